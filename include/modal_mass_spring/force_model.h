@@ -1,0 +1,63 @@
+// Force models: the generalized force F(q) of each method in its own coordinates q.
+#pragma once
+
+#include "modal_mass_spring/grid.h"
+#include "modal_mass_spring/modal_basis.h"
+
+#include <Eigen/Core>
+
+namespace modal_mass_spring
+{
+
+// q are displacements from a reference configuration x_ref: free-dof displacements u for the full
+// model (x = x_ref + u), modal coordinates X for the reduced ones (u = Phi X).
+class ForceModel
+{
+public:
+  virtual ~ForceModel() = default;
+  virtual int size() const = 0;
+  // Spring plus gravity force in these coordinates. Not const: models keep scratch buffers.
+  virtual void force(const Eigen::VectorXd& q, Eigen::VectorXd& f) = 0;
+};
+
+// `full`: eq. 13 forces on every free dof, no reduction.
+class FullForceModel : public ForceModel
+{
+public:
+  FullForceModel(const Grid& grid, const Eigen::VectorXd& x_ref);
+  int size() const override { return grid_.numFreeDofs(); }
+  void force(const Eigen::VectorXd& u, Eigen::VectorXd& f) override;
+
+private:
+  const Grid& grid_;
+  Eigen::VectorXd x_ref_, x_, f_all_;
+};
+
+// `linear` (O'Brien): F = Phi^T (f(x_ref) + f_g) - Lambda X, the force linearised at x_ref.
+class LinearModalForceModel : public ForceModel
+{
+public:
+  LinearModalForceModel(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref);
+  int size() const override { return static_cast<int>(lambda_.size()); }
+  void force(const Eigen::VectorXd& modal, Eigen::VectorXd& f) override;
+
+private:
+  Eigen::VectorXd lambda_;      // lambda^2 per mode
+  Eigen::VectorXd reference_;   // Phi^T (f(x_ref) + f_g), constant
+};
+
+// `physical` (Kobayashi et al.): x = x_ref + Phi X, F = Phi^T (f(x) + f_g).
+class PhysicalModalForceModel : public ForceModel
+{
+public:
+  PhysicalModalForceModel(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref);
+  int size() const override { return static_cast<int>(basis_.phi.cols()); }
+  void force(const Eigen::VectorXd& modal, Eigen::VectorXd& f) override;
+
+private:
+  const Grid& grid_;
+  const ModalBasis& basis_;
+  Eigen::VectorXd x_ref_, u_, x_, f_all_, f_free_;
+};
+
+}  // namespace modal_mass_spring

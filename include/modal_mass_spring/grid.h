@@ -1,0 +1,93 @@
+// The spring-mass grid: particles, springs, fixed particles and the free degrees of freedom.
+#pragma once
+
+#include <Eigen/Core>
+
+#include <string>
+#include <vector>
+
+namespace modal_mass_spring
+{
+
+// Everything that defines a grid. Defaults are the paper's 2D experiment (5 x 5, top row fixed).
+struct GridParams
+{
+  int rows = 5;                 // particles along -z; row 0 is the top
+  int cols = 5;                 // particles along x
+  double spacing = 0.1;         // m, rest distance between structural neighbours
+  int dimension = 2;            // 2: planar model in the x-z plane; 3: x, y, z
+  double mass = 0.01;           // kg, every particle
+  double structural_stiffness = 10.0;  // N/m, horizontal and vertical neighbours
+  double shear_stiffness = 5.0;        // N/m, both diagonals of every cell
+  bool bending = false;                // springs to the neighbour two away
+  double bending_stiffness = 1.0;      // N/m
+  std::vector<int> fixed;              // particle indices held in place; empty: the top row
+  Eigen::Vector3d gravity{0.0, 0.0, -9.81};  // m/s^2; in 2D the y component must be 0
+  double rotation_deg = 0.0;           // initial rotation of the sheet about the x axis (3D only)
+};
+
+struct Spring
+{
+  int i;
+  int j;
+  double stiffness;
+  double rest_length;
+};
+
+// Topology and initial state of a grid. Positions are flat vectors, `dimension` values per particle
+// (x, z in 2D; x, y, z in 3D). Construction validates the parameters and throws
+// std::invalid_argument naming the parameter, its value and what is allowed.
+class Grid
+{
+public:
+  explicit Grid(const GridParams& params);
+
+  const GridParams& params() const { return params_; }
+  int dimension() const { return params_.dimension; }
+  int numParticles() const { return params_.rows * params_.cols; }
+  int numDofs() const { return dimension() * numParticles(); }
+  int numFreeDofs() const { return static_cast<int>(free_dofs_.size()); }
+  int particleIndex(int row, int col) const { return row * params_.cols + col; }
+
+  const std::vector<Spring>& springs() const { return springs_; }
+  int numStructuralSprings() const { return num_structural_; }
+  int numShearSprings() const { return num_shear_; }
+  int numBendingSprings() const { return num_bending_; }
+
+  const Eigen::VectorXd& initialPositions() const { return x0_; }
+  bool isFixed(int particle) const { return fixed_mask_[particle]; }
+  const std::vector<int>& fixedParticles() const { return fixed_; }
+
+  // Free degrees of freedom: free_dofs()[k] is the global dof of free dof k; freeIndex(dof) is -1 for
+  // a fixed dof.
+  const std::vector<int>& freeDofs() const { return free_dofs_; }
+  int freeIndex(int dof) const { return free_index_[dof]; }
+
+  // Gravity force on every dof (m g), the diagonal of the mass matrix, both over all dofs.
+  const Eigen::VectorXd& gravityForce() const { return gravity_force_; }
+  double particleMass() const { return params_.mass; }
+
+  // Scatter a free-dof vector into an all-dof vector (fixed dofs untouched), and gather back.
+  void scatterFree(const Eigen::VectorXd& free, Eigen::VectorXd& all) const;
+  Eigen::VectorXd gatherFree(const Eigen::VectorXd& all) const;
+
+  // Positions as 3 x N (y = 0 for 2D grids), the form markers and TF want.
+  Eigen::Matrix3Xd toPoints(const Eigen::VectorXd& x) const;
+
+private:
+  void addSpring(int i, int j, double stiffness);
+
+  GridParams params_;
+  std::vector<Spring> springs_;
+  int num_structural_ = 0;
+  int num_shear_ = 0;
+  int num_bending_ = 0;
+  Eigen::VectorXd x0_;
+  Eigen::VectorXd gravity_force_;
+  std::vector<int> fixed_;
+  std::vector<bool> fixed_mask_;
+  std::vector<int> free_dofs_;
+  std::vector<int> free_index_;
+};
+
+}  // namespace modal_mass_spring

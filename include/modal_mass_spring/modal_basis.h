@@ -1,0 +1,27 @@
+// The r lowest modes of K u = lambda^2 M u, mass-normalised (Phi^T M Phi = I).
+#pragma once
+
+#include "modal_mass_spring/spring_forces.h"
+
+#include <Eigen/Core>
+
+namespace modal_mass_spring
+{
+
+struct ModalBasis
+{
+  Eigen::MatrixXd phi;          // free dofs x r, columns are the modes
+  Eigen::VectorXd eigenvalues;  // lambda^2, ascending
+  Eigen::VectorXd frequencies;  // omega = sqrt(lambda^2) in rad/s (0 for numerically zero modes)
+  int num_zero_modes = 0;       // lambda^2 below 1e-8 of the largest diagonal stiffness per mass
+  bool sparse = true;           // false only when r is so close to the size that Lanczos cannot run
+  double shift = 0.0;           // sigma of the shift-invert, negative so K - sigma M stays regular
+  double build_seconds = 0.0;
+};
+
+// K: free-dof stiffness (symmetric, positive semi-definite); mass: the diagonal of M over the same
+// dofs. Throws std::invalid_argument for r outside [1, size] and std::runtime_error when the
+// eigensolver does not converge.
+ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorXd& mass, int r);
+
+}  // namespace modal_mass_spring

@@ -1,0 +1,34 @@
+// Spring forces (paper eq. 13), energy and the analytic tangent stiffness K(x) = -df/dx.
+#pragma once
+
+#include "modal_mass_spring/grid.h"
+
+#include <Eigen/SparseCore>
+
+namespace modal_mass_spring
+{
+
+using SparseMatrix = Eigen::SparseMatrix<double>;
+
+// Sum of all spring forces on every dof at positions x (gravity not included).
+void springForces(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f);
+
+// Total spring energy sum 1/2 k (l - l0)^2.
+double springEnergy(const Grid& grid, const Eigen::VectorXd& x);
+
+// Potential energy of gravity, -f_g . x.
+double gravityEnergy(const Grid& grid, const Eigen::VectorXd& x);
+
+// How the geometric part (1 - l0/l)(I - u u^T) of a compressed spring (l < l0) enters K.
+enum class CompressedSprings
+{
+  Keep,  // the exact Hessian
+  Drop,  // keep only k u u^T: K stays positive semi-definite (used at a hanging equilibrium)
+};
+
+// The Hessian of the spring energy restricted to the free dofs (free-dof numbering of the grid).
+SparseMatrix tangentStiffness(const Grid& grid, const Eigen::VectorXd& x,
+                              CompressedSprings compressed = CompressedSprings::Keep,
+                              int* num_dropped = nullptr);
+
+}  // namespace modal_mass_spring

@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Installs the Debian packages this package builds, runs and tests with. Idempotent.
+set -euo pipefail
+export PATH=/usr/bin:/bin:/usr/sbin:/sbin:$PATH
+export DEBIAN_FRONTEND=noninteractive
+
+packages=(
+  build-essential cmake catkin python3-catkin-pkg catkin-lint
+  ros-core-dev libroscpp-dev librosbag-dev
+  libtf2-ros-dev libtf2-dev libtf2-msgs-dev libgeometry-msgs-dev
+  libvisualization-msgs-dev libstd-srvs-dev libstd-msgs-dev libdiagnostic-updater-dev
+  libdiagnostic-msgs-dev librostest-dev python3-rostest python3-roslaunch
+  libeigen3-dev libspectra-dev libgtest-dev googletest libbenchmark-dev libyaml-cpp-dev
+  python3-rosservice python3-rostopic python3-rosbag python3-rosnode python3-rosparam rosbash
+  python3-std-srvs python3-std-msgs python3-visualization-msgs python3-geometry-msgs
+  python3-tf2-msgs python3-diagnostic-msgs python3-rosgraph-msgs python3-genmsg python3-gencpp python3-genpy
+  python3-matplotlib python3-numpy
+)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ "${#missing[@]}" -gt 0 ]; then
+  ${SUDO:-} apt-get update -q
+  ${SUDO:-} apt-get install -y -q --no-install-recommends "${missing[@]}"
+fi

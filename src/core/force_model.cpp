@@ -1,0 +1,60 @@
+// The three force models of the paper.
+#include "modal_mass_spring/force_model.h"
+
+#include "modal_mass_spring/spring_forces.h"
+
+namespace modal_mass_spring
+{
+
+FullForceModel::FullForceModel(const Grid& grid, const Eigen::VectorXd& x_ref)
+  : grid_(grid), x_ref_(x_ref), x_(x_ref), f_all_(x_ref.size())
+{
+}
+
+void FullForceModel::force(const Eigen::VectorXd& u, Eigen::VectorXd& f)
+{
+  x_ = x_ref_;
+  grid_.scatterFree(u, x_);
+  springForces(grid_, x_, f_all_);
+  f_all_ += grid_.gravityForce();
+  f.resize(u.size());
+  const std::vector<int>& free = grid_.freeDofs();
+  for (size_t k = 0; k < free.size(); ++k)
+    f[k] = f_all_[free[k]];
+}
+
+LinearModalForceModel::LinearModalForceModel(const Grid& grid, const ModalBasis& basis,
+                                             const Eigen::VectorXd& x_ref)
+  : lambda_(basis.eigenvalues)
+{
+  Eigen::VectorXd f;
+  springForces(grid, x_ref, f);
+  f += grid.gravityForce();
+  reference_ = basis.phi.transpose() * grid.gatherFree(f);
+}
+
+void LinearModalForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorXd& f)
+{
+  f = reference_ - lambda_.cwiseProduct(modal);
+}
+
+PhysicalModalForceModel::PhysicalModalForceModel(const Grid& grid, const ModalBasis& basis,
+                                                 const Eigen::VectorXd& x_ref)
+  : grid_(grid), basis_(basis), x_ref_(x_ref), x_(x_ref), f_all_(x_ref.size()), f_free_(grid.numFreeDofs())
+{
+}
+
+void PhysicalModalForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorXd& f)
+{
+  u_.noalias() = basis_.phi * modal;
+  x_ = x_ref_;
+  grid_.scatterFree(u_, x_);
+  springForces(grid_, x_, f_all_);
+  f_all_ += grid_.gravityForce();
+  const std::vector<int>& free = grid_.freeDofs();
+  for (size_t k = 0; k < free.size(); ++k)
+    f_free_[k] = f_all_[free[k]];
+  f.noalias() = basis_.phi.transpose() * f_free_;
+}
+
+}  // namespace modal_mass_spring

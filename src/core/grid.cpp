@@ -1,0 +1,182 @@
+// Builds and validates the particle grid and its springs.
+#include "modal_mass_spring/grid.h"
+
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace modal_mass_spring
+{
+namespace
+{
+
+template <typename T>
+[[noreturn]] void reject(const std::string& name, const T& value, const std::string& allowed)
+{
+  std::ostringstream msg;
+  msg << "invalid parameter '" << name << "' = " << value << ": " << allowed;
+  throw std::invalid_argument(msg.str());
+}
+
+void requirePositive(const std::string& name, double value)
+{
+  if (!std::isfinite(value) || value <= 0.0)
+    reject(name, value, "must be a finite number > 0");
+}
+
+void validate(const GridParams& p)
+{
+  if (p.rows < 1)
+    reject("rows", p.rows, "must be an integer >= 1");
+  if (p.cols < 1)
+    reject("cols", p.cols, "must be an integer >= 1");
+  if (p.rows * p.cols < 2)
+    reject("rows x cols", std::to_string(p.rows) + " x " + std::to_string(p.cols),
+           "the grid must have at least 2 particles");
+  if (p.dimension != 2 && p.dimension != 3)
+    reject("dimension", p.dimension, "must be 2 (planar, x-z) or 3");
+  requirePositive("spacing", p.spacing);
+  requirePositive("mass", p.mass);
+  requirePositive("structural_stiffness", p.structural_stiffness);
+  requirePositive("shear_stiffness", p.shear_stiffness);
+  if (p.bending)
+    requirePositive("bending_stiffness", p.bending_stiffness);
+  if (!p.gravity.allFinite())
+    reject("gravity", p.gravity.transpose(), "must be 3 finite numbers");
+  if (p.dimension == 2 && p.gravity.y() != 0.0)
+    reject("gravity", p.gravity.transpose(), "the y component must be 0 for a 2D grid (it lies in the x-z plane)");
+  if (!std::isfinite(p.rotation_deg))
+    reject("rotation_deg", p.rotation_deg, "must be a finite angle in degrees");
+  if (p.dimension == 2 && p.rotation_deg != 0.0)
+    reject("rotation_deg", p.rotation_deg, "must be 0 for a 2D grid (a rotation about x leaves the x-z plane)");
+
+  const int n = p.rows * p.cols;
+  std::vector<bool> seen(n, false);
+  for (int index : p.fixed)
+  {
+    if (index < 0 || index >= n)
+      reject("fixed", index, "particle indices must be in [0, " + std::to_string(n - 1) + "]");
+    if (seen[index])
+      reject("fixed", index, "each particle index must be listed once");
+    seen[index] = true;
+  }
+  const int num_fixed = p.fixed.empty() ? p.cols : static_cast<int>(p.fixed.size());
+  if (num_fixed >= n)
+    reject("fixed", std::to_string(num_fixed) + " of " + std::to_string(n) + " particles",
+           "at least one particle must be free");
+}
+
+}  // namespace
+
+Grid::Grid(const GridParams& params) : params_(params)
+{
+  validate(params_);
+  const int n = numParticles();
+  const int dim = dimension();
+  const double s = params_.spacing;
+
+  // Rows hang along -z, columns run along x; a 3D sheet is then turned about x.
+  const double angle = params_.rotation_deg * M_PI / 180.0;
+  x0_.resize(numDofs());
+  for (int r = 0; r < params_.rows; ++r)
+    for (int c = 0; c < params_.cols; ++c)
+    {
+      const int p = particleIndex(r, c);
+      const double x = c * s;
+      const double z = -r * s;
+      if (dim == 2)
+        x0_.segment<2>(2 * p) << x, z;
+      else
+        x0_.segment<3>(3 * p) << x, -z * std::sin(angle), z * std::cos(angle);
+    }
+
+  for (int r = 0; r < params_.rows; ++r)
+    for (int c = 0; c < params_.cols; ++c)
+    {
+      if (c + 1 < params_.cols)
+        addSpring(particleIndex(r, c), particleIndex(r, c + 1), params_.structural_stiffness), ++num_structural_;
+      if (r + 1 < params_.rows)
+        addSpring(particleIndex(r, c), particleIndex(r + 1, c), params_.structural_stiffness), ++num_structural_;
+    }
+  for (int r = 0; r + 1 < params_.rows; ++r)
+    for (int c = 0; c + 1 < params_.cols; ++c)
+    {
+      addSpring(particleIndex(r, c), particleIndex(r + 1, c + 1), params_.shear_stiffness);
+      addSpring(particleIndex(r, c + 1), particleIndex(r + 1, c), params_.shear_stiffness);
+      num_shear_ += 2;
+    }
+  if (params_.bending)
+    for (int r = 0; r < params_.rows; ++r)
+      for (int c = 0; c < params_.cols; ++c)
+      {
+        if (c + 2 < params_.cols)
+          addSpring(particleIndex(r, c), particleIndex(r, c + 2), params_.bending_stiffness), ++num_bending_;
+        if (r + 2 < params_.rows)
+          addSpring(particleIndex(r, c), particleIndex(r + 2, c), params_.bending_stiffness), ++num_bending_;
+      }
+
+  fixed_ = params_.fixed;
+  if (fixed_.empty())
+    for (int c = 0; c < params_.cols; ++c)
+      fixed_.push_back(particleIndex(0, c));
+  fixed_mask_.assign(n, false);
+  for (int p : fixed_)
+    fixed_mask_[p] = true;
+
+  free_index_.assign(numDofs(), -1);
+  for (int p = 0; p < n; ++p)
+    if (!fixed_mask_[p])
+      for (int d = 0; d < dim; ++d)
+      {
+        free_index_[dim * p + d] = static_cast<int>(free_dofs_.size());
+        free_dofs_.push_back(dim * p + d);
+      }
+
+  // In 2D the dofs are (x, z): take gravity's x and z components.
+  gravity_force_.resize(numDofs());
+  for (int p = 0; p < n; ++p)
+  {
+    if (dim == 2)
+      gravity_force_.segment<2>(2 * p) << params_.gravity.x(), params_.gravity.z();
+    else
+      gravity_force_.segment<3>(3 * p) = params_.gravity;
+  }
+  gravity_force_ *= params_.mass;
+}
+
+void Grid::addSpring(int i, int j, double stiffness)
+{
+  const int dim = dimension();
+  const double rest_length = (x0_.segment(dim * j, dim) - x0_.segment(dim * i, dim)).norm();
+  springs_.push_back({i, j, stiffness, rest_length});
+}
+
+void Grid::scatterFree(const Eigen::VectorXd& free, Eigen::VectorXd& all) const
+{
+  for (size_t k = 0; k < free_dofs_.size(); ++k)
+    all[free_dofs_[k]] = free[k];
+}
+
+Eigen::VectorXd Grid::gatherFree(const Eigen::VectorXd& all) const
+{
+  Eigen::VectorXd free(free_dofs_.size());
+  for (size_t k = 0; k < free_dofs_.size(); ++k)
+    free[k] = all[free_dofs_[k]];
+  return free;
+}
+
+Eigen::Matrix3Xd Grid::toPoints(const Eigen::VectorXd& x) const
+{
+  const int n = numParticles();
+  Eigen::Matrix3Xd points(3, n);
+  for (int p = 0; p < n; ++p)
+  {
+    if (dimension() == 2)
+      points.col(p) << x[2 * p], 0.0, x[2 * p + 1];
+    else
+      points.col(p) = x.segment<3>(3 * p);
+  }
+  return points;
+}
+
+}  // namespace modal_mass_spring

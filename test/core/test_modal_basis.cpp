@@ -1,0 +1,104 @@
+// The modal basis against closed-form frequencies and its defining properties.
+#include "modal_mass_spring/modal_basis.h"
+
+#include <Eigen/Eigenvalues>
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+using namespace modal_mass_spring;
+
+namespace
+{
+
+// n free particles hanging below one fixed particle, gravity off: a fixed-free chain.
+GridParams chain(int n, double k, double m)
+{
+  GridParams p;
+  p.rows = n + 1;
+  p.cols = 1;
+  p.mass = m;
+  p.structural_stiffness = k;
+  p.gravity.setZero();
+  return p;
+}
+
+}  // namespace
+
+TEST(ModalBasis, HangingChainMatchesClosedForm)
+{
+  const int n = 40;
+  const double k = 50.0, m = 0.02;
+  const Grid grid(chain(n, k, m));
+  const SparseMatrix stiffness = tangentStiffness(grid, grid.initialPositions());
+  // At rest the sideways (x) dofs have no stiffness: n zero modes below the n axial ones.
+  const int axial = 6;
+  const ModalBasis basis = computeModalBasis(stiffness, Eigen::VectorXd::Constant(grid.numFreeDofs(), m), n + axial);
+  ASSERT_TRUE(basis.sparse);
+  EXPECT_EQ(basis.num_zero_modes, n);
+  for (int j = 1; j <= axial; ++j)
+  {
+    const double expected = 2.0 * std::sqrt(k / m) * std::sin((2 * j - 1) * M_PI / (2.0 * (2 * n + 1)));
+    EXPECT_NEAR(basis.frequencies[n + j - 1] / expected, 1.0, 1e-9) << "mode " << j;
+  }
+}
+
+TEST(ModalBasis, MassOrthonormalWithSmallResiduals)
+{
+  GridParams p;
+  p.rows = 12;
+  p.cols = 9;
+  p.mass = 0.03;
+  const Grid grid(p);
+  const SparseMatrix k = tangentStiffness(grid, grid.initialPositions());
+  const Eigen::VectorXd mass = Eigen::VectorXd::Constant(grid.numFreeDofs(), p.mass);
+  const ModalBasis basis = computeModalBasis(k, mass, 10);
+  ASSERT_TRUE(basis.sparse);
+  EXPECT_EQ(basis.num_zero_modes, 0);
+  const Eigen::MatrixXd gram = basis.phi.transpose() * mass.asDiagonal() * basis.phi;
+  EXPECT_LT((gram - Eigen::MatrixXd::Identity(10, 10)).cwiseAbs().maxCoeff(), 1e-10);
+  for (int j = 0; j < 10; ++j)
+  {
+    const Eigen::VectorXd u = basis.phi.col(j);
+    const Eigen::VectorXd ku = k * u;
+    const Eigen::VectorXd residual = ku - basis.eigenvalues[j] * mass.cwiseProduct(u);
+    EXPECT_LT(residual.norm() / ku.norm(), 1e-9) << "mode " << j;
+    if (j > 0)
+    {
+      EXPECT_GE(basis.eigenvalues[j], basis.eigenvalues[j - 1]);
+    }
+  }
+  // The lowest modes: a dense solve of the same small problem agrees.
+  const Eigen::MatrixXd a = Eigen::MatrixXd(k) / p.mass;
+  const Eigen::VectorXd dense = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(a).eigenvalues();
+  for (int j = 0; j < 10; ++j)
+    EXPECT_NEAR(basis.eigenvalues[j] / dense[j], 1.0, 1e-9);
+}
+
+TEST(ModalBasis, FlatSheetIn3DReportsItsZeroModes)
+{
+  GridParams p;
+  p.dimension = 3;
+  p.rotation_deg = 45.0;
+  const Grid grid(p);
+  const SparseMatrix k = tangentStiffness(grid, grid.initialPositions());
+  const ModalBasis basis = computeModalBasis(k, Eigen::VectorXd::Constant(grid.numFreeDofs(), p.mass), 30);
+  // 20 free particles, one out-of-plane direction each with no stiffness at rest.
+  EXPECT_EQ(basis.num_zero_modes, 20);
+  EXPECT_TRUE(basis.phi.allFinite());
+  EXPECT_GT(basis.frequencies[20], 0.0);
+}
+
+TEST(ModalBasis, AllModesFallBackToDense)
+{
+  GridParams p;
+  p.rows = 3;
+  p.cols = 2;
+  const Grid grid(p);
+  const SparseMatrix k = tangentStiffness(grid, grid.initialPositions());
+  const int n = grid.numFreeDofs();
+  const ModalBasis basis = computeModalBasis(k, Eigen::VectorXd::Constant(n, p.mass), n);
+  EXPECT_FALSE(basis.sparse);
+  EXPECT_EQ(basis.phi.cols(), n);
+  EXPECT_THROW(computeModalBasis(k, Eigen::VectorXd::Constant(n, p.mass), n + 1), std::invalid_argument);
+}
