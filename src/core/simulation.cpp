@@ -60,7 +60,7 @@ Method parseMethod(const std::string& name)
   for (size_t k = 0; k < names.size(); ++k)
     if (names[k] == name)
       return static_cast<Method>(k);
-  throw std::invalid_argument("unknown method '" + name + "': must be one of full, linear, physical");
+  throw std::invalid_argument("invalid parameter 'method' = '" + name + "': must be one of full, linear, physical");
 }
 
 Simulation::Simulation(const GridParams& grid_params, const SimulationParams& params)

@@ -1,0 +1,40 @@
+// One set of parameter names for the node (ROS parameter server) and the tools (YAML files).
+#pragma once
+
+#include "modal_mass_spring/grid.h"
+#include "modal_mass_spring/simulation.h"
+
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace modal_mass_spring
+{
+
+// Where parameters come from. Each getter returns nothing when the key is absent and throws
+// std::invalid_argument naming the key when it is present with the wrong type.
+class ParameterSource
+{
+public:
+  virtual ~ParameterSource() = default;
+  virtual std::optional<int> getInt(const std::string& key) const = 0;
+  virtual std::optional<double> getDouble(const std::string& key) const = 0;  // accepts integers too
+  virtual std::optional<bool> getBool(const std::string& key) const = 0;
+  virtual std::optional<std::string> getString(const std::string& key) const = 0;
+  virtual std::optional<std::vector<int>> getIntList(const std::string& key) const = 0;
+  virtual std::optional<std::vector<double>> getDoubleList(const std::string& key) const = 0;
+};
+
+// Reads every model and simulation parameter, defaults (GridParams{}, SimulationParams{}) where a key
+// is absent. Throws std::invalid_argument naming the parameter, its value and what is allowed;
+// the ranges themselves are checked when the Simulation is built.
+//   rows, cols, spacing, dimension, mass, structural_stiffness, shear_stiffness, bending,
+//   bending_stiffness, fixed, gravity, rotation_deg, method, num_modes, alpha, beta, time_step,
+//   divergence_limit
+GridParams loadGridParams(const ParameterSource& source);
+SimulationParams loadSimulationParams(const ParameterSource& source);
+
+// The message for a present key of the wrong type, shared by the sources.
+std::string wrongType(const std::string& key, const std::string& expected);
+
+}  // namespace modal_mass_spring

@@ -1,0 +1,51 @@
+// Parameter names and types shared by the node and the tools.
+#include "modal_mass_spring/parameters.h"
+
+#include <stdexcept>
+
+namespace modal_mass_spring
+{
+
+std::string wrongType(const std::string& key, const std::string& expected)
+{
+  return "invalid parameter '" + key + "': wrong type, must be " + expected;
+}
+
+GridParams loadGridParams(const ParameterSource& s)
+{
+  GridParams p;
+  p.rows = s.getInt("rows").value_or(p.rows);
+  p.cols = s.getInt("cols").value_or(p.cols);
+  p.spacing = s.getDouble("spacing").value_or(p.spacing);
+  p.dimension = s.getInt("dimension").value_or(p.dimension);
+  p.mass = s.getDouble("mass").value_or(p.mass);
+  p.structural_stiffness = s.getDouble("structural_stiffness").value_or(p.structural_stiffness);
+  p.shear_stiffness = s.getDouble("shear_stiffness").value_or(p.shear_stiffness);
+  p.bending = s.getBool("bending").value_or(p.bending);
+  p.bending_stiffness = s.getDouble("bending_stiffness").value_or(p.bending_stiffness);
+  p.fixed = s.getIntList("fixed").value_or(p.fixed);
+  if (const auto gravity = s.getDoubleList("gravity"))
+  {
+    if (gravity->size() != 3)
+      throw std::invalid_argument("invalid parameter 'gravity': has " + std::to_string(gravity->size()) +
+                                  " values, must be a list of 3 numbers [x, y, z] in m/s^2");
+    p.gravity = Eigen::Vector3d((*gravity)[0], (*gravity)[1], (*gravity)[2]);
+  }
+  p.rotation_deg = s.getDouble("rotation_deg").value_or(p.rotation_deg);
+  return p;
+}
+
+SimulationParams loadSimulationParams(const ParameterSource& s)
+{
+  SimulationParams p;
+  if (const auto method = s.getString("method"))
+    p.method = parseMethod(*method);
+  p.num_modes = s.getInt("num_modes").value_or(p.num_modes);
+  p.alpha = s.getDouble("alpha").value_or(p.alpha);
+  p.beta = s.getDouble("beta").value_or(p.beta);
+  p.time_step = s.getDouble("time_step").value_or(p.time_step);
+  p.divergence_limit = s.getDouble("divergence_limit").value_or(p.divergence_limit);
+  return p;
+}
+
+}  // namespace modal_mass_spring
