@@ -67,8 +67,8 @@ public:
   const Eigen::VectorXd& gravityForce() const { return gravity_force_; }
   double particleMass() const { return params_.mass; }
 
-  // Scatter a free-dof vector into an all-dof vector (fixed dofs untouched), and gather back.
-  void scatterFree(const Eigen::VectorXd& free, Eigen::VectorXd& all) const;
+  // Add a free-dof vector into an all-dof vector (fixed dofs untouched), and gather one back.
+  void addFree(const Eigen::VectorXd& free, Eigen::VectorXd& all) const;
   Eigen::VectorXd gatherFree(const Eigen::VectorXd& all) const;
 
   // Positions as 3 x N (y = 0 for 2D grids), the form markers and TF want.

@@ -14,7 +14,7 @@ FullForceModel::FullForceModel(const Grid& grid, const Eigen::VectorXd& x_ref)
 void FullForceModel::force(const Eigen::VectorXd& u, Eigen::VectorXd& f)
 {
   x_ = x_ref_;
-  grid_.scatterFree(u, x_);
+  grid_.addFree(u, x_);
   springForces(grid_, x_, f_all_);
   f_all_ += grid_.gravityForce();
   f.resize(u.size());
@@ -48,7 +48,7 @@ void PhysicalModalForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorX
 {
   u_.noalias() = basis_.phi * modal;
   x_ = x_ref_;
-  grid_.scatterFree(u_, x_);
+  grid_.addFree(u_, x_);
   springForces(grid_, x_, f_all_);
   f_all_ += grid_.gravityForce();
   const std::vector<int>& free = grid_.freeDofs();

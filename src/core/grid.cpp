@@ -151,10 +151,10 @@ void Grid::addSpring(int i, int j, double stiffness)
   springs_.push_back({i, j, stiffness, rest_length});
 }
 
-void Grid::scatterFree(const Eigen::VectorXd& free, Eigen::VectorXd& all) const
+void Grid::addFree(const Eigen::VectorXd& free, Eigen::VectorXd& all) const
 {
   for (size_t k = 0; k < free_dofs_.size(); ++k)
-    all[free_dofs_[k]] = free[k];
+    all[free_dofs_[k]] += free[k];
 }
 
 Eigen::VectorXd Grid::gatherFree(const Eigen::VectorXd& all) const

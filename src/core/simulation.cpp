@@ -215,9 +215,7 @@ Eigen::VectorXd Simulation::velocity() const
 Eigen::VectorXd Simulation::positions() const
 {
   Eigen::VectorXd x = grid_.initialPositions();
-  Eigen::VectorXd u = displacement();
-  for (int k = 0; k < u.size(); ++k)
-    x[grid_.freeDofs()[k]] += u[k];
+  grid_.addFree(displacement(), x);
   return x;
 }
 

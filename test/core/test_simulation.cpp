@@ -1,1 +1,215 @@
+// The three methods against closed forms, against each other, and their error handling.
+#include "modal_mass_spring/simulation.h"
 
+#include "modal_mass_spring/spring_forces.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+using namespace modal_mass_spring;
+
+namespace
+{
+
+GridParams weightless(int rows = 5, int cols = 5)
+{
+  GridParams p;
+  p.rows = rows;
+  p.cols = cols;
+  p.gravity.setZero();
+  return p;
+}
+
+SimulationParams withMethod(Method method, int r, double dt = 1e-3)
+{
+  SimulationParams s;
+  s.method = method;
+  s.num_modes = r;
+  s.time_step = dt;
+  return s;
+}
+
+double maxDistance(const Eigen::VectorXd& a, const Eigen::VectorXd& b)
+{
+  return (a - b).cwiseAbs().maxCoeff();
+}
+
+}  // namespace
+
+TEST(Simulation, SingleDampedModeUnderLinearFollowsClosedForm)
+{
+  SimulationParams s = withMethod(Method::Linear, 4);
+  s.alpha = 0.8;
+  s.beta = 2e-3;
+  Simulation sim(weightless(), s);
+  const double amplitude = 0.01;
+  const int mode = 1;
+  const Eigen::VectorXd shape = sim.basis().phi.col(mode);
+  sim.setPhysicalState(amplitude * shape, Eigen::VectorXd::Zero(shape.size()));
+
+  const double omega = sim.basis().frequencies[mode];
+  const double c = s.alpha + s.beta * omega * omega;  // X'' + c X' + omega^2 X = 0
+  const double omega_d = std::sqrt(omega * omega - 0.25 * c * c);
+  double worst = 0.0;
+  for (int k = 1; k <= 3000; ++k)
+  {
+    ASSERT_FALSE(sim.step().diverged);
+    const double t = sim.time();
+    const double expected =
+        amplitude * std::exp(-0.5 * c * t) * (std::cos(omega_d * t) + 0.5 * c / omega_d * std::sin(omega_d * t));
+    worst = std::max(worst, std::abs(sim.state().q[mode] - expected));
+    for (int other = 0; other < 4; ++other)
+      if (other != mode)
+        ASSERT_NEAR(sim.state().q[other], 0.0, 1e-14);
+  }
+  // Newmark's phase error is O((omega dt)^2) per radian; here that is below 1e-4 of the amplitude.
+  EXPECT_LT(worst, 1e-4 * amplitude);
+  EXPECT_LT(std::abs(sim.state().q[mode]), 0.5 * amplitude);  // and it did decay
+}
+
+TEST(Simulation, PhysicalWithEveryModeMatchesFull)
+{
+  GridParams g;
+  g.rows = 4;
+  g.cols = 3;
+  g.mass = 0.02;
+  SimulationParams s = withMethod(Method::Full, 2 * 9);
+  s.alpha = 0.3;
+  s.beta = 1e-3;
+  Simulation full(g, s);
+  s.method = Method::Physical;
+  Simulation physical(g, s);
+  double largest_motion = 0.0;
+  for (int k = 0; k < 3000; ++k)
+  {
+    ASSERT_FALSE(full.step().diverged);
+    ASSERT_FALSE(physical.step().diverged);
+    largest_motion = std::max(largest_motion, maxDistance(full.positions(), full.grid().initialPositions()));
+    ASSERT_LT(maxDistance(full.positions(), physical.positions()), 1e-10) << "step " << k;
+  }
+  EXPECT_GT(largest_motion, 0.01);  // gravity really moved it
+}
+
+TEST(Simulation, LinearAndPhysicalAgreeAtSmallAmplitudeOnly)
+{
+  const GridParams g = weightless();
+  auto relativeGap = [&](double amplitude) {
+    Simulation linear(g, withMethod(Method::Linear, 6));
+    Simulation physical(g, withMethod(Method::Physical, 6));
+    const Eigen::VectorXd shape = linear.basis().phi.col(0) + linear.basis().phi.col(2);
+    const Eigen::VectorXd u = amplitude / shape.cwiseAbs().maxCoeff() * shape;  // largest particle offset
+    const Eigen::VectorXd v = Eigen::VectorXd::Zero(u.size());
+    linear.setPhysicalState(u, v);
+    physical.setPhysicalState(u, v);
+    double gap = 0.0;
+    for (int k = 0; k < 2000; ++k)
+    {
+      linear.step();
+      physical.step();
+      gap = std::max(gap, maxDistance(linear.positions(), physical.positions()));
+    }
+    return gap / amplitude;
+  };
+  const double spacing = g.spacing;
+  EXPECT_LT(relativeGap(1e-5 * spacing), 1e-3);
+  EXPECT_GT(relativeGap(0.5 * spacing), 5e-2);
+}
+
+TEST(Simulation, UndampedFullKeepsEnergyBounded)
+{
+  Simulation sim(weightless(), withMethod(Method::Full, 4, 2e-4));
+  std::srand(11);
+  const int n = sim.grid().numFreeDofs();
+  sim.setPhysicalState(0.2 * sim.grid().params().spacing * Eigen::VectorXd::Random(n), Eigen::VectorXd::Zero(n));
+  const double initial = sim.totalEnergy();
+  double worst = 0.0;
+  for (int k = 0; k < 100; ++k)
+  {
+    ASSERT_FALSE(sim.step(1000).diverged);
+    worst = std::max(worst, std::abs(sim.totalEnergy() - initial));
+  }
+  EXPECT_GT(initial, 0.0);
+  EXPECT_LT(worst, 1e-2 * initial);
+}
+
+TEST(Simulation, MethodSwitchKeepsPositionsAndResetRestores)
+{
+  Simulation sim(GridParams{}, withMethod(Method::Physical, 8));
+  sim.step(400);
+  const Eigen::VectorXd before = sim.positions();
+  ASSERT_GT(maxDistance(before, sim.grid().initialPositions()), 1e-3);
+
+  sim.setMethod(Method::Linear);  // modal to modal: the same X
+  EXPECT_LT(maxDistance(sim.positions(), before), 1e-14);
+  sim.setMethod(Method::Full);  // u = Phi X
+  EXPECT_LT(maxDistance(sim.positions(), before), 1e-14);
+  EXPECT_EQ(sim.method(), Method::Full);
+
+  sim.step(100);
+  const Eigen::VectorXd u = sim.displacement();
+  sim.setMethod(Method::Physical);  // the M-orthogonal projection of u onto the modes
+  const ModalBasis& b = sim.basis();
+  const Eigen::VectorXd projected = b.phi * (b.phi.transpose() * (sim.grid().particleMass() * u));
+  EXPECT_LT(maxDistance(sim.displacement(), projected), 1e-14);
+
+  const long steps = sim.stepCount();
+  sim.step(10);
+  EXPECT_EQ(sim.stepCount(), steps + 10);
+  sim.reset();
+  EXPECT_EQ(sim.stepCount(), 0);
+  EXPECT_EQ(sim.positions(), sim.grid().initialPositions());
+  EXPECT_EQ(sim.kineticEnergy(), 0.0);
+}
+
+TEST(Simulation, SwitchWithEveryModeIsExact)
+{
+  GridParams g;
+  g.rows = 3;
+  g.cols = 3;
+  Simulation sim(g, withMethod(Method::Full, 12));
+  sim.step(300);
+  const Eigen::VectorXd before = sim.positions();
+  sim.setMethod(Method::Physical);
+  EXPECT_LT(maxDistance(sim.positions(), before), 1e-12);
+}
+
+TEST(Simulation, TooLargeStepDivergesAndKeepsLastGoodState)
+{
+  for (Method method : {Method::Full, Method::Linear, Method::Physical})
+  {
+    // Past 2 / omega_max of each method: the reduced ones only see their 6 modes.
+    const SimulationParams s = withMethod(method, 6, method == Method::Full ? 0.05 : 0.5);
+    Simulation sim(GridParams{}, s);
+    const StepResult result = sim.step(5000);
+    ASSERT_TRUE(result.diverged) << toString(method);
+    EXPECT_LT(result.steps_taken, 5000);
+    EXPECT_NE(result.message.find(toString(method)), std::string::npos) << result.message;
+    EXPECT_NE(result.message.find("time_step"), std::string::npos) << result.message;
+    EXPECT_TRUE(sim.positions().allFinite());
+    EXPECT_EQ(sim.stepCount(), result.steps_taken);
+
+    // The kept state is exactly the one after the last good step.
+    Simulation replay(GridParams{}, s);
+    replay.step(result.steps_taken);
+    EXPECT_EQ(replay.positions(), sim.positions());
+
+    // Stepping a diverged simulation changes nothing until reset or a method switch.
+    const StepResult again = sim.step(10);
+    EXPECT_TRUE(again.diverged);
+    EXPECT_EQ(again.steps_taken, 0);
+    EXPECT_EQ(replay.positions(), sim.positions());
+    sim.reset();
+    EXPECT_FALSE(sim.diverged());
+  }
+}
+
+TEST(Simulation, SmallerTimeStepRecoversAfterSetTimeStep)
+{
+  Simulation sim(GridParams{}, withMethod(Method::Physical, 4, 1.0));
+  EXPECT_TRUE(sim.step(100).diverged);
+  sim.setTimeStep(1e-3);
+  sim.reset();
+  EXPECT_FALSE(sim.step(1000).diverged);
+  EXPECT_THROW(sim.setTimeStep(-1.0), std::invalid_argument);
+}
