@@ -18,6 +18,11 @@ public:
   virtual int size() const = 0;
   // Spring plus gravity force in these coordinates. Not const: models keep scratch buffers.
   virtual void force(const Eigen::VectorXd& q, Eigen::VectorXd& f) = 0;
+  // Tangent stiffness -dF/dq at q, for implicit integrators: sparse for the full model, dense
+  // (r x r, stored sparse) for the physical one, diagonal for the linear one.
+  virtual void tangentStiffness(const Eigen::VectorXd& q, SparseMatrix& k) = 0;
+  // True when F is affine in q, so one Newton iteration solves an implicit step exactly.
+  virtual bool isLinear() const { return false; }
 };
 
 // `full`: eq. 13 forces on every free dof, no reduction.
@@ -27,6 +32,7 @@ public:
   FullForceModel(const Grid& grid, const Eigen::VectorXd& x_ref);
   int size() const override { return grid_.numFreeDofs(); }
   void force(const Eigen::VectorXd& u, Eigen::VectorXd& f) override;
+  void tangentStiffness(const Eigen::VectorXd& u, SparseMatrix& k) override;
 
 private:
   const Grid& grid_;
@@ -40,6 +46,8 @@ public:
   LinearModalForceModel(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref);
   int size() const override { return static_cast<int>(lambda_.size()); }
   void force(const Eigen::VectorXd& modal, Eigen::VectorXd& f) override;
+  void tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k) override;
+  bool isLinear() const override { return true; }
 
 private:
   Eigen::VectorXd lambda_;      // lambda^2 per mode
@@ -53,6 +61,8 @@ public:
   PhysicalModalForceModel(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref);
   int size() const override { return static_cast<int>(basis_.phi.cols()); }
   void force(const Eigen::VectorXd& modal, Eigen::VectorXd& f) override;
+  // Phi^T K(x) Phi, with K(x) the sparse tangent at x = x_ref + Phi X.
+  void tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k) override;
 
 private:
   const Grid& grid_;

@@ -20,11 +20,39 @@ enum class Method
   Physical,  // modal, F = Phi^T f(x0 + Phi X)
 };
 
+// Where K is taken and the modal coordinates are measured from.
+enum class Linearization
+{
+  Rest,         // the initial positions (the paper)
+  Equilibrium,  // the static equilibrium under gravity
+};
+
+enum class IntegratorKind
+{
+  Explicit,  // the paper's scheme
+  Implicit,  // Newmark average acceleration with Newton iterations
+};
+
+// Where a run (and a reset) starts.
+enum class InitialState
+{
+  Initial,      // the initial, unloaded positions, at rest
+  Equilibrium,  // the static equilibrium, at rest
+};
+
 // "full", "linear", "physical"
 std::string toString(Method method);
 // Throws std::invalid_argument naming the valid methods.
 Method parseMethod(const std::string& name);
 const std::vector<std::string>& methodNames();
+// "rest", "equilibrium"; "explicit", "implicit"; "initial", "equilibrium". The parsers throw
+// std::invalid_argument naming the parameter and the valid values.
+std::string toString(Linearization linearization);
+Linearization parseLinearization(const std::string& name);
+std::string toString(IntegratorKind integrator);
+IntegratorKind parseIntegrator(const std::string& name);
+std::string toString(InitialState initial_state);
+InitialState parseInitialState(const std::string& name);
 
 struct SimulationParams
 {
@@ -36,6 +64,19 @@ struct SimulationParams
   // A step diverges when the state is not finite or the mass-weighted RMS displacement exceeds this
   // (m). 0: 100 times the grid's larger side.
   double divergence_limit = 0.0;
+  Linearization linearization = Linearization::Rest;
+  IntegratorKind integrator = IntegratorKind::Explicit;
+  InitialState initial_state = InitialState::Initial;
+  int newton_max_iterations = 20;  // per implicit step
+};
+
+// What building the linearization point found.
+struct LinearizationInfo
+{
+  bool equilibrium_solved = false;
+  int equilibrium_iterations = 0;
+  double equilibrium_residual = 0.0;  // N
+  int dropped_compressed_springs = 0; // springs whose compressive geometric stiffness was left out of K
 };
 
 struct StepResult
@@ -64,8 +105,18 @@ public:
   void setTimeStep(double dt);
   // Back to the initial positions, at rest, time 0.
   void reset();
-  // Sets the state from free-dof displacements (from the initial positions) and velocities.
+  // Sets the state from free-dof displacements (from the linearization point) and velocities. A
+  // modal method takes their M-orthogonal projection; projectionError() then says how far (m, the
+  // largest particle distance) the projected positions are from the requested ones.
   void setPhysicalState(const Eigen::VectorXd& displacement, const Eigen::VectorXd& velocity);
+  double projectionError() const { return projection_error_; }
+  const LinearizationInfo& linearization() const { return linearization_; }
+  // x_ref: the initial positions (rest) or the static equilibrium.
+  const Eigen::VectorXd& linearizationPositions() const { return x_ref_; }
+  // The positions a reset returns to.
+  const Eigen::VectorXd& startPositions() const { return x_start_; }
+  // Newton iterations of the last implicit step (0 under the explicit integrator).
+  int lastNewtonIterations() const;
 
   // Takes up to `steps` steps; stops at the first that diverges and keeps the state before it.
   StepResult step(int steps = 1);
@@ -76,7 +127,7 @@ public:
 
   // The generalized state of the current method (u for full, X for the modal methods).
   const State& state() const { return state_; }
-  // Free-dof displacement and velocity from the initial positions, whatever the method.
+  // Free-dof displacement (from the linearization point) and velocity, whatever the method.
   Eigen::VectorXd displacement() const;
   Eigen::VectorXd velocity() const;
   // All particle positions as a flat vector (dimension values per particle), and as 3 x N points.
@@ -96,8 +147,11 @@ private:
 
   Grid grid_;
   SimulationParams params_;
+  LinearizationInfo linearization_;
+  Eigen::VectorXd x_ref_;    // linearization point: q measures displacement from here
+  Eigen::VectorXd x_start_;  // where reset() puts the grid
   ModalBasis basis_;
-  SparseMatrix stiffness_;  // K at x0 on the free dofs
+  SparseMatrix stiffness_;  // K at x_ref on the free dofs
   Eigen::VectorXd mass_;    // diagonal of M on the free dofs
   std::unique_ptr<FullForceModel> full_force_;
   std::unique_ptr<LinearModalForceModel> linear_force_;
@@ -107,6 +161,7 @@ private:
   long step_count_ = 0;
   bool diverged_ = false;
   double limit_ = 0.0;
+  double projection_error_ = 0.0;
 };
 
 }  // namespace modal_mass_spring

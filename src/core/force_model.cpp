@@ -23,6 +23,13 @@ void FullForceModel::force(const Eigen::VectorXd& u, Eigen::VectorXd& f)
     f[k] = f_all_[free[k]];
 }
 
+void FullForceModel::tangentStiffness(const Eigen::VectorXd& u, SparseMatrix& k)
+{
+  x_ = x_ref_;
+  grid_.addFree(u, x_);
+  k = modal_mass_spring::tangentStiffness(grid_, x_);
+}
+
 LinearModalForceModel::LinearModalForceModel(const Grid& grid, const ModalBasis& basis,
                                              const Eigen::VectorXd& x_ref)
   : lambda_(basis.eigenvalues)
@@ -36,6 +43,13 @@ LinearModalForceModel::LinearModalForceModel(const Grid& grid, const ModalBasis&
 void LinearModalForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorXd& f)
 {
   f = reference_ - lambda_.cwiseProduct(modal);
+}
+
+void LinearModalForceModel::tangentStiffness(const Eigen::VectorXd&, SparseMatrix& k)
+{
+  k.resize(lambda_.size(), lambda_.size());
+  k.setIdentity();
+  k = lambda_.asDiagonal() * k;
 }
 
 PhysicalModalForceModel::PhysicalModalForceModel(const Grid& grid, const ModalBasis& basis,
@@ -55,6 +69,16 @@ void PhysicalModalForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorX
   for (size_t k = 0; k < free.size(); ++k)
     f_free_[k] = f_all_[free[k]];
   f.noalias() = basis_.phi.transpose() * f_free_;
+}
+
+void PhysicalModalForceModel::tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k)
+{
+  u_.noalias() = basis_.phi * modal;
+  x_ = x_ref_;
+  grid_.addFree(u_, x_);
+  const SparseMatrix full = modal_mass_spring::tangentStiffness(grid_, x_);
+  const Eigen::MatrixXd k_phi = full * basis_.phi;
+  k = (basis_.phi.transpose() * k_phi).sparseView();
 }
 
 }  // namespace modal_mass_spring

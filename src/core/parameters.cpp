@@ -45,6 +45,13 @@ SimulationParams loadSimulationParams(const ParameterSource& s)
   p.beta = s.getDouble("beta").value_or(p.beta);
   p.time_step = s.getDouble("time_step").value_or(p.time_step);
   p.divergence_limit = s.getDouble("divergence_limit").value_or(p.divergence_limit);
+  if (const auto name = s.getString("linearization"))
+    p.linearization = parseLinearization(*name);
+  if (const auto name = s.getString("integrator"))
+    p.integrator = parseIntegrator(*name);
+  if (const auto name = s.getString("initial_state"))
+    p.initial_state = parseInitialState(*name);
+  p.newton_max_iterations = s.getInt("newton_max_iterations").value_or(p.newton_max_iterations);
   return p;
 }
 

@@ -1,6 +1,7 @@
 // Wires grid, basis, force models and integrators into the three methods.
 #include "modal_mass_spring/simulation.h"
 
+#include "modal_mass_spring/equilibrium.h"
 #include "modal_mass_spring/spring_forces.h"
 
 #include <cmath>
@@ -41,7 +42,39 @@ SparseMatrix diagonalMatrix(const Eigen::VectorXd& d)
   return m;
 }
 
+// Finds `name` among `names` (the enum's values in order) or throws naming the parameter.
+int parseName(const std::string& parameter, const std::string& name, const std::vector<std::string>& names)
+{
+  for (size_t k = 0; k < names.size(); ++k)
+    if (names[k] == name)
+      return static_cast<int>(k);
+  std::string allowed;
+  for (size_t k = 0; k < names.size(); ++k)
+    allowed += (k ? ", " : "") + names[k];
+  throw std::invalid_argument("invalid parameter '" + parameter + "' = '" + name + "': must be one of " + allowed);
+}
+
+const std::vector<std::string> kLinearizations{"rest", "equilibrium"};
+const std::vector<std::string> kIntegrators{"explicit", "implicit"};
+const std::vector<std::string> kInitialStates{"initial", "equilibrium"};
+
 }  // namespace
+
+std::string toString(Linearization value) { return kLinearizations[static_cast<int>(value)]; }
+Linearization parseLinearization(const std::string& name)
+{
+  return static_cast<Linearization>(parseName("linearization", name, kLinearizations));
+}
+std::string toString(IntegratorKind value) { return kIntegrators[static_cast<int>(value)]; }
+IntegratorKind parseIntegrator(const std::string& name)
+{
+  return static_cast<IntegratorKind>(parseName("integrator", name, kIntegrators));
+}
+std::string toString(InitialState value) { return kInitialStates[static_cast<int>(value)]; }
+InitialState parseInitialState(const std::string& name)
+{
+  return static_cast<InitialState>(parseName("initial_state", name, kInitialStates));
+}
 
 const std::vector<std::string>& methodNames()
 {
@@ -56,11 +89,7 @@ std::string toString(Method method)
 
 Method parseMethod(const std::string& name)
 {
-  const auto& names = methodNames();
-  for (size_t k = 0; k < names.size(); ++k)
-    if (names[k] == name)
-      return static_cast<Method>(k);
-  throw std::invalid_argument("invalid parameter 'method' = '" + name + "': must be one of full, linear, physical");
+  return static_cast<Method>(parseName("method", name, methodNames()));
 }
 
 Simulation::Simulation(const GridParams& grid_params, const SimulationParams& params)
@@ -79,28 +108,55 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
   limit_ = params_.divergence_limit > 0.0 ? params_.divergence_limit
                                           : 100.0 * g.spacing * std::max(g.rows, g.cols);
 
-  const Eigen::VectorXd& x0 = grid_.initialPositions();
-  stiffness_ = tangentStiffness(grid_, x0);
+  if (params_.newton_max_iterations < 1)
+    throw std::invalid_argument("invalid parameter 'newton_max_iterations' = " +
+                                std::to_string(params_.newton_max_iterations) + ": must be an integer >= 1");
+
+  x_ref_ = x_start_ = grid_.initialPositions();
+  if (params_.linearization == Linearization::Equilibrium || params_.initial_state == InitialState::Equilibrium)
+  {
+    const Equilibrium equilibrium = solveEquilibrium(grid_, grid_.initialPositions());
+    linearization_.equilibrium_solved = true;
+    linearization_.equilibrium_iterations = equilibrium.iterations;
+    linearization_.equilibrium_residual = equilibrium.residual;
+    if (params_.linearization == Linearization::Equilibrium)
+      x_ref_ = equilibrium.positions;
+    if (params_.initial_state == InitialState::Equilibrium)
+      x_start_ = equilibrium.positions;
+  }
+  // At a hanging equilibrium compressed springs would make K indefinite: their geometric part is
+  // dropped so that no mode has a negative lambda^2. At rest no spring is compressed.
+  stiffness_ = tangentStiffness(grid_, x_ref_, CompressedSprings::Drop, &linearization_.dropped_compressed_springs);
   mass_ = Eigen::VectorXd::Constant(n, grid_.particleMass());
   basis_ = computeModalBasis(stiffness_, mass_, params_.num_modes);
 
-  full_force_ = std::make_unique<FullForceModel>(grid_, x0);
-  linear_force_ = std::make_unique<LinearModalForceModel>(grid_, basis_, x0);
-  physical_force_ = std::make_unique<PhysicalModalForceModel>(grid_, basis_, x0);
+  full_force_ = std::make_unique<FullForceModel>(grid_, x_ref_);
+  linear_force_ = std::make_unique<LinearModalForceModel>(grid_, basis_, x_ref_);
+  physical_force_ = std::make_unique<PhysicalModalForceModel>(grid_, basis_, x_ref_);
   buildIntegrators();
   reset();
 }
 
 void Simulation::buildIntegrators()
 {
-  // Rayleigh damping: alpha M + beta K(x0); in modal coordinates diag(alpha + beta lambda^2).
-  SparseMatrix full_damping = params_.alpha * diagonalMatrix(mass_) + params_.beta * stiffness_;
-  full_integrator_ = std::make_unique<ExplicitNewmark>(MassDamping{mass_, full_damping}, params_.time_step);
-  const Eigen::VectorXd modal_damping =
-      (params_.alpha + params_.beta * basis_.eigenvalues.array()).matrix();
-  modal_integrator_ = std::make_unique<ExplicitNewmark>(
-      MassDamping{Eigen::VectorXd::Ones(basis_.eigenvalues.size()), diagonalMatrix(modal_damping)},
-      params_.time_step);
+  auto make = [this](MassDamping system) -> std::unique_ptr<Integrator> {
+    if (params_.integrator == IntegratorKind::Implicit)
+      return std::make_unique<ImplicitNewmark>(std::move(system), params_.time_step, params_.newton_max_iterations);
+    return std::make_unique<ExplicitNewmark>(std::move(system), params_.time_step);
+  };
+  // Rayleigh damping with the constant K of the linearization point: alpha M + beta K(x_ref); in
+  // modal coordinates diag(alpha + beta lambda^2).
+  full_integrator_ = make(MassDamping{mass_, params_.alpha * diagonalMatrix(mass_) + params_.beta * stiffness_});
+  const Eigen::VectorXd modal_damping = (params_.alpha + params_.beta * basis_.eigenvalues.array()).matrix();
+  modal_integrator_ =
+      make(MassDamping{Eigen::VectorXd::Ones(basis_.eigenvalues.size()), diagonalMatrix(modal_damping)});
+}
+
+int Simulation::lastNewtonIterations() const
+{
+  const auto* implicit = dynamic_cast<const ImplicitNewmark*>(
+      isModal() ? modal_integrator_.get() : full_integrator_.get());
+  return implicit ? implicit->lastIterations() : 0;
 }
 
 ForceModel& Simulation::forceModel()
@@ -136,11 +192,16 @@ void Simulation::setMethod(Method method)
 
 void Simulation::setPhysicalState(const Eigen::VectorXd& u, const Eigen::VectorXd& v)
 {
+  projection_error_ = 0.0;
   if (isModal())
   {
     // Mass-orthonormal basis: the M-orthogonal projection onto span(Phi) is X = Phi^T M u.
     state_.q = basis_.phi.transpose() * mass_.cwiseProduct(u);
     state_.v = basis_.phi.transpose() * mass_.cwiseProduct(v);
+    const Eigen::VectorXd residual = u - basis_.phi * state_.q;
+    const int dim = grid_.dimension();
+    for (int k = 0; k + dim <= residual.size(); k += dim)
+      projection_error_ = std::max(projection_error_, residual.segment(k, dim).norm());
   }
   else
   {
@@ -161,8 +222,8 @@ void Simulation::setTimeStep(double dt)
 
 void Simulation::reset()
 {
-  const int n = grid_.numFreeDofs();
-  setPhysicalState(Eigen::VectorXd::Zero(n), Eigen::VectorXd::Zero(n));
+  const Eigen::VectorXd start = grid_.gatherFree(x_start_ - x_ref_);
+  setPhysicalState(start, Eigen::VectorXd::Zero(start.size()));
   step_count_ = 0;
 }
 
@@ -190,7 +251,9 @@ StepResult Simulation::step(int steps)
       std::ostringstream msg;
       msg << "method '" << toString(params_.method) << "' diverged at step " << step_count_ + 1
           << " with time_step " << params_.time_step << " s ("
-          << (!ok ? "the step failed" : !finite ? "non-finite state" : "displacement beyond divergence_limit")
+          << (!ok ? "the implicit Newton iteration did not converge in newton_max_iterations = " +
+                        std::to_string(params_.newton_max_iterations)
+                  : !finite ? "non-finite state" : "displacement beyond divergence_limit")
           << "); the last good state is kept; a smaller time_step or more damping may help";
       result.message = msg.str();
       return result;
@@ -214,7 +277,7 @@ Eigen::VectorXd Simulation::velocity() const
 
 Eigen::VectorXd Simulation::positions() const
 {
-  Eigen::VectorXd x = grid_.initialPositions();
+  Eigen::VectorXd x = x_ref_;
   grid_.addFree(displacement(), x);
   return x;
 }

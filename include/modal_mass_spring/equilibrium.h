@@ -1,0 +1,27 @@
+// The static equilibrium of a grid under gravity, the linearization point of `equilibrium`.
+#pragma once
+
+#include "modal_mass_spring/grid.h"
+
+#include <Eigen/Core>
+
+namespace modal_mass_spring
+{
+
+struct Equilibrium
+{
+  Eigen::VectorXd positions;   // all dofs
+  int iterations = 0;          // Newton iterations taken
+  double residual = 0.0;       // largest unbalanced force component left, N
+};
+
+// Newton on the free dofs from `start`, the fixed particles held. The direction comes from the
+// tangent with compressed springs' geometric part dropped (positive semi-definite, so a descent
+// direction of the potential energy) plus a 1e-8 relative regularisation (a flat 3D sheet has no
+// out-of-plane stiffness); a backtracking line search on the energy makes it converge from far away,
+// such as a sheet rotated 45 degrees out of the vertical. Converged when every unbalanced force
+// component is below `tolerance` times one particle's weight. Throws std::runtime_error otherwise.
+Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int max_iterations = 200,
+                             double tolerance = 1e-9);
+
+}  // namespace modal_mass_spring

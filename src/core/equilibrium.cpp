@@ -1,0 +1,90 @@
+// Static equilibrium by damped Newton with an energy line search.
+#include "modal_mass_spring/equilibrium.h"
+
+#include "modal_mass_spring/spring_forces.h"
+
+#include <Eigen/SparseCholesky>
+
+#include <sstream>
+#include <stdexcept>
+
+namespace modal_mass_spring
+{
+namespace
+{
+
+double potential(const Grid& grid, const Eigen::VectorXd& x)
+{
+  return springEnergy(grid, x) + gravityEnergy(grid, x);
+}
+
+// Net force (springs + gravity) on the free dofs.
+Eigen::VectorXd unbalanced(const Grid& grid, const Eigen::VectorXd& x)
+{
+  Eigen::VectorXd f;
+  springForces(grid, x, f);
+  return grid.gatherFree(f + grid.gravityForce());
+}
+
+}  // namespace
+
+Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int max_iterations, double tolerance)
+{
+  const GridParams& p = grid.params();
+  // Forces are compared with one particle's weight, or without gravity with a small spring force.
+  const double weight = p.mass * p.gravity.norm();
+  const double scale = weight > 0.0 ? weight : p.structural_stiffness * p.spacing;
+
+  Equilibrium result;
+  result.positions = start;
+  Eigen::VectorXd r = unbalanced(grid, start);
+  Eigen::SimplicialLDLT<SparseMatrix> ldlt;
+  for (result.iterations = 0; result.iterations < max_iterations; ++result.iterations)
+  {
+    result.residual = r.cwiseAbs().maxCoeff();
+    if (result.residual <= tolerance * scale)
+      return result;
+
+    SparseMatrix k = tangentStiffness(grid, result.positions, CompressedSprings::Drop);
+    const double regularisation = 1e-8 * k.diagonal().maxCoeff();
+    for (int i = 0; i < k.rows(); ++i)
+      k.coeffRef(i, i) += regularisation;
+    if (result.iterations == 0)
+      ldlt.analyzePattern(k);
+    ldlt.factorize(k);
+    const Eigen::VectorXd direction = ldlt.solve(r);
+    if (ldlt.info() != Eigen::Success || !direction.allFinite())
+      break;
+
+    // Backtrack until the energy drops (Armijo) or, where energy differences are lost in round-off
+    // near the solution, the unbalanced force shrinks.
+    const double energy = potential(grid, result.positions);
+    const double slope = r.dot(direction);  // -dE/ds along the direction, > 0
+    bool accepted = false;
+    for (double s = 1.0; s > 1e-10 && !accepted; s *= 0.5)
+    {
+      Eigen::VectorXd trial = result.positions;
+      grid.addFree(s * direction, trial);
+      const Eigen::VectorXd trial_r = unbalanced(grid, trial);
+      const double trial_energy = potential(grid, trial);
+      if (trial_energy <= energy - 1e-4 * s * slope || trial_r.norm() < (1.0 - 1e-4 * s) * r.norm())
+      {
+        result.positions = trial;
+        r = trial_r;
+        accepted = true;
+      }
+    }
+    if (!accepted)
+      break;
+  }
+  result.residual = r.cwiseAbs().maxCoeff();
+  if (result.residual <= tolerance * scale)
+    return result;
+  std::ostringstream msg;
+  msg << "static equilibrium not found: Newton stopped after " << result.iterations
+      << " iterations with an unbalanced force of " << result.residual << " N (tolerance " << tolerance * scale
+      << " N); stiffer springs or a smaller load may help, or use linearization 'rest'";
+  throw std::runtime_error(msg.str());
+}
+
+}  // namespace modal_mass_spring
