@@ -1,0 +1,288 @@
+#!/usr/bin/env python3
+"""Draws the CSV files of modal_compare as PNG figures.
+
+Usage: plot_comparison.py --data DIR --out DIR
+
+Reads, from DIR, every file the tool writes and draws:
+  cost_<tag>.csv                      -> cost.png (one panel per file; per-step cost and basis build)
+  accuracy_<tag>_snapshots.csv        -> snapshots_<tag>.png (each modal method over `full`)
+  accuracy_<tag>_error.csv            -> error_<tag>.png (largest and RMS distance to `full`)
+  stability_<tag>.csv                 -> stability_<tag>.png (largest stable time step per method)
+The columns it needs are listed in COLUMNS: a file without them stops the script with a message.
+"""
+import argparse
+import csv
+import math
+import pathlib
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+
+COLUMNS = {
+    "cost": ["variant", "method", "dimension", "rows", "cols", "particles", "free_dofs", "num_modes",
+             "build_seconds", "step_seconds", "diverged"],
+    "error": ["variant", "method", "step", "time", "max_distance", "rms_distance", "diverged"],
+    "snapshots": ["variant", "method", "step", "time", "particle", "row", "col", "fixed", "x", "y", "z"],
+    "stability": ["variant", "method", "stable_dt", "unstable_dt", "steps", "tolerance", "modal_bound",
+                  "full_bound"],
+}
+METHOD_COLORS = {"full": "0.35", "linear": "tab:red", "physical": "tab:blue"}
+VARIANT_STYLES = ["-", "--", ":", "-."]
+
+
+class ColumnError(Exception):
+    pass
+
+
+def read_csv(path, kind):
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        missing = [c for c in COLUMNS[kind] if c not in (reader.fieldnames or [])]
+        if missing:
+            raise ColumnError(f"{path}: missing column(s) {', '.join(missing)} (a {kind} file needs "
+                              f"{', '.join(COLUMNS[kind])})")
+        rows = list(reader)
+    if not rows:
+        raise ColumnError(f"{path}: no rows")
+    return rows
+
+
+def number(text):
+    return float(text) if text not in ("", "nan", "-nan") else math.nan
+
+
+def tag_of(path, prefix, suffix):
+    return path.name[len(prefix):-len(suffix)]
+
+
+def ordered(values):
+    """Unique values in first-seen order."""
+    return list(dict.fromkeys(values))
+
+
+def plot_cost(paths, out):
+    fig, axes = plt.subplots(1, len(paths), figsize=(6 * len(paths), 4.5), squeeze=False)
+    for ax, path in zip(axes[0], paths):
+        rows = read_csv(path, "cost")
+        variants = ordered(r["variant"] for r in rows)
+        for vi, variant in enumerate(variants):
+            style = VARIANT_STYLES[vi % len(VARIANT_STYLES)]
+            vrows = [r for r in rows if r["variant"] == variant]
+            suffix = "" if len(variants) == 1 else f" ({variant})"
+            for method in ordered(r["method"] for r in vrows):
+                mrows = sorted((r for r in vrows if r["method"] == method), key=lambda r: int(r["particles"]))
+                ax.plot([int(r["particles"]) for r in mrows], [number(r["step_seconds"]) for r in mrows], style,
+                        marker="o", color=METHOD_COLORS.get(method), label=f"{method}: one step{suffix}")
+            brows = sorted({int(r["particles"]): r for r in vrows}.values(), key=lambda r: int(r["particles"]))
+            ax.plot([int(r["particles"]) for r in brows], [number(r["build_seconds"]) for r in brows], style,
+                    marker="s", color="black", label=f"modal basis build (once){suffix}")
+        first = rows[0]
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("particles (square grid, top row fixed)")
+        ax.set_ylabel("seconds (median of timed runs)")
+        ax.set_title(f"{first['dimension']}D, {first['num_modes']} modes ({tag_of(path, 'cost_', '.csv')})")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    target = out / "cost.png"
+    fig.savefig(target, dpi=110)
+    plt.close(fig)
+    return [target]
+
+
+def springs(rows, cols):
+    """Structural and shear springs of a rows x cols grid, as particle index pairs."""
+    pairs = []
+    for r in range(rows):
+        for c in range(cols):
+            p = r * cols + c
+            if c + 1 < cols:
+                pairs.append((p, p + 1))
+            if r + 1 < rows:
+                pairs.append((p, p + cols))
+            if r + 1 < rows and c + 1 < cols:
+                pairs.append((p, p + cols + 1))
+                pairs.append((p + 1, p + cols))
+    return pairs
+
+
+def plot_snapshots(path, out):
+    rows = read_csv(path, "snapshots")
+    tag = tag_of(path, "accuracy_", "_snapshots.csv")
+    nrows = max(int(r["row"]) for r in rows) + 1
+    ncols = max(int(r["col"]) for r in rows) + 1
+    links = springs(nrows, ncols)
+    three_d = any(abs(number(r["y"])) > 1e-12 for r in rows)
+    frames = {}
+    for r in rows:
+        frames.setdefault((r["variant"], r["method"], int(r["step"])), {})[int(r["particle"])] = (
+            number(r["x"]), number(r["y"]), number(r["z"]))
+    steps = sorted({k[2] for k in frames})
+    panels = [(v, m) for v, m in ordered((k[0], k[1]) for k in frames) if m != "full"]
+    times = {int(r["step"]): number(r["time"]) for r in rows}
+    # Every panel on the scale of the reference, so the figures compare shapes and sizes; a method
+    # that drifts far away leaves the panel and says so in its title.
+    reference = [p for k, f in frames.items() if k[1] == "full" for p in f.values()]
+    lo = [min(p[d] for p in reference) for d in range(3)]
+    hi = [max(p[d] for p in reference) for d in range(3)]
+    span = max(h - l for l, h in zip(lo, hi))
+    lo = [l - 0.1 * span for l in lo]
+    hi = [h + 0.1 * span for h in hi]
+    xs, ys, zs = (lo[0], hi[0]), (lo[1], hi[1]), (lo[2], hi[2])
+
+    def inside(p):
+        return all(lo[d] <= p[d] <= hi[d] for d in range(3))
+
+    def outside(frame):
+        return any(not (lo[d] <= p[d] <= hi[d]) for p in frame.values() for d in range(3))
+
+    width = 2.6 if three_d else 2.6 * (hi[0] - lo[0]) / (hi[2] - lo[2]) + 0.4
+    fig = plt.figure(figsize=(width * len(steps), (3.2 if three_d else 2.8) * len(panels) + 0.6))
+    for i, (variant, method) in enumerate(panels):
+        for j, step in enumerate(steps):
+            index = i * len(steps) + j + 1
+            ax = fig.add_subplot(len(panels), len(steps), index, projection="3d" if three_d else None)
+            for name, color, width in (("full", METHOD_COLORS["full"], 0.8), (method, METHOD_COLORS.get(method), 1.0)):
+                frame = frames.get((variant, name, step))
+                if frame is None:  # diverged before this step
+                    continue
+                for a, b in links:
+                    pa, pb = frame[a], frame[b]
+                    if three_d:
+                        if not (inside(pa) and inside(pb)):  # 3D axes do not clip
+                            continue
+                        ax.plot([pa[0], pb[0]], [pa[1], pb[1]], [pa[2], pb[2]], color=color, lw=width * 0.6)
+                    else:
+                        ax.plot([pa[0], pb[0]], [pa[2], pb[2]], color=color, lw=width * 0.6)
+                pts = list(frame.values())
+                if three_d:
+                    pts = [p for p in pts if inside(p)]
+                    ax.scatter([p[0] for p in pts], [p[1] for p in pts], [p[2] for p in pts], s=4, color=color)
+                else:
+                    ax.scatter([p[0] for p in pts], [p[2] for p in pts], s=8, color=color, zorder=3)
+                    ax.set_xlim(*xs)
+                    ax.set_ylim(*zs)
+            if three_d:
+                ax.set_xlim(*xs)
+                ax.set_ylim(*ys)
+                ax.set_zlim(*zs)
+                ax.set_box_aspect((hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]))
+                ax.view_init(elev=15, azim=-60)
+                ax.tick_params(labelsize=5)
+            else:
+                ax.set_xlim(*xs)
+                ax.set_ylim(*zs)
+                ax.set_aspect("equal")
+                ax.tick_params(labelsize=6)
+            label = method if variant == "base" else f"{method} ({variant})"
+            if frames.get((variant, method, step)) is None:
+                label += ": diverged"
+            elif outside(frames[(variant, method, step)]):
+                label += " (leaves the frame)"
+            ax.set_title(f"{label}\nstep {step} ({times[step]:g} s)", fontsize=7)
+    fig.suptitle(f"{tag}: each modal method (colour) over full (grey)", fontsize=10)
+    fig.tight_layout()
+    target = out / f"snapshots_{tag}.png"
+    fig.savefig(target, dpi=110)
+    plt.close(fig)
+    return [target]
+
+
+def plot_error(path, out):
+    rows = read_csv(path, "error")
+    tag = tag_of(path, "accuracy_", "_error.csv")
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    variants = ordered(r["variant"] for r in rows)
+    for column, ax, title in (("max_distance", axes[0], "largest particle distance to full"),
+                              ("rms_distance", axes[1], "RMS particle distance to full")):
+        for vi, variant in enumerate(variants):
+            for method in ordered(r["method"] for r in rows if r["variant"] == variant):
+                if method == "full":
+                    continue
+                series = [(number(r["time"]), number(r[column])) for r in rows
+                          if r["variant"] == variant and r["method"] == method and r["diverged"] == "0"]
+                series = [(t, e) for t, e in series if e > 0]
+                label = method if len(variants) == 1 else f"{method} ({variant})"
+                ax.plot([t for t, _ in series], [e for _, e in series], VARIANT_STYLES[vi % len(VARIANT_STYLES)],
+                        color=METHOD_COLORS.get(method), label=label, lw=1)
+        ax.set_yscale("log")
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("m")
+        ax.set_title(title, fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"{tag}: error against full", fontsize=10)
+    fig.tight_layout()
+    target = out / f"error_{tag}.png"
+    fig.savefig(target, dpi=110)
+    plt.close(fig)
+    return [target]
+
+
+def plot_stability(path, out):
+    rows = read_csv(path, "stability")
+    tag = tag_of(path, "stability_", ".csv")
+    labels = [r["method"] if r["variant"] == "base" else f"{r['method']}\n({r['variant']})" for r in rows]
+    values = [number(r["stable_dt"]) for r in rows]
+    fig, ax = plt.subplots(figsize=(max(5.5, 1.6 * len(rows)), 4))
+    bars = ax.bar(range(len(rows)), values, color=[METHOD_COLORS.get(r["method"], "0.5") for r in rows])
+    for bar, value in zip(bars, values):
+        ax.annotate(f"{value * 1e3:.3g} ms", (bar.get_x() + bar.get_width() / 2, value), ha="center",
+                    va="bottom", fontsize=8)
+    modal = ordered(number(r["modal_bound"]) for r in rows)
+    full = ordered(number(r["full_bound"]) for r in rows)
+    for i, value in enumerate(modal):
+        ax.axhline(value, color="tab:red", ls="--", lw=0.8, label="2/omega, highest mode of the basis" if i == 0 else None)
+    for i, value in enumerate(v for v in full if not math.isnan(v)):
+        ax.axhline(value, color="0.3", ls=":", lw=0.8, label="2/omega, highest of K(x0) (all dofs)" if i == 0 else None)
+    ax.set_xticks(range(len(rows)))
+    ax.set_xticklabels(labels, fontsize=8)
+    ax.set_yscale("log")
+    ax.set_ylabel("largest stable time step (s)")
+    first = rows[0]
+    ax.set_title(f"{tag}: no divergence within {first['steps']} steps (bisection, rel. tol. {first['tolerance']})",
+                 fontsize=9)
+    ax.legend(fontsize=7, loc="lower right")
+    ax.grid(True, axis="y", which="both", alpha=0.3)
+    fig.tight_layout()
+    target = out / f"stability_{tag}.png"
+    fig.savefig(target, dpi=110)
+    plt.close(fig)
+    return [target]
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", required=True, help="folder with the CSV files of modal_compare")
+    parser.add_argument("--out", required=True, help="folder for the PNG files")
+    args = parser.parse_args(argv)
+    data, out = pathlib.Path(args.data), pathlib.Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    try:
+        cost = sorted(data.glob("cost_*.csv"))
+        if cost:
+            written += plot_cost(cost, out)
+        for path in sorted(data.glob("accuracy_*_snapshots.csv")):
+            written += plot_snapshots(path, out)
+        for path in sorted(data.glob("accuracy_*_error.csv")):
+            written += plot_error(path, out)
+        for path in sorted(data.glob("stability_*.csv")):
+            written += plot_stability(path, out)
+    except ColumnError as error:
+        print(f"plot_comparison: error: {error}", file=sys.stderr)
+        return 1
+    if not written:
+        print(f"plot_comparison: error: no CSV files of modal_compare in {data}", file=sys.stderr)
+        return 1
+    for path in written:
+        print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,135 @@
+// The paper's experiments on the core: cost, accuracy against `full`, and the largest stable step.
+#pragma once
+
+#include "modal_mass_spring/simulation.h"
+
+#include <Eigen/Core>
+
+#include <functional>
+#include <ostream>
+#include <string>
+#include <vector>
+
+namespace modal_mass_spring
+{
+
+// One combination of parameters an experiment runs, named for the CSV `variant` column ("base", or
+// the varied keys as "key=value key=value").
+struct Setup
+{
+  std::string variant = "base";
+  GridParams grid;
+  SimulationParams sim;
+};
+
+// Reports how far a long run is (label, fraction done in [0, 1]); may be empty.
+using ProgressFn = std::function<void(const std::string&, double)>;
+
+// ---------------------------------------------------------------- 1. cost
+
+struct CostOptions
+{
+  std::vector<int> sizes{5, 10, 20, 40};  // square grids, sizes x sizes particles
+  std::vector<Method> methods{Method::Full, Method::Linear, Method::Physical};
+  int repeats = 7;                   // timed runs per method and size; the median is reported
+  double min_repeat_seconds = 0.02;  // each timed run takes at least this many steps' worth
+  int build_repeats = 3;             // basis builds per size; the median is reported
+};
+
+struct CostRow
+{
+  std::string variant, method;
+  int dimension = 0, rows = 0, cols = 0, particles = 0, free_dofs = 0, springs = 0, num_modes = 0;
+  double build_seconds = 0.0;        // median time to build the modal basis
+  double step_seconds = 0.0;         // median time per step
+  double step_seconds_min = 0.0;
+  int repeats = 0, steps_per_repeat = 0;
+  bool diverged = false;             // a timed run diverged: its time covers fewer steps
+};
+
+std::vector<CostRow> runCost(const Setup& setup, const CostOptions& options, const ProgressFn& progress = {});
+
+// ---------------------------------------------------------------- 2. and 4. accuracy
+
+struct AccuracyOptions
+{
+  std::vector<Method> methods{Method::Linear, Method::Physical};  // compared with `full`
+  int steps = 5000;
+  int interval = 1000;  // snapshots of every particle every `interval` steps, as in the paper
+  int sample = 10;      // error samples every `sample` steps (must divide `interval`)
+};
+
+// One method at one step, against `full` at the same step. Distances are per particle, between the
+// method's and full's positions: the largest and the RMS over the free particles.
+struct ErrorSample
+{
+  std::string variant, method;
+  long step = 0;
+  double time = 0.0;
+  double max_distance = 0.0, rms_distance = 0.0;
+  double max_displacement = 0.0;  // of this method's particles from the initial positions
+  double energy = 0.0;            // kinetic + spring + gravity
+  bool diverged = false;          // the method diverged at or before this step: no distances
+};
+
+struct Snapshot
+{
+  std::string variant, method;
+  long step = 0;
+  double time = 0.0;
+  Eigen::Matrix3Xd points;
+};
+
+struct AccuracyResult
+{
+  std::vector<ErrorSample> errors;  // `full` included, with zero distances
+  std::vector<Snapshot> snapshots;  // `full` included
+  std::vector<std::string> messages;  // divergences, one line each
+  // The basis of the setup (the same for every method).
+  Eigen::VectorXd frequencies;
+  int num_zero_modes = 0;
+};
+
+AccuracyResult runAccuracy(const Setup& setup, const AccuracyOptions& options, const ProgressFn& progress = {});
+
+// ---------------------------------------------------------------- 3. stability
+
+struct StabilityOptions
+{
+  std::vector<Method> methods{Method::Full, Method::Linear, Method::Physical};
+  int steps = 10000;        // S: a time step is stable when S steps from the setup's initial state do not diverge
+  double tolerance = 1e-3;  // bisection stops when (unstable - stable) <= tolerance * stable
+  double max_time_step = 10.0;  // s; no divergence up to here counts as unbounded
+  double min_time_step = 1e-9;  // s; divergence down to here counts as no stable step
+};
+
+struct StabilityRow
+{
+  std::string variant, method;
+  double stable_dt = 0.0;    // largest time step found stable (0: none above min_time_step)
+  double unstable_dt = 0.0;  // smallest found to diverge (infinity: none up to max_time_step)
+  int trials = 0;
+  int steps = 0;
+  double tolerance = 0.0;
+  // Closed forms of the explicit scheme, 2 / omega: for the highest mode of the basis and for the
+  // highest frequency of K(x0) over all free dofs (NaN when the grid is too large for a dense solve).
+  double modal_bound = 0.0;
+  double full_bound = 0.0;
+  // Whether 1/4, 1/2 and 3/4 of stable_dt are stable too: bisection assumes one boundary.
+  bool below_stable = true;
+};
+
+std::vector<StabilityRow> runStability(const Setup& setup, const StabilityOptions& options,
+                                       const ProgressFn& progress = {});
+
+// Largest dense eigen-frequency of M^-1 K(x0) on the free dofs, NaN above `max_dofs`.
+double highestFrequencyAtRest(const Grid& grid, int max_dofs = 3000);
+
+// ---------------------------------------------------------------- CSV files the plotting script reads
+
+void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows);
+void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows);
+void writeSnapshotCsv(std::ostream& out, const Grid& grid, const std::vector<Snapshot>& snapshots);
+void writeStabilityCsv(std::ostream& out, const std::vector<StabilityRow>& rows);
+
+}  // namespace modal_mass_spring
