@@ -73,7 +73,7 @@ double maxDisplacement(const Grid& grid, const Eigen::Matrix3Xd& points)
 
 // ---------------------------------------------------------------- cost
 
-std::vector<CostRow> runCost(const Setup& setup, const CostOptions& options, const ProgressFn& progress)
+std::vector<CostRow> runCost(const ExperimentSetup& setup, const CostOptions& options, const ProgressFn& progress)
 {
   std::vector<CostRow> rows;
   const double total = static_cast<double>(options.sizes.size());
@@ -160,7 +160,7 @@ std::vector<CostRow> runCost(const Setup& setup, const CostOptions& options, con
 
 // ---------------------------------------------------------------- accuracy
 
-AccuracyResult runAccuracy(const Setup& setup, const AccuracyOptions& options, const ProgressFn& progress)
+AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& options, const ProgressFn& progress)
 {
   if (options.steps < 1 || options.interval < 1 || options.sample < 1 || options.interval % options.sample != 0)
     throw std::invalid_argument("accuracy: steps, interval and sample must be >= 1 and sample must divide interval");
@@ -240,7 +240,7 @@ double highestFrequencyAtRest(const Grid& grid, int max_dofs)
   return std::sqrt(std::max(0.0, solver.eigenvalues().maxCoeff()));
 }
 
-std::vector<StabilityRow> runStability(const Setup& setup, const StabilityOptions& options, const ProgressFn& progress)
+std::vector<StabilityRow> runStability(const ExperimentSetup& setup, const StabilityOptions& options, const ProgressFn& progress)
 {
   if (options.steps < 1 || !(options.tolerance > 0.0) || !(options.min_time_step > 0.0) ||
       !(options.max_time_step > options.min_time_step))

@@ -15,7 +15,7 @@ namespace modal_mass_spring
 
 // One combination of parameters an experiment runs, named for the CSV `variant` column ("base", or
 // the varied keys as "key=value key=value").
-struct Setup
+struct ExperimentSetup
 {
   std::string variant = "base";
   GridParams grid;
@@ -47,7 +47,7 @@ struct CostRow
   bool diverged = false;             // a timed run diverged: its time covers fewer steps
 };
 
-std::vector<CostRow> runCost(const Setup& setup, const CostOptions& options, const ProgressFn& progress = {});
+std::vector<CostRow> runCost(const ExperimentSetup& setup, const CostOptions& options, const ProgressFn& progress = {});
 
 // ---------------------------------------------------------------- 2. and 4. accuracy
 
@@ -90,7 +90,7 @@ struct AccuracyResult
   int num_zero_modes = 0;
 };
 
-AccuracyResult runAccuracy(const Setup& setup, const AccuracyOptions& options, const ProgressFn& progress = {});
+AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& options, const ProgressFn& progress = {});
 
 // ---------------------------------------------------------------- 3. stability
 
@@ -119,7 +119,7 @@ struct StabilityRow
   bool below_stable = true;
 };
 
-std::vector<StabilityRow> runStability(const Setup& setup, const StabilityOptions& options,
+std::vector<StabilityRow> runStability(const ExperimentSetup& setup, const StabilityOptions& options,
                                        const ProgressFn& progress = {});
 
 // Largest dense eigen-frequency of M^-1 K(x0) on the free dofs, NaN above `max_dofs`.

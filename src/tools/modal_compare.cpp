@@ -233,7 +233,7 @@ Options parseArguments(int argc, char** argv)
 }
 
 // Every combination of the --vary values, each loaded and validated from its own copy of the config.
-std::vector<Setup> buildSetups(const Options& o)
+std::vector<ExperimentSetup> buildSetups(const Options& o)
 {
   YamlParameterSource base = YamlParameterSource::fromFile(o.config);
   for (const auto& [key, text] : o.sets)
@@ -253,11 +253,11 @@ std::vector<Setup> buildSetups(const Options& o)
     combinations = next;
   }
 
-  std::vector<Setup> setups;
+  std::vector<ExperimentSetup> setups;
   for (const auto& combination : combinations)
   {
     YamlParameterSource source = base.clone();
-    Setup setup;
+    ExperimentSetup setup;
     std::string label;
     for (const auto& [key, v] : combination)
     {
@@ -293,9 +293,9 @@ std::vector<Setup> buildSetups(const Options& o)
 
 // Fails before any experiment runs: builds each setup once (ranges are checked there) and checks
 // that the cost sizes leave room for the modes.
-void validate(const Options& o, const std::vector<Setup>& setups)
+void validate(const Options& o, const std::vector<ExperimentSetup>& setups)
 {
-  for (const Setup& setup : setups)
+  for (const ExperimentSetup& setup : setups)
   {
     try
     {
@@ -397,10 +397,10 @@ void printTable(const std::string& title, const std::vector<std::vector<std::str
   }
 }
 
-void runCostExperiment(const Options& o, const std::vector<Setup>& setups, Progress& progress)
+void runCostExperiment(const Options& o, const std::vector<ExperimentSetup>& setups, Progress& progress)
 {
   std::vector<CostRow> rows;
-  for (const Setup& setup : setups)
+  for (const ExperimentSetup& setup : setups)
   {
     const auto part = runCost(setup, o.cost, std::ref(progress));
     rows.insert(rows.end(), part.begin(), part.end());
@@ -416,14 +416,14 @@ void runCostExperiment(const Options& o, const std::vector<Setup>& setups, Progr
   printTable("cost (" + o.tag + "): median of " + std::to_string(o.cost.repeats) + " timed runs", table);
 }
 
-void runAccuracyExperiment(const Options& o, const std::vector<Setup>& setups, Progress& progress)
+void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>& setups, Progress& progress)
 {
   std::vector<ErrorSample> errors;
   std::vector<Snapshot> snapshots;
   std::vector<std::string> messages;
   std::vector<std::vector<std::string>> table{
       {"variant", "method", "step", "time s", "max distance m", "RMS distance m", "max displacement m"}};
-  for (const Setup& setup : setups)
+  for (const ExperimentSetup& setup : setups)
   {
     const AccuracyResult result = runAccuracy(setup, o.accuracy, std::ref(progress));
     errors.insert(errors.end(), result.errors.begin(), result.errors.end());
@@ -453,10 +453,10 @@ void runAccuracyExperiment(const Options& o, const std::vector<Setup>& setups, P
     std::cout << "note: " << m << "\n";
 }
 
-void runStabilityExperiment(const Options& o, const std::vector<Setup>& setups, Progress& progress)
+void runStabilityExperiment(const Options& o, const std::vector<ExperimentSetup>& setups, Progress& progress)
 {
   std::vector<StabilityRow> rows;
-  for (const Setup& setup : setups)
+  for (const ExperimentSetup& setup : setups)
   {
     const auto part = runStability(setup, o.stability, std::ref(progress));
     rows.insert(rows.end(), part.begin(), part.end());
@@ -478,7 +478,7 @@ void runStabilityExperiment(const Options& o, const std::vector<Setup>& setups, 
 int main(int argc, char** argv)
 {
   Options options;
-  std::vector<Setup> setups;
+  std::vector<ExperimentSetup> setups;
   try
   {
     options = parseArguments(argc, argv);

@@ -1,1 +1,140 @@
+// The tool from the command line: a small run through the CSV files to the plotting script's PNGs,
+// and bad input refused with a message naming it before any file is written.
 #include <gtest/gtest.h>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+namespace fs = std::filesystem;
+
+namespace
+{
+
+struct CommandResult
+{
+  int status = -1;
+  std::string output;  // stdout and stderr
+};
+
+CommandResult run(const std::string& command)
+{
+  CommandResult result;
+  FILE* pipe = popen((command + " 2>&1").c_str(), "r");
+  if (!pipe)
+    return result;
+  std::array<char, 4096> buffer;
+  size_t n;
+  while ((n = fread(buffer.data(), 1, buffer.size(), pipe)) > 0)
+    result.output.append(buffer.data(), n);
+  const int status = pclose(pipe);
+  result.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return result;
+}
+
+std::string firstLine(const fs::path& path)
+{
+  std::ifstream in(path);
+  std::string line;
+  std::getline(in, line);
+  return line;
+}
+
+class ModalCompareTool : public ::testing::Test
+{
+protected:
+  void SetUp() override
+  {
+    dir_ = fs::temp_directory_path() / ("modal_compare_test_" + std::to_string(getpid()));
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  std::string tool(const std::string& args) const
+  {
+    return std::string(MODAL_COMPARE_EXECUTABLE) + " --quiet --output " + (dir_ / "data").string() + " " + args;
+  }
+  std::string config(const std::string& name) const { return std::string(MODAL_SOURCE_DIR) + "/config/compare/" + name; }
+
+  fs::path dir_;
+};
+
+}  // namespace
+
+TEST_F(ModalCompareTool, SmallRunEndToEndToPngs)
+{
+  // A 2D and a 3D config, every experiment, small enough to take a few seconds.
+  const CommandResult r2 = run(tool("--config " + config("paper_2d.yaml") +
+                          " --experiment all --steps 400 --interval 200 --sample 20 --stability-steps 500"
+                          " --tolerance 0.05 --sizes 4,6 --repeats 2 --min-repeat-seconds 0.001"));
+  ASSERT_EQ(r2.status, 0) << r2.output;
+  const CommandResult r3 = run(tool("--config " + config("paper_3d.yaml") +
+                          " --set rows=5 --set cols=5 --set num_modes=6 --tag small_3d --experiment accuracy,cost"
+                          " --steps 200 --interval 100 --sample 20 --sizes 5 --repeats 2 --min-repeat-seconds 0.001"));
+  ASSERT_EQ(r3.status, 0) << r3.output;
+  EXPECT_NE(r2.output.find("accuracy (paper_2d)"), std::string::npos) << r2.output;  // the summary table
+
+  const fs::path data = dir_ / "data";
+  for (const char* name : {"cost_paper_2d.csv", "accuracy_paper_2d_error.csv", "accuracy_paper_2d_snapshots.csv",
+                           "stability_paper_2d.csv", "cost_small_3d.csv", "accuracy_small_3d_snapshots.csv"})
+    ASSERT_TRUE(fs::exists(data / name)) << name;
+  EXPECT_EQ(firstLine(data / "accuracy_paper_2d_error.csv"),
+            "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged");
+
+  const fs::path figures = dir_ / "figures";
+  const CommandResult plot = run("MPLBACKEND=Agg /usr/bin/python3 " + std::string(MODAL_SOURCE_DIR) +
+                       "/scripts/plot_comparison.py --data " + data.string() + " --out " + figures.string());
+  ASSERT_EQ(plot.status, 0) << plot.output;
+  for (const char* name : {"cost.png", "snapshots_paper_2d.png", "error_paper_2d.png", "stability_paper_2d.png",
+                           "snapshots_small_3d.png", "error_small_3d.png"})
+  {
+    ASSERT_TRUE(fs::exists(figures / name)) << name << "\n" << plot.output;
+    EXPECT_GT(fs::file_size(figures / name), 5000u) << name;
+  }
+}
+
+TEST_F(ModalCompareTool, PlottingScriptRefusesACsvWithoutItsColumns)
+{
+  fs::create_directories(dir_ / "data");
+  std::ofstream(dir_ / "data" / "stability_broken.csv") << "variant,method,dt\nbase,linear,0.1\n";
+  const CommandResult plot = run("/usr/bin/python3 " + std::string(MODAL_SOURCE_DIR) + "/scripts/plot_comparison.py --data " +
+                       (dir_ / "data").string() + " --out " + (dir_ / "figures").string());
+  EXPECT_EQ(plot.status, 1);
+  EXPECT_NE(plot.output.find("stable_dt"), std::string::npos) << plot.output;
+}
+
+TEST_F(ModalCompareTool, BadInputStopsBeforeAnyWorkWithAMessageNamingIt)
+{
+  struct Case
+  {
+    std::string args, named;
+  };
+  const std::string paper = "--config " + config("paper_2d.yaml");
+  for (const Case& c : {Case{"--config /nonexistent/grid.yaml", "/nonexistent/grid.yaml"},
+                        Case{paper + " --experiment speed", "speed"},
+                        Case{paper + " --methods linear,quadratic", "quadratic"},
+                        Case{paper + " --set num_modes=0", "num_modes"},
+                        Case{paper + " --set num_modes=41", "num_modes"},
+                        Case{paper + " --set time_step=-1", "time_step"},
+                        Case{paper + " --set mass=heavy", "mass"},
+                        Case{paper + " --set stifness=3", "stifness"},
+                        Case{paper + " --vary integrator=explicit,sideways", "sideways"},
+                        Case{paper + " --experiment cost --sizes 1,5", "--sizes"},
+                        Case{paper + " --set num_modes=30 --experiment cost --sizes 5,3", "--sizes 3"},
+                        Case{paper + " --sample 300", "--sample"},
+                        Case{paper + " --frobnicate", "--frobnicate"},
+                        Case{"--experiment accuracy", "--config"}})
+  {
+    const CommandResult r = run(tool(c.args));
+    EXPECT_EQ(r.status, 2) << c.args << "\n" << r.output;
+    EXPECT_NE(r.output.find(c.named), std::string::npos) << c.args << "\n" << r.output;
+    EXPECT_FALSE(fs::exists(dir_ / "data")) << c.args << ": wrote output before refusing";
+    fs::remove_all(dir_ / "data");
+  }
+}

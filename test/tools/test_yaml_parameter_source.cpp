@@ -1,1 +1,134 @@
+// The YAML parameter source: the node's names and types, wrong types refused, unknown keys ignored.
+#include "yaml_parameter_source.h"
+
 #include <gtest/gtest.h>
+
+#include <stdexcept>
+
+using namespace modal_mass_spring;
+
+namespace
+{
+
+// The message of the std::invalid_argument `f` throws; fails the test when it throws nothing.
+template <typename F>
+std::string invalidArgument(F f)
+{
+  try
+  {
+    f();
+  }
+  catch (const std::invalid_argument& e)
+  {
+    return e.what();
+  }
+  ADD_FAILURE() << "no std::invalid_argument thrown";
+  return "";
+}
+
+}  // namespace
+
+TEST(YamlParameterSource, ReadsEveryParameterTheCoreKnows)
+{
+  const auto source = YamlParameterSource::fromString(R"(
+rows: 6
+cols: 4
+spacing: 0.05
+dimension: 3
+mass: 0.02
+structural_stiffness: 20
+shear_stiffness: 7.5
+bending: true
+bending_stiffness: 2
+fixed: [0, 3]
+gravity: [0, 0, -1.62]
+rotation_deg: 30
+method: linear
+num_modes: 12
+alpha: 0.5
+beta: 0.001
+time_step: 0.002
+divergence_limit: 50
+publish_rate: 30      # a node-only key: ignored
+frame_id: world
+)");
+  const GridParams g = loadGridParams(source);
+  const SimulationParams s = loadSimulationParams(source);
+  EXPECT_EQ(g.rows, 6);
+  EXPECT_EQ(g.cols, 4);
+  EXPECT_DOUBLE_EQ(g.spacing, 0.05);
+  EXPECT_EQ(g.dimension, 3);
+  EXPECT_DOUBLE_EQ(g.mass, 0.02);
+  EXPECT_DOUBLE_EQ(g.structural_stiffness, 20.0);  // an integer where a number is expected
+  EXPECT_DOUBLE_EQ(g.shear_stiffness, 7.5);
+  EXPECT_TRUE(g.bending);
+  EXPECT_DOUBLE_EQ(g.bending_stiffness, 2.0);
+  EXPECT_EQ(g.fixed, (std::vector<int>{0, 3}));
+  EXPECT_DOUBLE_EQ(g.gravity.z(), -1.62);
+  EXPECT_DOUBLE_EQ(g.rotation_deg, 30.0);
+  EXPECT_EQ(s.method, Method::Linear);
+  EXPECT_EQ(s.num_modes, 12);
+  EXPECT_DOUBLE_EQ(s.alpha, 0.5);
+  EXPECT_DOUBLE_EQ(s.beta, 0.001);
+  EXPECT_DOUBLE_EQ(s.time_step, 0.002);
+  EXPECT_DOUBLE_EQ(s.divergence_limit, 50.0);
+  EXPECT_TRUE(source.queried().count("num_modes"));
+  EXPECT_FALSE(source.queried().count("publish_rate"));
+}
+
+TEST(YamlParameterSource, AbsentKeysKeepTheDefaults)
+{
+  const auto source = YamlParameterSource::fromString("");
+  const GridParams g = loadGridParams(source);
+  const SimulationParams s = loadSimulationParams(source);
+  EXPECT_EQ(g.rows, GridParams{}.rows);
+  EXPECT_EQ(s.num_modes, SimulationParams{}.num_modes);
+}
+
+TEST(YamlParameterSource, WrongTypesNameTheKey)
+{
+  struct Case
+  {
+    const char* yaml;
+    const char* key;
+  };
+  for (const Case& c : {Case{"rows: 5.5", "rows"}, Case{"rows: five", "rows"}, Case{"mass: heavy", "mass"},
+                        Case{"bending: 3", "bending"}, Case{"fixed: 0", "fixed"}, Case{"fixed: [0, a]", "fixed"},
+                        Case{"gravity: {z: -9.81}", "gravity"}, Case{"method: [full]", "method"},
+                        Case{"num_modes: [4]", "num_modes"}, Case{"time_step: true", "time_step"}})
+  {
+    const auto source = YamlParameterSource::fromString(c.yaml);
+    const std::string message = invalidArgument([&] {
+      loadGridParams(source);
+      loadSimulationParams(source);
+    });
+    EXPECT_NE(message.find(std::string("'") + c.key + "'"), std::string::npos) << c.yaml << ": " << message;
+    EXPECT_NE(message.find("wrong type"), std::string::npos) << c.yaml << ": " << message;
+  }
+}
+
+TEST(YamlParameterSource, UnreadableFilesNameTheFile)
+{
+  EXPECT_NE(invalidArgument([] { YamlParameterSource::fromFile("/nonexistent/grid.yaml"); })
+                .find("/nonexistent/grid.yaml"),
+            std::string::npos);
+  EXPECT_NE(invalidArgument([] { YamlParameterSource::fromString("rows: [1, 2", "broken.yaml"); }).find("broken.yaml"),
+            std::string::npos);
+  EXPECT_NE(invalidArgument([] { YamlParameterSource::fromString("- 1\n- 2\n", "list.yaml"); }).find("map"),
+            std::string::npos);
+}
+
+TEST(YamlParameterSource, OverridesTakeTheirTypeFromYamlAndClonesAreIndependent)
+{
+  auto source = YamlParameterSource::fromString("num_modes: 4\nmethod: full\n");
+  auto copy = source.clone();
+  source.set("num_modes", "30");
+  source.set("fixed", "[0, 4]");
+  source.set("method", "physical");
+  EXPECT_EQ(loadSimulationParams(source).num_modes, 30);
+  EXPECT_EQ(loadSimulationParams(source).method, Method::Physical);
+  EXPECT_EQ(loadGridParams(source).fixed, (std::vector<int>{0, 4}));
+  EXPECT_EQ(loadSimulationParams(copy).num_modes, 4);
+  source.set("num_modes", "many");
+  EXPECT_NE(invalidArgument([&] { loadSimulationParams(source); }).find("num_modes"), std::string::npos);
+}
