@@ -187,7 +187,7 @@ def plot_snapshots(path, out):
     fig.suptitle(f"{tag}: each modal method (colour) over full (grey)", fontsize=10)
     fig.tight_layout()
     target = out / f"snapshots_{tag}.png"
-    fig.savefig(target, dpi=110)
+    fig.savefig(target, dpi=110 if len(panels) <= 2 else 70)
     plt.close(fig)
     return [target]
 
@@ -226,13 +226,17 @@ def plot_error(path, out):
 def plot_stability(path, out):
     rows = read_csv(path, "stability")
     tag = tag_of(path, "stability_", ".csv")
-    labels = [r["method"] if r["variant"] == "base" else f"{r['method']}\n({r['variant']})" for r in rows]
+    labels = [r["method"] if r["variant"] == "base" else r["method"] + "\n" + r["variant"].replace(" ", "\n")
+              for r in rows]
     values = [number(r["stable_dt"]) for r in rows]
-    fig, ax = plt.subplots(figsize=(max(5.5, 1.6 * len(rows)), 4))
+    fig, ax = plt.subplots(figsize=(max(5.5, 1.45 * len(rows)), 4.2 + 0.25 * max(l.count("\n") for l in labels)))
     bars = ax.bar(range(len(rows)), values, color=[METHOD_COLORS.get(r["method"], "0.5") for r in rows])
-    for bar, value in zip(bars, values):
-        ax.annotate(f"{value * 1e3:.3g} ms", (bar.get_x() + bar.get_width() / 2, value), ha="center",
-                    va="bottom", fontsize=8)
+    for bar, value, r in zip(bars, values, rows):
+        unbounded = math.isinf(number(r["unstable_dt"]))
+        if unbounded:
+            bar.set_hatch("//")
+        text = f">= {value:.3g} s\n(no divergence found)" if unbounded else f"{value * 1e3:.3g} ms"
+        ax.annotate(text, (bar.get_x() + bar.get_width() / 2, value), ha="center", va="bottom", fontsize=7)
     modal = ordered(number(r["modal_bound"]) for r in rows)
     full = ordered(number(r["full_bound"]) for r in rows)
     for i, value in enumerate(modal):
@@ -240,8 +244,10 @@ def plot_stability(path, out):
     for i, value in enumerate(v for v in full if not math.isnan(v)):
         ax.axhline(value, color="0.3", ls=":", lw=0.8, label="2/omega, highest of K(x0) (all dofs)" if i == 0 else None)
     ax.set_xticks(range(len(rows)))
-    ax.set_xticklabels(labels, fontsize=8)
+    ax.set_xticklabels(labels, fontsize=7)
     ax.set_yscale("log")
+    positive = [v for v in values + modal + full if v > 0 and math.isfinite(v)]
+    ax.set_ylim(min(positive) / 3, max(positive) * 8)
     ax.set_ylabel("largest stable time step (s)")
     first = rows[0]
     ax.set_title(f"{tag}: no divergence within {first['steps']} steps (bisection, rel. tol. {first['tolerance']})",
