@@ -2,6 +2,11 @@
 """Counts the test cases in the JUnit XML files under a folder; prints 'N passed, N failed'.
 
 Exits 1 when any test failed or errored, or when no test ran at all.
+
+Each rostest writes two files: rosunit-<test>.xml with the test's own cases, and rostest-<file>.xml
+with one case per test node that only says whether the node ran and left results. The latter counts
+only when it failed (a crash, a time-out, a fixture node that did not launch), so passes are not
+counted twice and such failures are not missed. Disabled gtest cases (status="notrun") are skipped.
 """
 import pathlib
 import sys
@@ -17,11 +22,14 @@ def main(folder):
             print(f"{path}: unreadable result file: {error}")
             failed += 1
             continue
+        rostest_wrapper = path.name.startswith("rostest-")
         for case in root.iter("testcase"):
             if case.find("failure") is not None or case.find("error") is not None:
                 failed += 1
                 print(f"FAILED: {case.get('classname')}.{case.get('name')} ({path.name})")
-            elif case.find("skipped") is not None:
+            elif rostest_wrapper:
+                continue
+            elif case.find("skipped") is not None or case.get("status") == "notrun":
                 skipped += 1
             else:
                 passed += 1
