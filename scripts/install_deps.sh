@@ -15,7 +15,13 @@ packages=(
   python3-std-srvs python3-std-msgs python3-visualization-msgs python3-geometry-msgs
   python3-tf2-msgs python3-diagnostic-msgs python3-rosgraph-msgs python3-genmsg python3-gencpp python3-genpy
   python3-matplotlib python3-numpy
+  python3-rospy python3-roslib python3-rosgraph python3-rosunit
 )
+# The viewer, only for the main job with a display (scripts/run.sh sets MODAL_VIEWER=1) and the
+# screenshot under Xvfb: CI and the tests do not need it.
+if [ "${MODAL_VIEWER:-0}" = "1" ]; then
+  packages+=(rviz xvfb xauth x11-utils imagemagick)
+fi
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
