@@ -18,6 +18,8 @@ public:
   virtual int size() const = 0;
   // Spring plus gravity force in these coordinates. Not const: models keep scratch buffers.
   virtual void force(const Eigen::VectorXd& q, Eigen::VectorXd& f) = 0;
+  // Potential energy E(q) with F = -dE/dq, for line searches.
+  virtual double energy(const Eigen::VectorXd& q) = 0;
   // Tangent stiffness -dF/dq at q, for implicit integrators: sparse for the full model, dense
   // (r x r, stored sparse) for the physical one, diagonal for the linear one.
   virtual void tangentStiffness(const Eigen::VectorXd& q, SparseMatrix& k) = 0;
@@ -33,6 +35,7 @@ public:
   int size() const override { return grid_.numFreeDofs(); }
   void force(const Eigen::VectorXd& u, Eigen::VectorXd& f) override;
   void tangentStiffness(const Eigen::VectorXd& u, SparseMatrix& k) override;
+  double energy(const Eigen::VectorXd& u) override;
 
 private:
   const Grid& grid_;
@@ -47,11 +50,13 @@ public:
   int size() const override { return static_cast<int>(lambda_.size()); }
   void force(const Eigen::VectorXd& modal, Eigen::VectorXd& f) override;
   void tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k) override;
+  double energy(const Eigen::VectorXd& modal) override;
   bool isLinear() const override { return true; }
 
 private:
   Eigen::VectorXd lambda_;      // lambda^2 per mode
   Eigen::VectorXd reference_;   // Phi^T (f(x_ref) + f_g), constant
+  double reference_energy_;     // E(x_ref)
 };
 
 // `physical` (Kobayashi et al.): x = x_ref + Phi X, F = Phi^T (f(x) + f_g).
@@ -63,6 +68,7 @@ public:
   void force(const Eigen::VectorXd& modal, Eigen::VectorXd& f) override;
   // Phi^T K(x) Phi, with K(x) the sparse tangent at x = x_ref + Phi X.
   void tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k) override;
+  double energy(const Eigen::VectorXd& modal) override;
 
 private:
   const Grid& grid_;

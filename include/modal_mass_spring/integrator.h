@@ -61,30 +61,43 @@ private:
 };
 
 // Newmark average acceleration (beta = 1/4, gamma = 1/2), implicit in the forces: each step solves
-// R(q') = M a' + C v' - F(q') = 0 by Newton with the tangent 4/dt^2 M + 2/dt C + K(q'). Unconditionally
-// stable and energy-conserving for linear systems; a step whose Newton iteration does not converge
-// is refused, never taken.
+// R(q') = M a' + C v' - F(q') = 0 by Newton with the tangent 4/dt^2 M + 2/dt C + K(q') and a line
+// search. Unconditionally stable and energy-conserving for linear systems. Where Newton does not
+// converge in max_iterations, the step is retried as two half steps (recursively, down to 1/16);
+// a step that still does not converge is refused, never taken.
 class ImplicitNewmark : public Integrator
 {
 public:
-  ImplicitNewmark(MassDamping system, double dt, int max_iterations = 20, double tolerance = 1e-9);
+  ImplicitNewmark(MassDamping system, double dt, int max_iterations = 50, double tolerance = 1e-9);
   bool step(ForceModel& model, const State& state, State& next) override;
-  // Newton iterations the last step took.
+  // Newton iterations of the last solve, and how many solves the last step took (1 unless split).
   int lastIterations() const { return last_iterations_; }
+  int lastSubsteps() const { return substeps_; }
 
 private:
+  static constexpr int kMaxHalvings = 4;
+  void setStepSize(double h);
+  bool advance(ForceModel& model, const State& s, State& next, double h, int depth);
+  // One Newton solve of a step of size h_.
+  bool solve(ForceModel& model, const State& s, State& next);
   // a' and v' that the Newmark relations give for a trial q'.
   void kinematics(const State& s, State& next) const;
   void analyzeIfNewPattern(const SparseMatrix& jacobian);
+  // Sets next.v, next.a from next.q, stores R(q') in residual_ and returns its norm.
+  double residual(ForceModel& model, const State& s, State& next);
 
   int max_iterations_;
   double tolerance_;
   int last_iterations_ = 0;
+  int substeps_ = 0;
+  double h_ = 0.0;             // the step size being solved
+  SparseMatrix mass_matrix_;
   Eigen::SimplicialLDLT<SparseMatrix> ldlt_;
-  SparseMatrix inertia_;  // 4/dt^2 M + 2/dt C, constant
+  SparseMatrix inertia_;  // 4/h^2 M + 2/h C
   SparseMatrix tangent_;
   std::vector<int> pattern_outer_, pattern_inner_;
   Eigen::VectorXd force_, residual_;
+  double inertial_norm_ = 0.0;  // |M a' + C v'| at the last residual
 };
 
 }  // namespace modal_mass_spring

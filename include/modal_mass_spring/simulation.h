@@ -67,7 +67,7 @@ struct SimulationParams
   Linearization linearization = Linearization::Rest;
   IntegratorKind integrator = IntegratorKind::Explicit;
   InitialState initial_state = InitialState::Initial;
-  int newton_max_iterations = 20;  // per implicit step
+  int newton_max_iterations = 50;  // per implicit solve
 };
 
 // What building the linearization point found.
@@ -115,8 +115,10 @@ public:
   const Eigen::VectorXd& linearizationPositions() const { return x_ref_; }
   // The positions a reset returns to.
   const Eigen::VectorXd& startPositions() const { return x_start_; }
-  // Newton iterations of the last implicit step (0 under the explicit integrator).
+  // Newton iterations of the last implicit solve, and the solves the last step took (1 unless
+  // Newton failed and the step was split); both 0 under the explicit integrator.
   int lastNewtonIterations() const;
+  int lastImplicitSubsteps() const;
 
   // Takes up to `steps` steps; stops at the first that diverges and keeps the state before it.
   StepResult step(int steps = 1);

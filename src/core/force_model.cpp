@@ -30,6 +30,13 @@ void FullForceModel::tangentStiffness(const Eigen::VectorXd& u, SparseMatrix& k)
   k = modal_mass_spring::tangentStiffness(grid_, x_);
 }
 
+double FullForceModel::energy(const Eigen::VectorXd& u)
+{
+  x_ = x_ref_;
+  grid_.addFree(u, x_);
+  return springEnergy(grid_, x_) + gravityEnergy(grid_, x_);
+}
+
 LinearModalForceModel::LinearModalForceModel(const Grid& grid, const ModalBasis& basis,
                                              const Eigen::VectorXd& x_ref)
   : lambda_(basis.eigenvalues)
@@ -38,11 +45,17 @@ LinearModalForceModel::LinearModalForceModel(const Grid& grid, const ModalBasis&
   springForces(grid, x_ref, f);
   f += grid.gravityForce();
   reference_ = basis.phi.transpose() * grid.gatherFree(f);
+  reference_energy_ = springEnergy(grid, x_ref) + gravityEnergy(grid, x_ref);
 }
 
 void LinearModalForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorXd& f)
 {
   f = reference_ - lambda_.cwiseProduct(modal);
+}
+
+double LinearModalForceModel::energy(const Eigen::VectorXd& modal)
+{
+  return reference_energy_ - reference_.dot(modal) + 0.5 * modal.dot(lambda_.cwiseProduct(modal));
 }
 
 void LinearModalForceModel::tangentStiffness(const Eigen::VectorXd&, SparseMatrix& k)
@@ -69,6 +82,14 @@ void PhysicalModalForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorX
   for (size_t k = 0; k < free.size(); ++k)
     f_free_[k] = f_all_[free[k]];
   f.noalias() = basis_.phi.transpose() * f_free_;
+}
+
+double PhysicalModalForceModel::energy(const Eigen::VectorXd& modal)
+{
+  u_.noalias() = basis_.phi * modal;
+  x_ = x_ref_;
+  grid_.addFree(u_, x_);
+  return springEnergy(grid_, x_) + gravityEnergy(grid_, x_);
 }
 
 void PhysicalModalForceModel::tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k)

@@ -68,10 +68,40 @@ namespace modal_mass_spring
 ImplicitNewmark::ImplicitNewmark(MassDamping system, double dt, int max_iterations, double tolerance)
   : Integrator(std::move(system), dt), max_iterations_(max_iterations), tolerance_(tolerance)
 {
-  SparseMatrix mass(system_.mass.size(), system_.mass.size());
-  mass.setIdentity();
-  mass = system_.mass.asDiagonal() * mass;
-  inertia_ = (4.0 / (dt_ * dt_)) * mass + (2.0 / dt_) * system_.damping;
+  mass_matrix_.resize(system_.mass.size(), system_.mass.size());
+  mass_matrix_.setIdentity();
+  mass_matrix_ = system_.mass.asDiagonal() * mass_matrix_;
+  setStepSize(dt_);
+}
+
+void ImplicitNewmark::setStepSize(double h)
+{
+  if (h == h_)
+    return;
+  h_ = h;
+  inertia_ = (4.0 / (h * h)) * mass_matrix_ + (2.0 / h) * system_.damping;
+}
+
+bool ImplicitNewmark::step(ForceModel& model, const State& s, State& next)
+{
+  substeps_ = 0;
+  return advance(model, s, next, dt_, 0);
+}
+
+// Where Newton does not converge, the step is taken as two implicit half steps, down to 1/16 of it:
+// still converged solutions of the same scheme, only finer.
+bool ImplicitNewmark::advance(ForceModel& model, const State& s, State& next, double h, int depth)
+{
+  setStepSize(h);
+  if (solve(model, s, next))
+  {
+    ++substeps_;
+    return true;
+  }
+  if (depth == kMaxHalvings)
+    return false;
+  State middle;
+  return advance(model, s, middle, 0.5 * h, depth + 1) && advance(model, middle, next, 0.5 * h, depth + 1);
 }
 
 void ImplicitNewmark::analyzeIfNewPattern(const SparseMatrix& jacobian)
@@ -95,45 +125,86 @@ void ImplicitNewmark::analyzeIfNewPattern(const SparseMatrix& jacobian)
 
 void ImplicitNewmark::kinematics(const State& s, State& next) const
 {
-  next.a = (4.0 / (dt_ * dt_)) * (next.q - s.q - dt_ * s.v) - s.a;
-  next.v = (2.0 / dt_) * (next.q - s.q) - s.v;
+  next.a = (4.0 / (h_ * h_)) * (next.q - s.q - h_ * s.v) - s.a;
+  next.v = (2.0 / h_) * (next.q - s.q) - s.v;
 }
 
-bool ImplicitNewmark::step(ForceModel& model, const State& s, State& next)
+bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
 {
-  // The explicit step is the predictor.
-  next.q = s.q + dt_ * s.v + (0.5 * dt_ * dt_) * s.a;
-  const int iterations = model.isLinear() ? 1 : max_iterations_;
-  for (last_iterations_ = 1; last_iterations_ <= iterations; ++last_iterations_)
+  // Predictor: constant velocity. The explicit extrapolation, with a step far past the explicit
+  // bound, lands too far away.
+  next.q = s.q + h_ * s.v;
+  const Eigen::VectorXd y = s.q + h_ * s.v + (0.25 * h_ * h_) * s.a;
+  // R(q') is the gradient of the incremental potential
+  //   G(q') = 2/dt^2 |q' - y|_M^2 + 1/dt |q' - q|_C^2 - v^T C q' + E(q'),
+  // so a Newton direction that descends G, found with a line search on G, converges from far away.
+  auto incremental = [&](const Eigen::VectorXd& q) {
+    const Eigen::VectorXd dy = q - y, dq = q - s.q;
+    return 2.0 / (h_ * h_) * dy.dot(system_.mass.cwiseProduct(dy)) + dq.dot(system_.damping * dq) / h_ -
+           s.v.dot(system_.damping * q) + model.energy(q);
+  };
+
+  for (last_iterations_ = 1; last_iterations_ <= max_iterations_; ++last_iterations_)
   {
-    kinematics(s, next);
-    model.force(next.q, force_);
-    const Eigen::VectorXd inertial = system_.mass.cwiseProduct(next.a) + system_.damping * next.v;
-    residual_ = inertial - force_;
+    const double residual_norm = residual(model, s, next);
     // Converged when the unbalanced force is small against the forces at play.
-    if (!model.isLinear() && last_iterations_ > 1 &&
-        residual_.norm() <= tolerance_ * (force_.norm() + inertial.norm() + 1e-300))
-      break;
+    if (residual_norm <= tolerance_ * (force_.norm() + inertial_norm_ + 1e-300))
+      return true;
+
+    Eigen::VectorXd delta;
+    // The exact tangent; where compressed springs make the Jacobian indefinite, more of the
+    // (positive) inertia is added until it is positive definite, so the direction descends G.
     model.tangentStiffness(next.q, tangent_);
-    SparseMatrix jacobian = inertia_ + tangent_;
-    jacobian.makeCompressed();
-    analyzeIfNewPattern(jacobian);
-    ldlt_.factorize(jacobian);
-    if (ldlt_.info() != Eigen::Success)
-      return false;
-    next.q -= ldlt_.solve(residual_);
-    if (!next.q.allFinite())
-      return false;
-    if (model.isLinear())
+    for (double extra = 0.0; extra < 1e8; extra = std::max(1e-3, 10.0 * extra))
     {
-      kinematics(s, next);
+      SparseMatrix jacobian = (1.0 + extra) * inertia_ + tangent_;
+      jacobian.makeCompressed();
+      analyzeIfNewPattern(jacobian);
+      ldlt_.factorize(jacobian);
+      if (ldlt_.info() == Eigen::Success && ldlt_.vectorD().minCoeff() > 0.0)
+      {
+        delta = -ldlt_.solve(residual_);
+        break;
+      }
+    }
+    if (delta.size() > 0 && (!delta.allFinite() || residual_.dot(delta) >= 0.0))
+      delta.resize(0);
+    if (delta.size() == 0)
+      return false;
+    if (model.isLinear())  // the Newton step is exact
+    {
+      next.q += delta;
+      residual(model, s, next);
       return true;
     }
+
+    const Eigen::VectorXd start = next.q;
+    const double g0 = incremental(start);
+    const double slope = residual_.dot(delta);
+    bool accepted = false;
+    for (double fraction = 1.0; fraction > 1e-6 && !accepted; fraction *= 0.5)
+    {
+      next.q = start + fraction * delta;
+      // Armijo on G; only where the expected decrease drowns in G's round-off, a smaller residual.
+      const double expected = fraction * slope;
+      const bool roundoff = std::abs(expected) < 1e-12 * (std::abs(g0) + 1e-300);
+      accepted = roundoff ? residual(model, s, next) < residual_norm
+                          : incremental(next.q) <= g0 + 1e-4 * expected;
+    }
+    if (!accepted)
+      return false;
   }
-  if (last_iterations_ > iterations)
-    return false;
+  return false;
+}
+
+double ImplicitNewmark::residual(ForceModel& model, const State& s, State& next)
+{
   kinematics(s, next);
-  return true;
+  model.force(next.q, force_);
+  residual_ = system_.mass.cwiseProduct(next.a) + system_.damping * next.v;
+  inertial_norm_ = residual_.norm();
+  residual_ -= force_;
+  return residual_.norm();
 }
 
 }  // namespace modal_mass_spring

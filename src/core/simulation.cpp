@@ -159,6 +159,13 @@ int Simulation::lastNewtonIterations() const
   return implicit ? implicit->lastIterations() : 0;
 }
 
+int Simulation::lastImplicitSubsteps() const
+{
+  const auto* implicit = dynamic_cast<const ImplicitNewmark*>(
+      isModal() ? modal_integrator_.get() : full_integrator_.get());
+  return implicit ? implicit->lastSubsteps() : 0;
+}
+
 ForceModel& Simulation::forceModel()
 {
   switch (params_.method)
@@ -252,7 +259,7 @@ StepResult Simulation::step(int steps)
       msg << "method '" << toString(params_.method) << "' diverged at step " << step_count_ + 1
           << " with time_step " << params_.time_step << " s ("
           << (!ok ? "the implicit Newton iteration did not converge in newton_max_iterations = " +
-                        std::to_string(params_.newton_max_iterations)
+                        std::to_string(params_.newton_max_iterations) + ", even in 1/16 of the step"
                   : !finite ? "non-finite state" : "displacement beyond divergence_limit")
           << "); the last good state is kept; a smaller time_step or more damping may help";
       result.message = msg.str();
