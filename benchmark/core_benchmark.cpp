@@ -1,1 +1,112 @@
-int main(){}
+// Google Benchmark of the core: basis construction, one step of each method, position
+// reconstruction and one evaluation of all spring forces.
+#include "modal_mass_spring/simulation.h"
+#include "modal_mass_spring/spring_forces.h"
+
+#include <benchmark/benchmark.h>
+
+using namespace modal_mass_spring;
+
+namespace
+{
+
+GridParams square(int size, int dimension)
+{
+  GridParams p;
+  p.rows = size;
+  p.cols = size;
+  p.dimension = dimension;
+  return p;
+}
+
+// A 3D sheet disturbed out of its plane, gravity off, so no method drifts away during a long loop.
+Simulation disturbedSheet(int size, int r, Method method, IntegratorKind integrator = IntegratorKind::Explicit)
+{
+  GridParams g = square(size, 3);
+  g.gravity.setZero();
+  SimulationParams s;
+  s.method = method;
+  s.num_modes = r;
+  s.time_step = 1e-4;
+  s.integrator = integrator;
+  Simulation sim(g, s);
+  std::srand(1);
+  const int n = sim.grid().numFreeDofs();
+  sim.setPhysicalState(1e-3 * g.spacing * Eigen::VectorXd::Random(n), Eigen::VectorXd::Zero(n));
+  return sim;
+}
+
+const std::vector<int64_t> kSizes{5, 10, 20, 50, 100};
+
+// The basis is timed on 2D grids: a flat 3D sheet at rest has only zero out-of-plane modes.
+void BM_Basis2D(benchmark::State& state)
+{
+  const Grid grid(square(static_cast<int>(state.range(0)), 2));
+  const SparseMatrix k = tangentStiffness(grid, grid.initialPositions());
+  const Eigen::VectorXd mass = Eigen::VectorXd::Constant(grid.numFreeDofs(), grid.particleMass());
+  for (auto _ : state)
+    benchmark::DoNotOptimize(computeModalBasis(k, mass, static_cast<int>(state.range(1))));
+  state.counters["free_dofs"] = grid.numFreeDofs();
+}
+BENCHMARK(BM_Basis2D)->ArgsProduct({kSizes, {4, 30}})->Unit(benchmark::kMillisecond);
+
+void stepBenchmark(benchmark::State& state, Method method)
+{
+  Simulation sim = disturbedSheet(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)), method);
+  for (auto _ : state)
+    benchmark::DoNotOptimize(sim.step(1));
+  if (sim.diverged())
+    state.SkipWithError("diverged");
+}
+void BM_StepFull(benchmark::State& state) { stepBenchmark(state, Method::Full); }
+void BM_StepLinear(benchmark::State& state) { stepBenchmark(state, Method::Linear); }
+void BM_StepPhysical(benchmark::State& state) { stepBenchmark(state, Method::Physical); }
+BENCHMARK(BM_StepFull)->ArgsProduct({kSizes, {30}})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_StepLinear)->ArgsProduct({kSizes, {4, 30}})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_StepPhysical)->ArgsProduct({kSizes, {4, 30}})->Unit(benchmark::kMicrosecond);
+
+// Implicit Newmark: Newton iterations with the sparse (full) or r x r (physical) tangent.
+void implicitBenchmark(benchmark::State& state, Method method)
+{
+  Simulation sim = disturbedSheet(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)), method,
+                                  IntegratorKind::Implicit);
+  for (auto _ : state)
+    benchmark::DoNotOptimize(sim.step(1));
+  if (sim.diverged())
+    state.SkipWithError("diverged");
+  state.counters["newton_iterations"] = sim.lastNewtonIterations();
+}
+void BM_ImplicitFull(benchmark::State& state) { implicitBenchmark(state, Method::Full); }
+void BM_ImplicitLinear(benchmark::State& state) { implicitBenchmark(state, Method::Linear); }
+void BM_ImplicitPhysical(benchmark::State& state) { implicitBenchmark(state, Method::Physical); }
+BENCHMARK(BM_ImplicitFull)->ArgsProduct({{5, 20, 50}, {30}})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_ImplicitLinear)->ArgsProduct({{5, 20, 100}, {30}})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_ImplicitPhysical)->ArgsProduct({{5, 20, 50, 100}, {30}})->Unit(benchmark::kMicrosecond);
+
+// x = x0 + Phi X for every particle: what a modal method pays only when positions are wanted.
+void BM_Reconstruct(benchmark::State& state)
+{
+  Simulation sim = disturbedSheet(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)), Method::Linear);
+  for (auto _ : state)
+    benchmark::DoNotOptimize(sim.positions());
+}
+BENCHMARK(BM_Reconstruct)->ArgsProduct({kSizes, {4, 30}})->Unit(benchmark::kMicrosecond);
+
+void BM_SpringForces(benchmark::State& state)
+{
+  const Grid grid(square(static_cast<int>(state.range(0)), 3));
+  std::srand(1);
+  const Eigen::VectorXd x = grid.initialPositions() + 1e-3 * Eigen::VectorXd::Random(grid.numDofs());
+  Eigen::VectorXd f;
+  for (auto _ : state)
+  {
+    springForces(grid, x, f);
+    benchmark::DoNotOptimize(f.data());
+  }
+  state.counters["springs"] = static_cast<double>(grid.springs().size());
+}
+BENCHMARK(BM_SpringForces)->ArgsProduct({kSizes})->Unit(benchmark::kMicrosecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();
