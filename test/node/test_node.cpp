@@ -215,6 +215,58 @@ TEST(Topology, ConfiguredFramesAreBroadcastWhereTheParticlesAre)
   }
 }
 
+// ---------------------------------------------------------------- the timer, any config
+
+// Every tick advances real_time_factor / publish_rate simulated seconds in whole steps, carrying the
+// fraction: however late the ticks are (behind.test makes them very late).
+TEST(Timer, StepsAFixedSimulatedTimePerTick)
+{
+  const std::string name = nodeNames().front();
+  const double rate = param(name + "/publish_rate", 0.0);
+  const double factor = param(name + "/real_time_factor", 1.0);
+  const double dt = param(name + "/time_step", 0.0);
+  ASSERT_GT(rate * dt, 0.0);
+  const double per_tick = factor / (rate * dt);
+  const int ticks = param("~ticks", 30);
+
+  std::vector<Status::ConstPtr> statuses;
+  ros::NodeHandle nh;
+  ros::Subscriber sub = nh.subscribe<Status>(name + "/status", 1000, [&](const Status::ConstPtr& s) {
+    if (s->state == Status::RUNNING && statuses.size() < static_cast<size_t>(ticks) + 1)
+      statuses.push_back(s);
+  });
+  const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(ticks / rate * 100 + 30);
+  while (statuses.size() < static_cast<size_t>(ticks) + 1 && ros::ok() && ros::WallTime::now() < end)
+    ros::WallDuration(0.01).sleep();
+  sub.shutdown();
+  ASSERT_EQ(statuses.size(), static_cast<size_t>(ticks) + 1);
+
+  for (size_t k = 1; k < statuses.size(); ++k)
+  {
+    const auto& s = *statuses[k];
+    EXPECT_TRUE(s.tick_steps == static_cast<uint32_t>(std::floor(per_tick)) ||
+                s.tick_steps == static_cast<uint32_t>(std::ceil(per_tick)))
+        << s.tick_steps << " steps in a tick, expected " << per_tick;
+    EXPECT_EQ(s.step_count - statuses[k - 1]->step_count, s.tick_steps) << "a tick without a status";
+    EXPECT_NEAR(s.sim_time, s.step_count * dt, 1e-9 * s.sim_time);
+  }
+  // The fraction is carried: over many ticks the steps add up to the simulated time asked for.
+  const double steps = static_cast<double>(statuses.back()->step_count - statuses.front()->step_count);
+  EXPECT_NEAR(steps, ticks * per_tick, 1.0);
+}
+
+TEST(Timer, FallingBehindRealTimeWarnsInDiagnostics)
+{
+  const auto is_warn = [](const diagnostic_msgs::DiagnosticArray& a) {
+    for (const auto& s : a.status)
+      if (s.name.find("simulation") != std::string::npos && s.level == diagnostic_msgs::DiagnosticStatus::WARN &&
+          s.message.find("falling behind") != std::string::npos)
+        return true;
+    return false;
+  };
+  EXPECT_TRUE(waitFor<diagnostic_msgs::DiagnosticArray>("/diagnostics", is_warn, 30.0));
+}
+
 // ---------------------------------------------------------------- services (paper_2d, running)
 
 class Services : public ::testing::Test
