@@ -22,7 +22,8 @@ rm -f "$data"/*.csv
 
 {
   echo "# modal_compare, $(date -u +%Y-%m-%dT%H:%MZ), commit $(git -C "$REPO_DIR" rev-parse --short HEAD)"
-  echo "# CPU: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//'), $(nproc) cores"
+  echo "# CPU: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//'), $(nproc) cores," \
+    "load average $(cut -d' ' -f1-3 /proc/loadavg) at the start (timings are only as quiet as the machine)"
   # The paper's experiments: cost over grid sizes, accuracy against full, largest stable step.
   "$tool" --config "$configs/paper_2d.yaml" --experiment all --sizes 5,10,20,40,80 --output "$data" "$@"
   "$tool" --config "$configs/paper_3d.yaml" --experiment all --sizes 5,10,20,40,80 --output "$data" "$@"
@@ -30,6 +31,7 @@ rm -f "$data"/*.csv
   # implicit integrator (every combination).
   "$tool" --config "$configs/paper_2d.yaml" --tag paper_2d_variants --experiment accuracy,stability \
     --vary linearization=rest,equilibrium --vary integrator=explicit,implicit --sample 50 --output "$data" "$@"
+  echo "# load average $(cut -d' ' -f1-3 /proc/loadavg) at the end"
 } | tee "$data/summary.txt"
 
 /usr/bin/python3 "$REPO_DIR/scripts/plot_comparison.py" --data "$data" --out "$REPO_DIR/docs"

@@ -8,6 +8,7 @@ Reads, from DIR, every file the tool writes and draws:
   accuracy_<tag>_snapshots.csv        -> snapshots_<tag>.png (each modal method over `full`)
   accuracy_<tag>_error.csv            -> error_<tag>.png (largest and RMS distance to `full`)
   stability_<tag>.csv                 -> stability_<tag>.png (largest stable time step per method)
+and writes the numbers behind them as Markdown tables to DIR/tables.md, for docs/results.md to quote.
 The columns it needs are listed in COLUMNS: a file without them stops the script with a message.
 """
 import argparse
@@ -142,6 +143,8 @@ def plot_snapshots(path, out):
 
     width = 2.6 if three_d else 2.6 * (hi[0] - lo[0]) / (hi[2] - lo[2]) + 0.4
     fig = plt.figure(figsize=(width * len(steps), (3.2 if three_d else 2.8) * len(panels) + 0.6))
+    if any(v != "base" for v, _ in panels):
+        fig.set_size_inches(max(fig.get_size_inches()[0], 2.3 * len(steps)), fig.get_size_inches()[1] + 0.3 * len(panels))
     for i, (variant, method) in enumerate(panels):
         for j, step in enumerate(steps):
             index = i * len(steps) + j + 1
@@ -178,14 +181,14 @@ def plot_snapshots(path, out):
                 ax.set_ylim(*zs)
                 ax.set_aspect("equal")
                 ax.tick_params(labelsize=6)
-            label = method if variant == "base" else f"{method} ({variant})"
+            label = method if variant == "base" else f"{method}\n{variant}"
             if frames.get((variant, method, step)) is None:
                 label += ": diverged"
             elif outside(frames[(variant, method, step)]):
                 label += " (leaves the frame)"
-            ax.set_title(f"{label}\nstep {step} ({times[step]:g} s)", fontsize=7)
+            ax.set_title(f"{label}\nstep {step} ({times[step]:g} s)", fontsize=7 if variant == "base" else 6)
     fig.suptitle(f"{tag}: each modal method (colour) over full (grey)", fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.45 / fig.get_size_inches()[1]))
     target = out / f"snapshots_{tag}.png"
     fig.savefig(target, dpi=110 if len(panels) <= 2 else 70)
     plt.close(fig)
@@ -214,9 +217,16 @@ def plot_error(path, out):
         ax.set_ylabel("m")
         ax.set_title(title, fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
+        if len(variants) == 1:
+            ax.legend(fontsize=8)
     fig.suptitle(f"{tag}: error against full", fontsize=10)
-    fig.tight_layout()
+    if len(variants) == 1:
+        fig.tight_layout()
+    else:  # many curves: the legend goes below, off the data
+        fig.set_size_inches(11, 4 + 0.2 * len(variants) * 2)
+        handles, labels = axes[0].get_legend_handles_labels()
+        fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8)
+        fig.tight_layout(rect=(0, 0.1 * len(variants) * 2 / (4 + 0.2 * len(variants) * 2) + 0.05, 1, 1))
     target = out / f"error_{tag}.png"
     fig.savefig(target, dpi=110)
     plt.close(fig)
@@ -261,6 +271,65 @@ def plot_stability(path, out):
     return [target]
 
 
+def fmt(value, digits=3):
+    if math.isnan(value):
+        return "-"
+    if math.isinf(value):
+        return "none found"
+    return f"{value:.{digits}g}"
+
+
+def markdown(header, rows):
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(str(c) for c in row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
+
+
+def write_tables(data, target):
+    """The figures' numbers as Markdown: per-step cost, error every snapshot interval, stable steps."""
+    parts = ["# Numbers behind the figures\n\nWritten by scripts/plot_comparison.py from the CSV files in this folder.\n"]
+    for path in sorted(data.glob("cost_*.csv")):
+        rows = read_csv(path, "cost")
+        methods = ordered(r["method"] for r in rows)
+        body = []
+        for variant in ordered(r["variant"] for r in rows):
+            for size in ordered(r["rows"] for r in rows if r["variant"] == variant):
+                cell = {r["method"]: r for r in rows if r["variant"] == variant and r["rows"] == size}
+                first = next(iter(cell.values()))
+                body.append([variant, f"{size}x{first['cols']}", first["particles"], first["free_dofs"],
+                             fmt(1e3 * number(first["build_seconds"]))]
+                            + [fmt(1e6 * number(cell[m]["step_seconds"])) + (" (diverged)" if cell[m]["diverged"] == "1" else "")
+                               if m in cell else "-" for m in methods])
+        parts.append(f"## {path.name}: median cost\n\n" + markdown(
+            ["variant", "grid", "particles", "free dofs", "basis build (ms)"] + [f"{m} step (us)" for m in methods], body))
+    for path in sorted(data.glob("accuracy_*_error.csv")):
+        rows = [r for r in read_csv(path, "error") if r["method"] != "full"]
+        snapshot_steps = sorted({int(r["step"]) for r in read_csv(path.with_name(path.name.replace("_error", "_snapshots")), "snapshots")}) \
+            if path.with_name(path.name.replace("_error", "_snapshots")).exists() else []
+        body = []
+        for variant in ordered(r["variant"] for r in rows):
+            for method in ordered(r["method"] for r in rows if r["variant"] == variant):
+                series = [r for r in rows if r["variant"] == variant and r["method"] == method]
+                valid = [r for r in series if r["diverged"] == "0" and int(r["step"]) > 0]
+                mean_rms = sum(number(r["rms_distance"]) for r in valid) / max(1, len(valid))
+                mean_max = sum(number(r["max_distance"]) for r in valid) / max(1, len(valid))
+                at = {int(r["step"]): r for r in series}
+                body.append([variant, method, fmt(mean_max), fmt(mean_rms)]
+                            + [fmt(number(at[s]["rms_distance"])) if s in at else "-" for s in snapshot_steps if s > 0])
+        parts.append(f"## {path.name}: distance to full (m)\n\nMeans over every sample after step 0; then the RMS "
+                     "distance at each snapshot step.\n\n" + markdown(
+                         ["variant", "method", "mean largest", "mean RMS"] + [f"RMS @ {s}" for s in snapshot_steps if s > 0], body))
+    for path in sorted(data.glob("stability_*.csv")):
+        rows = read_csv(path, "stability")
+        body = [[r["variant"], r["method"], fmt(1e3 * number(r["stable_dt"]), 5), fmt(1e3 * number(r["unstable_dt"]), 5),
+                 fmt(1e3 * number(r["modal_bound"]), 5), fmt(1e3 * number(r["full_bound"]), 5)] for r in rows]
+        parts.append(f"## {path.name}: largest stable time step (ms), {rows[0]['steps']} steps, relative tolerance "
+                     f"{rows[0]['tolerance']}\n\n" + markdown(
+                         ["variant", "method", "stable", "diverges", "2/omega highest mode", "2/omega K(x0)"], body))
+    target.write_text("\n".join(parts))
+    return [target]
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", required=True, help="folder with the CSV files of modal_compare")
@@ -279,6 +348,8 @@ def main(argv=None):
             written += plot_error(path, out)
         for path in sorted(data.glob("stability_*.csv")):
             written += plot_stability(path, out)
+        if written:
+            written += write_tables(data, data / "tables.md")
     except ColumnError as error:
         print(f"plot_comparison: error: {error}", file=sys.stderr)
         return 1
