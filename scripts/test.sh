@@ -6,7 +6,7 @@ source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
 bash "$REPO_DIR/scripts/build.sh" || { echo "0 passed, 1 failed"; exit 1; }
 cd "$WS_DIR"
 rm -rf build/test_results
-source devel/setup.bash
+set +u; source devel/setup.bash; set -u  # catkin's setup reads unset variables
 catkin_make -j2 run_tests
 catkin_test_results build/test_results
 results_status=$?
