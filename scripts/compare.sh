@@ -21,7 +21,7 @@ mkdir -p "$data"
 rm -f "$data"/*.csv
 
 {
-  echo "# modal_compare, $(date -u +%Y-%m-%dT%H:%MZ), commit $(git -C "$REPO_DIR" rev-parse --short HEAD)"
+  echo "# modal_compare, $(date -u +%Y-%m-%dT%H:%MZ), commit $(git -C "$REPO_DIR" describe --always --dirty)"
   echo "# CPU: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//'), $(nproc) cores," \
     "load average $(cut -d' ' -f1-3 /proc/loadavg) at the start (timings are only as quiet as the machine)"
   # The paper's experiments: cost over grid sizes, accuracy against full, largest stable step.
