@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
 #include <stdexcept>
 
 using namespace modal_mass_spring;
@@ -131,4 +132,30 @@ TEST(YamlParameterSource, OverridesTakeTheirTypeFromYamlAndClonesAreIndependent)
   EXPECT_EQ(loadSimulationParams(copy).num_modes, 4);
   source.set("num_modes", "many");
   EXPECT_NE(invalidArgument([&] { loadSimulationParams(source); }).find("num_modes"), std::string::npos);
+}
+
+// The node's shipped configs and the tool's own: every one loads and builds a grid, so the two
+// really share one set of parameter names.
+TEST(YamlParameterSource, EveryShippedConfigLoads)
+{
+  int checked = 0;
+  for (const char* folder : {"/config", "/config/compare"})
+  {
+    const std::filesystem::path dir = std::string(MODAL_SOURCE_DIR) + folder;
+    if (!std::filesystem::is_directory(dir))
+      continue;
+    for (const auto& entry : std::filesystem::directory_iterator(dir))
+    {
+      if (entry.path().extension() != ".yaml")
+        continue;
+      SCOPED_TRACE(entry.path().string());
+      const auto source = YamlParameterSource::fromFile(entry.path().string());
+      const GridParams g = loadGridParams(source);
+      const SimulationParams s = loadSimulationParams(source);
+      const Grid grid(g);
+      EXPECT_GE(grid.numFreeDofs(), s.num_modes);
+      ++checked;
+    }
+  }
+  EXPECT_GE(checked, 2);  // at least the tool's paper_2d.yaml and paper_3d.yaml
 }
