@@ -66,13 +66,14 @@ public:
   PhysicalModalForceModel(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref);
   int size() const override { return static_cast<int>(basis_.phi.cols()); }
   void force(const Eigen::VectorXd& modal, Eigen::VectorXd& f) override;
-  // Phi^T K(x) Phi, with K(x) the sparse tangent at x = x_ref + Phi X.
+  // Phi^T K(x) Phi at x = x_ref + Phi X, K(x) Phi summed spring by spring.
   void tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k) override;
   double energy(const Eigen::VectorXd& modal) override;
 
 private:
   const Grid& grid_;
   const ModalBasis& basis_;
+  Eigen::MatrixXd phi_t_, k_phi_t_;  // Phi^T, contiguous per dof, and (K Phi)^T
   Eigen::VectorXd x_ref_, u_, x_, f_all_, f_free_;
 };
 

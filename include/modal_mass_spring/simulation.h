@@ -155,6 +155,7 @@ private:
   ModalBasis basis_;
   SparseMatrix stiffness_;  // K at x_ref on the free dofs
   Eigen::VectorXd mass_;    // diagonal of M on the free dofs
+  double total_mass_ = 0.0;  // weighs the divergence check into an RMS displacement in metres
   std::unique_ptr<FullForceModel> full_force_;
   std::unique_ptr<LinearModalForceModel> linear_force_;
   std::unique_ptr<PhysicalModalForceModel> physical_force_;

@@ -31,4 +31,10 @@ SparseMatrix tangentStiffness(const Grid& grid, const Eigen::VectorXd& x,
                               CompressedSprings compressed = CompressedSprings::Keep,
                               int* num_dropped = nullptr);
 
+// (K(x) Phi)^T from Phi^T (r x free dofs) without assembling K: a spring adds its 2 x 2 block
+// pattern to the rows of its two particles. The reduced tangent Phi^T K Phi then costs O(springs r
+// + n r^2) instead of an assembly of K per Newton iteration.
+void tangentTimesBasis(const Grid& grid, const Eigen::VectorXd& x, const Eigen::MatrixXd& phi_t,
+                       Eigen::MatrixXd& k_phi_t);
+
 }  // namespace modal_mass_spring

@@ -67,7 +67,13 @@ void LinearModalForceModel::tangentStiffness(const Eigen::VectorXd&, SparseMatri
 
 PhysicalModalForceModel::PhysicalModalForceModel(const Grid& grid, const ModalBasis& basis,
                                                  const Eigen::VectorXd& x_ref)
-  : grid_(grid), basis_(basis), x_ref_(x_ref), x_(x_ref), f_all_(x_ref.size()), f_free_(grid.numFreeDofs())
+  : grid_(grid),
+    basis_(basis),
+    phi_t_(basis.phi.transpose()),
+    x_ref_(x_ref),
+    x_(x_ref),
+    f_all_(x_ref.size()),
+    f_free_(grid.numFreeDofs())
 {
 }
 
@@ -97,9 +103,9 @@ void PhysicalModalForceModel::tangentStiffness(const Eigen::VectorXd& modal, Spa
   u_.noalias() = basis_.phi * modal;
   x_ = x_ref_;
   grid_.addFree(u_, x_);
-  const SparseMatrix full = modal_mass_spring::tangentStiffness(grid_, x_);
-  const Eigen::MatrixXd k_phi = full * basis_.phi;
-  k = (basis_.phi.transpose() * k_phi).sparseView();
+  tangentTimesBasis(grid_, x_, phi_t_, k_phi_t_);
+  const Eigen::MatrixXd reduced = k_phi_t_ * basis_.phi;
+  k = reduced.sparseView();
 }
 
 }  // namespace modal_mass_spring

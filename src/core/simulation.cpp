@@ -128,6 +128,7 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
   // dropped so that no mode has a negative lambda^2. At rest no spring is compressed.
   stiffness_ = tangentStiffness(grid_, x_ref_, CompressedSprings::Drop, &linearization_.dropped_compressed_springs);
   mass_ = Eigen::VectorXd::Constant(n, grid_.particleMass());
+  total_mass_ = mass_.sum();
   basis_ = computeModalBasis(stiffness_, mass_, params_.num_modes);
 
   full_force_ = std::make_unique<FullForceModel>(grid_, x_ref_);
@@ -244,14 +245,12 @@ StepResult Simulation::step(int steps)
                      "; reset or switch method to go on";
     return result;
   }
-  // Weights so that the check reads as an RMS displacement in metres, in both kinds of coordinates.
-  const double total_mass = mass_.sum();
   for (int k = 0; k < steps; ++k)
   {
     const bool ok = integrator().step(forceModel(), state_, next_);
     const double norm2 = isModal() ? next_.q.squaredNorm() : next_.q.cwiseAbs2().dot(mass_);
     const bool finite = next_.q.allFinite() && next_.v.allFinite() && next_.a.allFinite();
-    if (!ok || !finite || std::sqrt(norm2 / total_mass) > limit_)
+    if (!ok || !finite || std::sqrt(norm2 / total_mass_) > limit_)
     {
       diverged_ = true;
       result.diverged = true;

@@ -72,7 +72,54 @@ SparseMatrix tangentStiffnessDim(const Grid& grid, const Eigen::VectorXd& x, Com
   return k;
 }
 
+template <int Dim>
+void tangentTimesBasisDim(const Grid& grid, const Eigen::VectorXd& x, const Eigen::MatrixXd& phi_t,
+                          Eigen::MatrixXd& out)
+{
+  using Vec = Eigen::Matrix<double, Dim, 1>;
+  using Mat = Eigen::Matrix<double, Dim, Dim>;
+  const Eigen::Index r = phi_t.rows();
+  out.setZero(r, phi_t.cols());
+  Eigen::Matrix<double, Eigen::Dynamic, Dim> d(r, Dim), kd(r, Dim);  // (Phi_j - Phi_i)^T, times Ke
+  for (const Spring& s : grid.springs())
+  {
+    const Vec e = x.segment<Dim>(Dim * s.j) - x.segment<Dim>(Dim * s.i);
+    const double l = e.norm();
+    const Vec u = e / l;
+    const Mat uu = u * u.transpose();
+    const Mat ke = s.stiffness * (uu + (1.0 - s.rest_length / l) * (Mat::Identity() - uu));
+    for (int a = 0; a < Dim; ++a)
+    {
+      const int fi = grid.freeIndex(Dim * s.i + a), fj = grid.freeIndex(Dim * s.j + a);
+      d.col(a).setZero();
+      if (fj >= 0)
+        d.col(a) += phi_t.col(fj);
+      if (fi >= 0)
+        d.col(a) -= phi_t.col(fi);
+    }
+    // Rows i and j of K Phi get -Ke (Phi_j - Phi_i) and +Ke (Phi_j - Phi_i).
+    kd.noalias() = d * ke;  // Ke is symmetric
+    for (int a = 0; a < Dim; ++a)
+    {
+      const int fi = grid.freeIndex(Dim * s.i + a), fj = grid.freeIndex(Dim * s.j + a);
+      if (fi >= 0)
+        out.col(fi) -= kd.col(a);
+      if (fj >= 0)
+        out.col(fj) += kd.col(a);
+    }
+  }
+}
+
 }  // namespace
+
+void tangentTimesBasis(const Grid& grid, const Eigen::VectorXd& x, const Eigen::MatrixXd& phi_t,
+                       Eigen::MatrixXd& k_phi_t)
+{
+  if (grid.dimension() == 2)
+    tangentTimesBasisDim<2>(grid, x, phi_t, k_phi_t);
+  else
+    tangentTimesBasisDim<3>(grid, x, phi_t, k_phi_t);
+}
 
 void springForces(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f)
 {

@@ -117,3 +117,26 @@ TEST(SpringForces, RestStateHasNoForceAndGravityEnergyIsLinear)
   EXPECT_NEAR(gravityEnergy(grid, lowered) - gravityEnergy(grid, grid.initialPositions()),
               -9.81 * p.mass * grid.numParticles(), 1e-12);
 }
+
+TEST(SpringForces, TangentTimesBasisMatchesTheAssembledTangent)
+{
+  for (bool three_d : {false, true})
+  {
+    Eigen::VectorXd x;
+    Grid grid = deformedGrid3D(x, true);
+    if (!three_d)
+    {
+      GridParams p;
+      p.rows = 4;
+      p.cols = 4;
+      p.bending = true;
+      grid = Grid(p);
+      x = grid.initialPositions() + 0.03 * Eigen::VectorXd::Random(grid.numDofs());
+    }
+    const Eigen::MatrixXd phi = Eigen::MatrixXd::Random(grid.numFreeDofs(), 7);
+    Eigen::MatrixXd k_phi_t;
+    tangentTimesBasis(grid, x, phi.transpose(), k_phi_t);
+    const Eigen::MatrixXd expected = tangentStiffness(grid, x) * phi;
+    EXPECT_LT((k_phi_t.transpose() - expected).cwiseAbs().maxCoeff(), 1e-10 * expected.cwiseAbs().maxCoeff());
+  }
+}
