@@ -16,6 +16,7 @@ struct ModalBasis
   int num_zero_modes = 0;       // lambda^2 below 1e-8 of the largest diagonal stiffness per mass
   bool sparse = true;           // false only when r is so close to the size that Lanczos cannot run
   double shift = 0.0;           // sigma of the shift-invert, negative so K - sigma M stays regular
+  int deflation_passes = 0;     // extra Lanczos passes that looked for more of a large null space
   double build_seconds = 0.0;
 };
 

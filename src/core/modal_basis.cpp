@@ -2,6 +2,7 @@
 #include "modal_mass_spring/modal_basis.h"
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/QR>
 #include <Eigen/SparseCholesky>
 #include <Spectra/SymEigsShiftSolver.h>
 
@@ -16,38 +17,73 @@ namespace modal_mass_spring
 namespace
 {
 
-// y = (A - sigma I)^-1 x for Spectra. Spectra's own SparseSymShiftSolve uses SparseLU; A - sigma I is
+// y = P (A - sigma I)^-1 P x for Spectra, P = I - Q Q^T the projector onto the complement of the
+// modes found so far (none at first). Spectra's own SparseSymShiftSolve uses SparseLU; A - sigma I is
 // symmetric positive definite here (sigma < 0, A semi-definite), so a simplicial LDLT is enough and
-// several times faster.
+// several times faster. It is factorised once and reused by every deflated pass.
 class ShiftInvertLDLT
 {
 public:
   using Scalar = double;
 
-  explicit ShiftInvertLDLT(const SparseMatrix& a) : a_(a) {}
-  Eigen::Index rows() const { return a_.rows(); }
-  Eigen::Index cols() const { return a_.cols(); }
-
-  void set_shift(double sigma)
+  ShiftInvertLDLT(const SparseMatrix& a, double sigma) : n_(a.rows())
   {
-    SparseMatrix identity(a_.rows(), a_.cols());
+    SparseMatrix identity(a.rows(), a.cols());
     identity.setIdentity();
-    ldlt_.compute(a_ - sigma * identity);
+    ldlt_.compute(a - sigma * identity);
     if (ldlt_.info() != Eigen::Success)
       throw std::runtime_error("modal basis: factorising K - sigma M failed (sigma = " + std::to_string(sigma) + ")");
   }
+  Eigen::Index rows() const { return n_; }
+  Eigen::Index cols() const { return n_; }
+  void set_shift(double) {}  // factorised at construction, for the one shift used
+  void deflate(const Eigen::MatrixXd& q) { q_ = q; }
 
   void perform_op(const double* x_in, double* y_out) const
   {
-    Eigen::Map<const Eigen::VectorXd> x(x_in, a_.rows());
-    Eigen::Map<Eigen::VectorXd> y(y_out, a_.rows());
-    y.noalias() = ldlt_.solve(x);
+    Eigen::Map<const Eigen::VectorXd> x(x_in, n_);
+    Eigen::Map<Eigen::VectorXd> y(y_out, n_);
+    if (q_.cols() == 0)
+    {
+      y.noalias() = ldlt_.solve(x);
+      return;
+    }
+    const Eigen::VectorXd px = x - q_ * (q_.transpose() * x);
+    y.noalias() = ldlt_.solve(px);
+    y -= q_ * (q_.transpose() * y);
   }
 
 private:
-  const SparseMatrix& a_;
+  Eigen::Index n_;
   Eigen::SimplicialLDLT<SparseMatrix> ldlt_;
+  Eigen::MatrixXd q_;
 };
+
+// The nev eigenpairs of A nearest sigma in the complement the operator is deflated to.
+void lanczos(ShiftInvertLDLT& op, int nev, double sigma, Eigen::VectorXd& values, Eigen::MatrixXd& vectors)
+{
+  const int n = static_cast<int>(op.rows());
+  const int ncv = std::min(n, std::max(2 * nev + 1, nev + 20));
+  Spectra::SymEigsShiftSolver<ShiftInvertLDLT> solver(op, nev, ncv, sigma);
+  solver.init();
+  solver.compute(Spectra::SortRule::LargestMagn, 1000, 1e-12);
+  if (solver.info() != Spectra::CompInfo::Successful)
+    throw std::runtime_error("modal basis: the eigensolver did not converge for " + std::to_string(nev) +
+                             " modes of " + std::to_string(n) + " free degrees of freedom");
+  values = solver.eigenvalues();
+  vectors = solver.eigenvectors();
+}
+
+// Rayleigh-Ritz: the r lowest eigenpairs of A within the span of `vectors`.
+void rayleighRitz(const SparseMatrix& a, int r, Eigen::VectorXd& values, Eigen::MatrixXd& vectors)
+{
+  const Eigen::HouseholderQR<Eigen::MatrixXd> qr(vectors);
+  const Eigen::MatrixXd q = qr.householderQ() * Eigen::MatrixXd::Identity(vectors.rows(), vectors.cols());
+  const Eigen::MatrixXd projected = q.transpose() * (a * q);
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> small(0.5 * (projected + projected.transpose()));
+  values = small.eigenvalues().head(r);
+  vectors = q * small.eigenvectors().leftCols(r);
+}
 
 }  // namespace
 
@@ -68,10 +104,11 @@ ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorX
   ModalBasis basis;
   Eigen::VectorXd values;
   Eigen::MatrixXd vectors;
-  const int ncv = std::min(n, std::max(2 * r + 1, r + 20));
-  if (ncv <= r)
+  const double zero_tolerance = 1e-8 * scale;
+  if (r + 1 >= n)
   {
-    // r = n: Lanczos needs more vectors than the space has; the whole spectrum is wanted anyway.
+    // r = n or n - 1: Lanczos needs more vectors than the space has; the whole spectrum is wanted
+    // anyway.
     basis.sparse = false;
     const Eigen::MatrixXd dense_a = Eigen::MatrixXd(a);
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> dense(dense_a);
@@ -82,15 +119,29 @@ ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorX
   {
     // A negative shift keeps A - sigma I positive definite even when A has zero eigenvalues.
     basis.shift = -1e-4 * scale;
-    ShiftInvertLDLT op(a);
-    Spectra::SymEigsShiftSolver<ShiftInvertLDLT> solver(op, r, ncv, basis.shift);
-    solver.init();
-    solver.compute(Spectra::SortRule::LargestMagn, 1000, 1e-12);
-    if (solver.info() != Spectra::CompInfo::Successful)
-      throw std::runtime_error("modal basis: the eigensolver did not converge for " + std::to_string(r) +
-                               " modes of " + std::to_string(n) + " free degrees of freedom");
-    values = solver.eigenvalues();
-    vectors = solver.eigenvectors();
+    ShiftInvertLDLT op(a, basis.shift);
+    lanczos(op, r, basis.shift, values, vectors);
+    // A Krylov space holds one vector per eigenvalue, so a null space larger than a few vectors (a
+    // flat 3D sheet at rest has one zero mode per free particle) is found only in part, and modes
+    // above zero slip in. Look again in the complement of what was found until nothing lower turns
+    // up, then keep the r lowest of everything by Rayleigh-Ritz.
+    const int zeros = static_cast<int>((values.array().abs() < zero_tolerance).count());
+    for (int pass = 0; zeros > 0 && zeros < r && pass < 20 && vectors.cols() + r + 1 < n; ++pass)
+    {
+      const double highest = values.maxCoeff();
+      op.deflate(Eigen::HouseholderQR<Eigen::MatrixXd>(vectors).householderQ() *
+                 Eigen::MatrixXd::Identity(n, vectors.cols()));
+      Eigen::VectorXd more_values;
+      Eigen::MatrixXd more_vectors;
+      lanczos(op, r, basis.shift, more_values, more_vectors);
+      ++basis.deflation_passes;
+      if (more_values.minCoeff() >= highest - zero_tolerance)
+        break;
+      Eigen::MatrixXd all(n, vectors.cols() + more_vectors.cols());
+      all << vectors, more_vectors;
+      vectors = all;
+      rayleighRitz(a, r, values, vectors);
+    }
   }
 
   std::vector<int> order(r);
@@ -99,7 +150,6 @@ ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorX
   basis.eigenvalues.resize(r);
   basis.frequencies.resize(r);
   basis.phi.resize(n, r);
-  const double zero_tolerance = 1e-8 * scale;
   for (int k = 0; k < r; ++k)
   {
     double lambda2 = values[order[k]];

@@ -100,5 +100,30 @@ TEST(ModalBasis, AllModesFallBackToDense)
   const ModalBasis basis = computeModalBasis(k, Eigen::VectorXd::Constant(n, p.mass), n);
   EXPECT_FALSE(basis.sparse);
   EXPECT_EQ(basis.phi.cols(), n);
+  EXPECT_TRUE(computeModalBasis(k, Eigen::VectorXd::Constant(n, p.mass), n - 2).sparse);
   EXPECT_THROW(computeModalBasis(k, Eigen::VectorXd::Constant(n, p.mass), n + 1), std::invalid_argument);
+}
+
+TEST(ModalBasis, LargeNullSpaceIsFoundWhole)
+{
+  // A 10 x 10 flat 3D sheet at rest: 90 zero modes, far more than one Lanczos run finds.
+  GridParams p;
+  p.rows = 10;
+  p.cols = 10;
+  p.dimension = 3;
+  p.rotation_deg = 45.0;
+  const Grid grid(p);
+  const SparseMatrix k = tangentStiffness(grid, grid.initialPositions());
+  const Eigen::VectorXd mass = Eigen::VectorXd::Constant(grid.numFreeDofs(), p.mass);
+  const ModalBasis all_zero = computeModalBasis(k, mass, 30);
+  EXPECT_EQ(all_zero.num_zero_modes, 30);
+  const ModalBasis beyond = computeModalBasis(k, mass, 95);
+  EXPECT_EQ(beyond.num_zero_modes, 90);
+  // The five above zero are the lowest in-plane modes, as a dense solve says.
+  const Eigen::VectorXd dense =
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(Eigen::MatrixXd(k) / p.mass).eigenvalues();
+  for (int j = 90; j < 95; ++j)
+    EXPECT_NEAR(beyond.eigenvalues[j] / dense[j], 1.0, 1e-8) << "mode " << j;
+  const Eigen::MatrixXd gram = beyond.phi.transpose() * mass.asDiagonal() * beyond.phi;
+  EXPECT_LT((gram - Eigen::MatrixXd::Identity(95, 95)).cwiseAbs().maxCoeff(), 1e-9);
 }
