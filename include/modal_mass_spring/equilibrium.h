@@ -20,8 +20,9 @@ struct Equilibrium
 // direction of the potential energy) plus a 1e-8 relative regularisation (a flat 3D sheet has no
 // out-of-plane stiffness); a backtracking line search on the energy makes it converge from far away,
 // such as a sheet rotated 45 degrees out of the vertical. Converged when every unbalanced force
-// component is below `tolerance` times one particle's weight. Throws std::runtime_error otherwise.
-Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int max_iterations = 200,
+// component is below `tolerance` times one particle's weight, or, once the line search can make no
+// more progress (round-off), below its square root. Throws std::runtime_error otherwise.
+Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int max_iterations = 1000,
                              double tolerance = 1e-9);
 
 }  // namespace modal_mass_spring

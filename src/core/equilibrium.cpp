@@ -5,6 +5,7 @@
 
 #include <Eigen/SparseCholesky>
 
+#include <cmath>
 #include <sstream>
 #include <stdexcept>
 
@@ -45,15 +46,26 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
     if (result.residual <= tolerance * scale)
       return result;
 
-    SparseMatrix k = tangentStiffness(grid, result.positions, CompressedSprings::Drop);
-    const double regularisation = 1e-8 * k.diagonal().maxCoeff();
-    for (int i = 0; i < k.rows(); ++i)
-      k.coeffRef(i, i) += regularisation;
-    if (result.iterations == 0)
-      ldlt.analyzePattern(k);
-    ldlt.factorize(k);
-    const Eigen::VectorXd direction = ldlt.solve(r);
-    if (ldlt.info() != Eigen::Success || !direction.allFinite())
+    // The exact Hessian where it is positive definite (Newton converges quadratically near a
+    // stable equilibrium); where compressed springs make it indefinite, the one without their
+    // geometric part, which is semi-definite and so gives a descent direction.
+    Eigen::VectorXd direction;
+    for (CompressedSprings compressed : {CompressedSprings::Keep, CompressedSprings::Drop})
+    {
+      SparseMatrix k = tangentStiffness(grid, result.positions, compressed);
+      const double regularisation = 1e-8 * k.diagonal().cwiseAbs().maxCoeff();
+      for (int i = 0; i < k.rows(); ++i)
+        k.coeffRef(i, i) += regularisation;
+      if (result.iterations == 0)
+        ldlt.analyzePattern(k);
+      ldlt.factorize(k);
+      if (ldlt.info() == Eigen::Success && ldlt.vectorD().minCoeff() > 0.0)
+      {
+        direction = ldlt.solve(r);
+        break;
+      }
+    }
+    if (direction.size() == 0 || !direction.allFinite())
       break;
 
     // Backtrack until the energy drops (Armijo) or, where energy differences are lost in round-off
@@ -75,7 +87,16 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
       }
     }
     if (!accepted)
+    {
+      // No further progress: the unbalanced force is at the round-off of the spring forces.
+      // Accept when that is small anyway (the square root of the tolerance).
+      if (r.cwiseAbs().maxCoeff() <= std::sqrt(tolerance) * scale)
+      {
+        result.residual = r.cwiseAbs().maxCoeff();
+        return result;
+      }
       break;
+    }
   }
   result.residual = r.cwiseAbs().maxCoeff();
   if (result.residual <= tolerance * scale)
