@@ -47,6 +47,8 @@ class LinearModalForceModel : public ForceModel
 {
 public:
   LinearModalForceModel(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref);
+  // Moves the configuration X = 0 stands for (the basis and Lambda stay).
+  void setReference(const Eigen::VectorXd& x_ref);
   int size() const override { return static_cast<int>(lambda_.size()); }
   void force(const Eigen::VectorXd& modal, Eigen::VectorXd& f) override;
   void tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k) override;
@@ -54,6 +56,8 @@ public:
   bool isLinear() const override { return true; }
 
 private:
+  const Grid& grid_;
+  const ModalBasis& basis_;
   Eigen::VectorXd lambda_;      // lambda^2 per mode
   Eigen::VectorXd reference_;   // Phi^T (f(x_ref) + f_g), constant
   double reference_energy_;     // E(x_ref)
@@ -64,6 +68,7 @@ class PhysicalModalForceModel : public ForceModel
 {
 public:
   PhysicalModalForceModel(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref);
+  void setReference(const Eigen::VectorXd& x_ref) { x_ref_ = x_ref; }
   int size() const override { return static_cast<int>(basis_.phi.cols()); }
   void force(const Eigen::VectorXd& modal, Eigen::VectorXd& f) override;
   // Phi^T K(x) Phi at x = x_ref + Phi X, K(x) Phi summed spring by spring.

@@ -98,14 +98,17 @@ public:
   const SimulationParams& params() const { return params_; }
   Method method() const { return params_.method; }
 
-  // Switches method, carrying the motion over (X = Phi^T M u to a modal method, u = Phi X to full).
-  // Clears a divergence: the last good state goes on under the new method.
+  // Switches method, carrying the motion over without moving a particle: going to a modal method,
+  // X = Phi^T M u and the rest of u, which the modes cannot carry, stays frozen as an offset of the
+  // modal reference configuration (until reset); going to full, u = offset + Phi X. Clears a
+  // divergence: the last good state goes on under the new method.
   void setMethod(Method method);
   // Rebuilds the integrators for a new time step (validated as at construction); keeps the state.
   void setTimeStep(double dt);
   // Back to the initial positions, at rest, time 0.
   void reset();
-  // Sets the state from free-dof displacements (from the linearization point) and velocities. A
+  // Sets the state from free-dof displacements (from the linearization point) and velocities, with no
+  // frozen offset. A
   // modal method takes their M-orthogonal projection; projectionError() then says how far (m, the
   // largest particle distance) the projected positions are from the requested ones.
   void setPhysicalState(const Eigen::VectorXd& displacement, const Eigen::VectorXd& velocity);
@@ -146,6 +149,8 @@ private:
   Integrator& integrator();
   void buildIntegrators();
   void initializeAcceleration();
+  void setOffset(const Eigen::VectorXd& offset);
+  void assignState(const Eigen::VectorXd& displacement, const Eigen::VectorXd& velocity);  // keeps the offset
 
   Grid grid_;
   SimulationParams params_;
@@ -165,6 +170,7 @@ private:
   bool diverged_ = false;
   double limit_ = 0.0;
   double projection_error_ = 0.0;
+  Eigen::VectorXd offset_;  // free-dof displacement frozen under a modal method (see setMethod)
 };
 
 }  // namespace modal_mass_spring

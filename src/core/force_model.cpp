@@ -39,13 +39,18 @@ double FullForceModel::energy(const Eigen::VectorXd& u)
 
 LinearModalForceModel::LinearModalForceModel(const Grid& grid, const ModalBasis& basis,
                                              const Eigen::VectorXd& x_ref)
-  : lambda_(basis.eigenvalues)
+  : grid_(grid), basis_(basis), lambda_(basis.eigenvalues)
+{
+  setReference(x_ref);
+}
+
+void LinearModalForceModel::setReference(const Eigen::VectorXd& x_ref)
 {
   Eigen::VectorXd f;
-  springForces(grid, x_ref, f);
-  f += grid.gravityForce();
-  reference_ = basis.phi.transpose() * grid.gatherFree(f);
-  reference_energy_ = springEnergy(grid, x_ref) + gravityEnergy(grid, x_ref);
+  springForces(grid_, x_ref, f);
+  f += grid_.gravityForce();
+  reference_ = basis_.phi.transpose() * grid_.gatherFree(f);
+  reference_energy_ = springEnergy(grid_, x_ref) + gravityEnergy(grid_, x_ref);
 }
 
 void LinearModalForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorXd& f)

@@ -194,11 +194,40 @@ void Simulation::setMethod(Method method)
 {
   const Eigen::VectorXd u = displacement();
   const Eigen::VectorXd v = velocity();
+  const bool was_modal = isModal();
   params_.method = method;
-  setPhysicalState(u, v);
+  if (!isModal())
+  {
+    setPhysicalState(u, v);
+  }
+  else if (was_modal)
+  {
+    assignState(u - offset_, v);  // the same X
+  }
+  else
+  {
+    const Eigen::VectorXd modal = basis_.phi.transpose() * mass_.cwiseProduct(u);
+    setOffset(u - basis_.phi * modal);
+    assignState(basis_.phi * modal, v);
+  }
+}
+
+void Simulation::setOffset(const Eigen::VectorXd& offset)
+{
+  offset_ = offset;
+  Eigen::VectorXd reference = x_ref_;
+  grid_.addFree(offset_, reference);
+  linear_force_->setReference(reference);
+  physical_force_->setReference(reference);
 }
 
 void Simulation::setPhysicalState(const Eigen::VectorXd& u, const Eigen::VectorXd& v)
+{
+  setOffset(Eigen::VectorXd::Zero(u.size()));
+  assignState(u, v);
+}
+
+void Simulation::assignState(const Eigen::VectorXd& u, const Eigen::VectorXd& v)
 {
   projection_error_ = 0.0;
   if (isModal())
@@ -273,7 +302,7 @@ StepResult Simulation::step(int steps)
 
 Eigen::VectorXd Simulation::displacement() const
 {
-  return isModal() ? Eigen::VectorXd(basis_.phi * state_.q) : state_.q;
+  return isModal() ? Eigen::VectorXd(offset_ + basis_.phi * state_.q) : state_.q;
 }
 
 Eigen::VectorXd Simulation::velocity() const

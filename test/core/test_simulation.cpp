@@ -148,10 +148,22 @@ TEST(Simulation, MethodSwitchKeepsPositionsAndResetRestores)
 
   sim.step(100);
   const Eigen::VectorXd u = sim.displacement();
-  sim.setMethod(Method::Physical);  // the M-orthogonal projection of u onto the modes
+  const Eigen::VectorXd full_positions = sim.positions();
+  sim.setMethod(Method::Physical);  // X: the M-orthogonal projection of u; the rest stays frozen
   const ModalBasis& b = sim.basis();
-  const Eigen::VectorXd projected = b.phi * (b.phi.transpose() * (sim.grid().particleMass() * u));
-  EXPECT_LT(maxDistance(sim.displacement(), projected), 1e-14);
+  const Eigen::VectorXd modal = b.phi.transpose() * (sim.grid().particleMass() * u);
+  EXPECT_LT(maxDistance(sim.state().q, modal), 1e-14);
+  EXPECT_GT(maxDistance(b.phi * modal, u), 1e-4);  // the modes alone would have moved particles
+  EXPECT_LT(maxDistance(sim.positions(), full_positions), 1e-14);
+  // Stepping on from there moves the particles by about a step's motion, not by the residual.
+  const Eigen::VectorXd before_step = sim.positions();
+  sim.step(1);
+  EXPECT_LT(maxDistance(sim.positions(), before_step), 1e-3);
+  const Eigen::VectorXd after_step = sim.positions();
+  sim.setMethod(Method::Full);  // u = offset + Phi X, exactly
+  EXPECT_LT(maxDistance(sim.positions(), after_step), 1e-14);
+  sim.setMethod(Method::Linear);
+  sim.setMethod(Method::Physical);
 
   const long steps = sim.stepCount();
   sim.step(10);

@@ -343,11 +343,9 @@ TEST_F(Services, SetMethodKeepsTheParticlesWhereTheyWere)
   }
 }
 
-// Required by issue 3 but not yet met by the core: leaving `full` for a modal method projects the
-// displacement onto the r modes (X = Phi^T M u), which drops what lies outside them, so the particles
-// jump (about 10 step motions on paper_2d after 0.5 s). Enable when Simulation::setMethod keeps the
-// positions (see the node's report).
-TEST_F(Services, DISABLED_SetMethodFromFullToModalKeepsTheParticles)
+// Leaving `full` for a modal method: X = Phi^T M u, and what the r modes cannot carry stays as a
+// frozen offset, so no particle jumps.
+TEST_F(Services, SetMethodFromFullToModalKeepsTheParticles)
 {
   ASSERT_TRUE(node.setMethod("full").success);
   ros::WallDuration(0.5).sleep();
