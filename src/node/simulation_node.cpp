@@ -162,6 +162,16 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
            grid.fixedParticles().size(), toString(simulation_->method()).c_str(), r, 1e3 * basis.build_seconds,
            r ? basis.frequencies.minCoeff() : 0.0, r ? basis.frequencies.maxCoeff() : 0.0, basis.num_zero_modes,
            lowest_nonzero, sim_params.time_step, steps_per_tick_, params_.publish_rate, params_.real_time_factor);
+  const LinearizationInfo& lin = simulation_->linearization();
+  ROS_INFO("linearization %s, integrator %s, initial_state %s%s", toString(sim_params.linearization).c_str(),
+           toString(sim_params.integrator).c_str(), toString(sim_params.initial_state).c_str(),
+           lin.equilibrium_solved
+               ? (": equilibrium in " + std::to_string(lin.equilibrium_iterations) + " Newton iterations, " +
+                  std::to_string(lin.dropped_compressed_springs) + " compressed springs' geometric stiffness dropped, " +
+                  "start projected onto the modes with a largest error of " +
+                  std::to_string(simulation_->projectionError()) + " m")
+                     .c_str()
+               : "");
 
   markers_pub_ = private_nh_.advertise<visualization_msgs::MarkerArray>("markers", 1);
   status_pub_ = private_nh_.advertise<Status>("status", 10);
@@ -271,6 +281,9 @@ void SimulationNode::publish(const ros::Time& stamp, bool send_tf)
   status.header.stamp = stamp;
   status.header.frame_id = params_.fixed_frame;
   status.method = toString(simulation_->method());
+  status.linearization = toString(simulation_->params().linearization);
+  status.integrator = toString(simulation_->params().integrator);
+  status.newton_iterations = simulation_->lastNewtonIterations();
   status.step_count = simulation_->stepCount();
   status.sim_time = simulation_->time();
   status.tick_steps = tick_steps_;

@@ -60,8 +60,10 @@ TEST(Simulation, SingleDampedModeUnderLinearFollowsClosedForm)
         amplitude * std::exp(-0.5 * c * t) * (std::cos(omega_d * t) + 0.5 * c / omega_d * std::sin(omega_d * t));
     worst = std::max(worst, std::abs(sim.state().q[mode] - expected));
     for (int other = 0; other < 4; ++other)
+    {
       if (other != mode)
         ASSERT_NEAR(sim.state().q[other], 0.0, 1e-14);
+    }
   }
   // Newmark's phase error is O((omega dt)^2) per radian; here that is below 1e-4 of the amplitude.
   EXPECT_LT(worst, 1e-4 * amplitude);
