@@ -85,6 +85,8 @@ private:
   void analyzeIfNewPattern(const SparseMatrix& jacobian);
   // Sets next.v, next.a from next.q, stores R(q') in residual_ and returns its norm.
   double residual(ForceModel& model, const State& s, State& next);
+  // The residual below which round-off hides any further progress.
+  double roundoff(const State& next) const;
 
   int max_iterations_;
   double tolerance_;

@@ -2,6 +2,7 @@
 #include "modal_mass_spring/integrator.h"
 
 #include <algorithm>
+#include <limits>
 #include <stdexcept>
 
 namespace modal_mass_spring
@@ -148,7 +149,7 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
   {
     const double residual_norm = residual(model, s, next);
     // Converged when the unbalanced force is small against the forces at play.
-    if (residual_norm <= tolerance_ * (force_.norm() + inertial_norm_ + 1e-300))
+    if (residual_norm <= tolerance_ * (force_.norm() + inertial_norm_) + roundoff(next))
       return true;
 
     Eigen::VectorXd delta;
@@ -199,10 +200,17 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
       // it is small anyway (the square root of the tolerance), refuse the step otherwise.
       next.q = start;
       residual(model, s, next);
-      return residual_norm <= std::sqrt(tolerance_) * (force_.norm() + inertial_norm_ + 1e-300);
+      return residual_norm <= std::sqrt(tolerance_) * (force_.norm() + inertial_norm_) + roundoff(next);
     }
   }
   return false;
+}
+
+double ImplicitNewmark::roundoff(const State& next) const
+{
+  // a' = 4/h^2 (q' - q - h v) - a differences nearly equal numbers: its round-off is about
+  // eps 4/h^2 |q'|, which no Newton iteration removes when the motion is tiny.
+  return 100.0 * std::numeric_limits<double>::epsilon() * 4.0 / (h_ * h_) * system_.mass.cwiseProduct(next.q).norm();
 }
 
 double ImplicitNewmark::residual(ForceModel& model, const State& s, State& next)
