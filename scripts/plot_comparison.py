@@ -8,6 +8,9 @@ Reads, from DIR, every file the tool writes and draws:
   accuracy_<tag>_snapshots.csv        -> snapshots_<tag>.png (each modal method over `full`)
   accuracy_<tag>_error.csv            -> error_<tag>.png (largest and RMS distance to `full`)
   stability_<tag>.csv                 -> stability_<tag>.png (largest stable time step per method)
+  accuracy_combinations_<config>_dt<N>ms_error.csv (runs with --reference-time-step, one per time
+      step) -> combinations.png (error against the converged reference and wall time per simulated
+      second, against the time step, for every method x linearization x integrator)
 and writes the numbers behind them as Markdown tables to DIR/tables.md, for docs/results.md to quote.
 The columns it needs are listed in COLUMNS: a file without them stops the script with a message.
 """
@@ -30,7 +33,9 @@ COLUMNS = {
     "stability": ["variant", "method", "stable_dt", "unstable_dt", "steps", "tolerance", "modal_bound",
                   "full_bound"],
 }
-METHOD_COLORS = {"full": "0.35", "linear": "tab:red", "physical": "tab:blue"}
+METHOD_COLORS = {"full": "0.35", "linear": "tab:red", "physical": "tab:blue", "reference": "0.35",
+                 "reference_half_step": "black"}
+REFERENCES = ("reference", "reference_half_step")
 VARIANT_STYLES = ["-", "--", ":", "-."]
 
 
@@ -123,11 +128,12 @@ def plot_snapshots(path, out):
         frames.setdefault((r["variant"], r["method"], int(r["step"])), {})[int(r["particle"])] = (
             number(r["x"]), number(r["y"]), number(r["z"]))
     steps = sorted({k[2] for k in frames})
-    panels = [(v, m) for v, m in ordered((k[0], k[1]) for k in frames) if m != "full"]
+    base = "reference" if any(k[1] == "reference" for k in frames) else "full"
+    panels = [(v, m) for v, m in ordered((k[0], k[1]) for k in frames) if m != base]
     times = {int(r["step"]): number(r["time"]) for r in rows}
     # Every panel on the scale of the reference, so the figures compare shapes and sizes; a method
     # that drifts far away leaves the panel and says so in its title.
-    reference = [p for k, f in frames.items() if k[1] == "full" for p in f.values()]
+    reference = [p for k, f in frames.items() if k[1] == base for p in f.values()]
     lo = [min(p[d] for p in reference) for d in range(3)]
     hi = [max(p[d] for p in reference) for d in range(3)]
     span = max(h - l for l, h in zip(lo, hi))
@@ -149,7 +155,7 @@ def plot_snapshots(path, out):
         for j, step in enumerate(steps):
             index = i * len(steps) + j + 1
             ax = fig.add_subplot(len(panels), len(steps), index, projection="3d" if three_d else None)
-            for name, color, width in (("full", METHOD_COLORS["full"], 0.8), (method, METHOD_COLORS.get(method), 1.0)):
+            for name, color, width in ((base, METHOD_COLORS["full"], 0.8), (method, METHOD_COLORS.get(method), 1.0)):
                 frame = frames.get((variant, name, step))
                 if frame is None:  # diverged before this step
                     continue
@@ -187,7 +193,7 @@ def plot_snapshots(path, out):
             elif outside(frames[(variant, method, step)]):
                 label += " (leaves the frame)"
             ax.set_title(f"{label}\nstep {step} ({times[step]:g} s)", fontsize=7 if variant == "base" else 6)
-    fig.suptitle(f"{tag}: each modal method (colour) over full (grey)", fontsize=10)
+    fig.suptitle(f"{tag}: each method (colour) over {base} (grey)", fontsize=10)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.45 / fig.get_size_inches()[1]))
     target = out / f"snapshots_{tag}.png"
     fig.savefig(target, dpi=110 if len(panels) <= 2 else 70)
@@ -198,18 +204,21 @@ def plot_snapshots(path, out):
 def plot_error(path, out):
     rows = read_csv(path, "error")
     tag = tag_of(path, "accuracy_", "_error.csv")
+    base = "reference" if any(r["method"] == "reference" for r in rows) else "full"
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     variants = ordered(r["variant"] for r in rows)
-    for column, ax, title in (("max_distance", axes[0], "largest particle distance to full"),
-                              ("rms_distance", axes[1], "RMS particle distance to full")):
+    for column, ax, title in (("max_distance", axes[0], f"largest particle distance to {base}"),
+                              ("rms_distance", axes[1], f"RMS particle distance to {base}")):
         for vi, variant in enumerate(variants):
             for method in ordered(r["method"] for r in rows if r["variant"] == variant):
-                if method == "full":
+                if method == base or (method == "reference_half_step" and vi > 0):
                     continue
                 series = [(number(r["time"]), number(r[column])) for r in rows
                           if r["variant"] == variant and r["method"] == method and r["diverged"] == "0"]
                 series = [(t, e) for t, e in series if e > 0]
                 label = method if len(variants) == 1 else f"{method} ({variant})"
+                if method == "reference_half_step":
+                    label = "reference at half its step (convergence check)"
                 ax.plot([t for t, _ in series], [e for _, e in series], VARIANT_STYLES[vi % len(VARIANT_STYLES)],
                         color=METHOD_COLORS.get(method), label=label, lw=1)
         ax.set_yscale("log")
@@ -219,7 +228,7 @@ def plot_error(path, out):
         ax.grid(True, which="both", alpha=0.3)
         if len(variants) == 1:
             ax.legend(fontsize=8)
-    fig.suptitle(f"{tag}: error against full", fontsize=10)
+    fig.suptitle(f"{tag}: error against {base}", fontsize=10)
     if len(variants) == 1:
         fig.tight_layout()
     else:  # many curves: the legend goes below, off the data
@@ -246,6 +255,8 @@ def plot_stability(path, out):
         if unbounded:
             bar.set_hatch("//")
         text = f">= {value:.3g} s\n(no divergence found)" if unbounded else f"{value * 1e3:.3g} ms"
+        if number(r.get("check_dt", "0") or "0") > 0:
+            text += f"\n{'stable' if r.get('check_stable') == '1' else 'DIVERGES'} at\n{number(r['check_dt']):.3g} s (10x)"
         ax.annotate(text, (bar.get_x() + bar.get_width() / 2, value), ha="center", va="bottom", fontsize=7)
     modal = ordered(number(r["modal_bound"]) for r in rows)
     full = ordered(number(r["full_bound"]) for r in rows)
@@ -257,7 +268,7 @@ def plot_stability(path, out):
     ax.set_xticklabels(labels, fontsize=7)
     ax.set_yscale("log")
     positive = [v for v in values + modal + full if v > 0 and math.isfinite(v)]
-    ax.set_ylim(min(positive) / 3, max(positive) * 8)
+    ax.set_ylim(min(positive) / 3, max(positive) * 30)
     ax.set_ylabel("largest stable time step (s)")
     first = rows[0]
     ax.set_title(f"{tag}: no divergence within {first['steps']} steps (bisection, rel. tol. {first['tolerance']})",
@@ -269,6 +280,119 @@ def plot_stability(path, out):
     fig.savefig(target, dpi=110)
     plt.close(fig)
     return [target]
+
+
+def combination_files(data):
+    """{config: {time step (s): path}} of the accuracy runs against a converged reference."""
+    found = {}
+    for path in sorted(data.glob("accuracy_combinations_*_dt*ms_error.csv")):
+        tag = tag_of(path, "accuracy_combinations_", "_error.csv")
+        config, _, dt = tag.rpartition("_dt")
+        found.setdefault(config, {})[float(dt[:-2]) / 1e3] = path
+    return found
+
+
+def summarize(rows):
+    """Per (variant, method): mean and largest RMS distance, median wall time per step, diverged."""
+    out = {}
+    for r in rows:
+        key = (r["variant"], r["method"])
+        s = out.setdefault(key, {"rms": [], "diverged": False, "times": []})
+        if int(r["step"]) == 0:
+            continue
+        if r["diverged"] == "1":
+            s["diverged"] = True
+            continue
+        s["rms"].append(number(r["rms_distance"]))
+        t = number(r.get("step_seconds", "0") or "0")
+        if t > 0:
+            s["times"].append(t)
+    for s in out.values():
+        s["mean_rms"] = math.nan if s["diverged"] or not s["rms"] else sum(s["rms"]) / len(s["rms"])
+        s["max_rms"] = math.nan if s["diverged"] or not s["rms"] else max(s["rms"])
+        times = sorted(s["times"])
+        s["step_seconds"] = times[len(times) // 2] if times else math.nan
+    return out
+
+
+def short_variant(variant):
+    parts = dict(p.split("=", 1) for p in variant.split() if "=" in p)
+    return f"{parts.get('linearization', '?')}, {parts.get('integrator', '?')}"
+
+
+def plot_combinations(found, out):
+    configs = sorted(found)
+    fig, axes = plt.subplots(2, len(configs), figsize=(6.5 * len(configs), 9), squeeze=False)
+    styles = {"rest": "--", "equilibrium": "-"}
+    markers = {"explicit": "o", "implicit": "s"}
+    for c, config in enumerate(configs):
+        by_dt = {dt: summarize(read_csv(path, "error")) for dt, path in sorted(found[config].items())}
+        dts = sorted(by_dt)
+        keys = ordered(k for dt in dts for k in by_dt[dt] if k[1] not in REFERENCES)
+        check = [by_dt[dt].get((k[0], "reference_half_step")) for dt in dts for k in keys]
+        for key in keys:
+            variant, method = key
+            parts = dict(p.split("=", 1) for p in variant.split() if "=" in p)
+            style = styles.get(parts.get("linearization"), ":")
+            marker = markers.get(parts.get("integrator"), "^")
+            errors = [by_dt[dt][key]["mean_rms"] if key in by_dt[dt] else math.nan for dt in dts]
+            costs = [by_dt[dt][key]["step_seconds"] / dt if key in by_dt[dt] and not by_dt[dt][key]["diverged"]
+                     else math.nan for dt in dts]
+            label = f"{method}, {short_variant(variant)}"
+            kw = dict(color=METHOD_COLORS.get(method), ls=style, marker=marker, ms=5, lw=1,
+                      mfc="none" if parts.get("integrator") == "implicit" else None)
+            axes[0][c].plot(dts, errors, label=label, **kw)
+            axes[1][c].plot(dts, costs, label=label, **kw)
+            for dt, e in zip(dts, errors):
+                if math.isnan(e):
+                    axes[0][c].annotate("x", (dt, 1.0), xycoords=("data", "axes fraction"), ha="center", va="top",
+                                        color=METHOD_COLORS.get(method), fontsize=9)
+        floor = [max((by_dt[dt][k]["max_rms"] for k in by_dt[dt] if k[1] == "reference_half_step"), default=math.nan)
+                 for dt in dts]
+        axes[0][c].plot(dts, floor, color="black", lw=0.8, ls=":", label="reference vs. reference at half its step")
+        axes[0][c].set_title(f"{config}: mean RMS distance to the converged reference over 5 s\n"
+                             "(x at the top: diverged at that step)", fontsize=9)
+        axes[1][c].set_title(f"{config}: wall time per simulated second (median step time / dt)", fontsize=9)
+        for ax in axes[:, c]:
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_xlabel("time step (s)")
+            ax.grid(True, which="both", alpha=0.3)
+        axes[0][c].set_ylabel("m")
+        axes[1][c].set_ylabel("s of wall time per s simulated")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8)
+    fig.suptitle("Every method x linearization x integrator: colour = method, line = linearization (solid "
+                 "equilibrium, dashed rest), marker = integrator (filled explicit, open implicit)", fontsize=9)
+    fig.tight_layout(rect=(0, 0.13, 1, 0.97))
+    target = out / "combinations.png"
+    fig.savefig(target, dpi=100)
+    plt.close(fig)
+    return [target]
+
+
+def combination_tables(found):
+    parts = []
+    for config in sorted(found):
+        body = []
+        for dt, path in sorted(found[config].items()):
+            summary = summarize(read_csv(path, "error"))
+            check = max((s["max_rms"] for k, s in summary.items() if k[1] == "reference_half_step"), default=math.nan)
+            for (variant, method), s in summary.items():
+                if method in REFERENCES:
+                    continue
+                body.append([f"{dt * 1e3:g}", method, short_variant(variant),
+                             "diverged" if s["diverged"] else fmt(s["mean_rms"]),
+                             "diverged" if s["diverged"] else fmt(s["max_rms"]),
+                             fmt(1e6 * s["step_seconds"]),
+                             "-" if s["diverged"] else fmt(s["step_seconds"] / dt), fmt(check)])
+        parts.append(f"## {config}: every combination against the converged reference\n\nMean and largest RMS "
+                     "particle distance over 5 s (sampled every 50 ms), the median wall time of one step while it ran, "
+                     "wall time per simulated second, and the reference's own check (largest RMS distance to "
+                     "the reference at half its step).\n\n" + markdown(
+                         ["dt (ms)", "method", "linearization, integrator", "mean RMS (m)", "largest RMS (m)",
+                          "step (us)", "wall s / simulated s", "reference check (m)"], body))
+    return parts
 
 
 def fmt(value, digits=3):
@@ -323,9 +447,16 @@ def write_tables(data, target):
         rows = read_csv(path, "stability")
         body = [[r["variant"], r["method"], fmt(1e3 * number(r["stable_dt"]), 5), fmt(1e3 * number(r["unstable_dt"]), 5),
                  fmt(1e3 * number(r["modal_bound"]), 5), fmt(1e3 * number(r["full_bound"]), 5)] for r in rows]
+        if any(number(r.get("check_dt", "0") or "0") > 0 for r in rows):
+            for b, r in zip(body, rows):
+                b.append(f"{'stable' if r['check_stable'] == '1' else 'DIVERGED'} at {fmt(1e3 * number(r['check_dt']), 4)}"
+                         if number(r.get("check_dt", "0") or "0") > 0 else "-")
+        header = ["variant", "method", "stable", "diverges", "2/omega highest mode", "2/omega K(x0)"]
+        if len(body[0]) > len(header):
+            header.append("10 x the explicit method's stable step (ms)")
         parts.append(f"## {path.name}: largest stable time step (ms), {rows[0]['steps']} steps, relative tolerance "
-                     f"{rows[0]['tolerance']}\n\n" + markdown(
-                         ["variant", "method", "stable", "diverges", "2/omega highest mode", "2/omega K(x0)"], body))
+                     f"{rows[0]['tolerance']}\n\n" + markdown(header, body))
+    parts += combination_tables(combination_files(data))
     target.write_text("\n".join(parts))
     return [target]
 
@@ -344,10 +475,17 @@ def main(argv=None):
             written += plot_cost(cost, out)
         for path in sorted(data.glob("accuracy_*_snapshots.csv")):
             written += plot_snapshots(path, out)
+        # Of the runs against the converged reference, only the smallest time step gets an error figure;
+        # combinations.png draws them all.
+        skip = {p for steps in combination_files(data).values() for dt, p in steps.items() if dt != min(steps)}
         for path in sorted(data.glob("accuracy_*_error.csv")):
-            written += plot_error(path, out)
+            if path not in skip:
+                written += plot_error(path, out)
         for path in sorted(data.glob("stability_*.csv")):
             written += plot_stability(path, out)
+        combinations = combination_files(data)
+        if combinations:
+            written += plot_combinations(combinations, out)
         if written:
             written += write_tables(data, data / "tables.md")
     except ColumnError as error:

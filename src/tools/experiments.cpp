@@ -160,72 +160,201 @@ std::vector<CostRow> runCost(const ExperimentSetup& setup, const CostOptions& op
 
 // ---------------------------------------------------------------- accuracy
 
+int referenceSubsteps(double time_step, double reference_time_step)
+{
+  const double ratio = time_step / reference_time_step;
+  const double whole = std::round(ratio);
+  if (!(reference_time_step > 0.0) || whole < 1.0 || std::abs(ratio - whole) > 1e-6 * ratio)
+    throw std::invalid_argument("reference time step " + std::to_string(reference_time_step) +
+                                " s must divide time_step " + std::to_string(time_step) + " s a whole number of times");
+  return static_cast<int>(whole);
+}
+
 AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& options, const ProgressFn& progress)
 {
   if (options.steps < 1 || options.interval < 1 || options.sample < 1 || options.interval % options.sample != 0)
     throw std::invalid_argument("accuracy: steps, interval and sample must be >= 1 and sample must divide interval");
+  if (options.reference_time_step < 0.0)
+    throw std::invalid_argument("accuracy: reference_time_step must be >= 0");
+  const int divisor =
+      options.reference_time_step > 0.0 ? referenceSubsteps(setup.sim.time_step, options.reference_time_step) : 0;
 
-  std::vector<Method> methods{Method::Full};
+  // runs[0] is the reference every other run is measured against.
+  struct Run
+  {
+    std::string name;
+    std::unique_ptr<Simulation> sim;
+    int steps_per_sample = 0;
+    bool timed = false;
+    bool diverged = false;
+    double step_seconds = 0.0;
+  };
+  std::vector<Run> runs;
+  auto referenceParams = [&](int divide) {
+    SimulationParams p = withMethod(setup.sim, Method::Full);
+    p.integrator = IntegratorKind::Explicit;
+    p.linearization = Linearization::Rest;
+    p.time_step = setup.sim.time_step / divide;
+    return p;
+  };
+  if (divisor == 0)
+    runs.push_back({"full", std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, Method::Full)),
+                    options.sample, true});
+  else
+    runs.push_back({"reference", std::make_unique<Simulation>(setup.grid, referenceParams(divisor)),
+                    options.sample * divisor, false});
+  std::vector<Method> compared;
   for (Method m : options.methods)
-    if (m != Method::Full)
-      methods.push_back(m);
-
-  std::vector<std::unique_ptr<Simulation>> sims;
-  for (Method m : methods)
-    sims.push_back(std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, m)));
-  const Grid& grid = sims[0]->grid();
+    if ((divisor > 0 || m != Method::Full) && std::find(compared.begin(), compared.end(), m) == compared.end())
+      compared.push_back(m);
+  for (Method m : compared)
+    runs.push_back({toString(m), std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, m)), options.sample,
+                    true});
+  std::unique_ptr<Simulation> check;  // the reference at half its step
+  bool check_diverged = false;
+  if (divisor > 0)
+    check = std::make_unique<Simulation>(setup.grid, referenceParams(2 * divisor));
+  const Grid& grid = runs[0].sim->grid();
 
   AccuracyResult result;
-  result.frequencies = sims[0]->basis().frequencies;
-  result.num_zero_modes = sims[0]->basis().num_zero_modes;
+  const Simulation& modal = *runs.back().sim;  // every run of the setup has the same basis
+  result.frequencies = modal.basis().frequencies;
+  result.num_zero_modes = modal.basis().num_zero_modes;
 
-  std::vector<bool> diverged(methods.size(), false);
   auto record = [&](long step) {
-    const Eigen::Matrix3Xd reference = sims[0]->points();
-    const bool snapshot = step % options.interval == 0 || step == options.steps;
-    for (size_t k = 0; k < methods.size(); ++k)
+    const Eigen::Matrix3Xd reference = runs[0].sim->points();
+    const bool snapshot = options.snapshots && (step % options.interval == 0 || step == options.steps);
+    for (const Run& run : runs)
     {
       ErrorSample e;
       e.variant = setup.variant;
-      e.method = toString(methods[k]);
+      e.method = run.name;
       e.step = step;
       e.time = step * setup.sim.time_step;
-      e.diverged = diverged[k] || diverged[0];
+      e.diverged = run.diverged || runs[0].diverged;
+      e.step_seconds = run.timed && step > 0 ? run.step_seconds : 0.0;
       if (e.diverged)
       {
         e.max_distance = e.rms_distance = e.max_displacement = e.energy = std::numeric_limits<double>::quiet_NaN();
       }
       else
       {
-        const Eigen::Matrix3Xd points = sims[k]->points();
+        const Eigen::Matrix3Xd points = run.sim->points();
         distances(grid, points, reference, e.max_distance, e.rms_distance);
         e.max_displacement = maxDisplacement(grid, points);
-        e.energy = sims[k]->totalEnergy();
+        e.energy = run.sim->totalEnergy();
         if (snapshot)
           result.snapshots.push_back({setup.variant, e.method, step, e.time, points});
       }
       result.errors.push_back(e);
+    }
+    if (check)
+    {
+      ErrorSample e;
+      e.variant = setup.variant;
+      e.method = "reference_half_step";
+      e.step = step;
+      e.time = step * setup.sim.time_step;
+      e.diverged = check_diverged || runs[0].diverged;
+      if (e.diverged)
+        e.max_distance = e.rms_distance = e.max_displacement = e.energy = std::numeric_limits<double>::quiet_NaN();
+      else
+      {
+        const Eigen::Matrix3Xd points = check->points();
+        distances(grid, points, reference, e.max_distance, e.rms_distance);
+        e.max_displacement = maxDisplacement(grid, points);
+        e.energy = check->totalEnergy();
+        result.reference_check_max_rms = std::max(result.reference_check_max_rms, e.rms_distance);
+        result.reference_check_max_distance = std::max(result.reference_check_max_distance, e.max_distance);
+      }
+      result.reference_check.push_back(e);
     }
   };
 
   record(0);
   for (long step = options.sample; step <= options.steps; step += options.sample)
   {
-    for (size_t k = 0; k < methods.size(); ++k)
+    for (Run& run : runs)
     {
-      if (diverged[k])
+      if (run.diverged)
         continue;
-      const StepResult r = sims[k]->step(options.sample);
+      const auto start = Clock::now();
+      const StepResult r = run.sim->step(run.steps_per_sample);
+      run.step_seconds = seconds(start) / run.steps_per_sample;
       if (r.diverged)
       {
-        diverged[k] = true;
-        result.messages.push_back(setup.variant + ": " + r.message);
+        run.diverged = true;
+        result.messages.push_back(setup.variant + ": " + run.name + ": " + r.message);
+      }
+    }
+    if (check && !check_diverged)
+    {
+      const StepResult r = check->step(2 * options.sample * divisor);
+      if (r.diverged)
+      {
+        check_diverged = true;
+        result.messages.push_back(setup.variant + ": reference at half its step: " + r.message);
       }
     }
     record(step);
     report(progress, "accuracy " + setup.variant, static_cast<double>(step) / options.steps);
   }
+  if (check && check_diverged)
+    result.reference_check_max_rms = result.reference_check_max_distance = std::numeric_limits<double>::infinity();
   return result;
+}
+
+std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& rows)
+{
+  std::vector<AccuracySummary> out;
+  std::vector<std::vector<double>> times;
+  std::vector<int> counts;
+  for (const ErrorSample& e : rows)
+  {
+    auto it = std::find_if(out.begin(), out.end(), [&](const AccuracySummary& s) {
+      return s.variant == e.variant && s.method == e.method;
+    });
+    if (it == out.end())
+    {
+      out.push_back({e.variant, e.method});
+      times.emplace_back();
+      counts.push_back(0);
+      it = out.end() - 1;
+    }
+    const size_t k = it - out.begin();
+    AccuracySummary& s = *it;
+    if (e.step == 0)
+      continue;
+    if (e.diverged)
+    {
+      s.diverged = true;
+      continue;
+    }
+    s.mean_rms += e.rms_distance;
+    s.mean_max += e.max_distance;
+    s.max_rms = std::max(s.max_rms, e.rms_distance);
+    s.final_rms = e.rms_distance;
+    if (e.step_seconds > 0.0)
+      times[k].push_back(e.step_seconds);
+    ++counts[k];
+  }
+  for (size_t k = 0; k < out.size(); ++k)
+  {
+    AccuracySummary& s = out[k];
+    if (counts[k] > 0)
+    {
+      s.mean_rms /= counts[k];
+      s.mean_max /= counts[k];
+    }
+    if (s.diverged)
+      s.final_rms = std::numeric_limits<double>::quiet_NaN();
+    s.step_seconds_median = median(times[k]);
+    double sum = 0.0;
+    for (double t : times[k])
+      sum += t;
+    s.step_seconds_mean = times[k].empty() ? std::numeric_limits<double>::quiet_NaN() : sum / times[k].size();
+  }
+  return out;
 }
 
 // ---------------------------------------------------------------- stability
@@ -238,6 +367,14 @@ double highestFrequencyAtRest(const Grid& grid, int max_dofs)
   const Eigen::MatrixXd k = Eigen::MatrixXd(tangentStiffness(grid, grid.initialPositions())) / grid.particleMass();
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> solver(k, Eigen::EigenvaluesOnly);
   return std::sqrt(std::max(0.0, solver.eigenvalues().maxCoeff()));
+}
+
+bool checkStableAt(const ExperimentSetup& setup, Method method, double dt, int steps)
+{
+  SimulationParams params = withMethod(setup.sim, method);
+  params.time_step = dt;
+  Simulation sim(setup.grid, params);
+  return !sim.step(steps).diverged;
 }
 
 std::vector<StabilityRow> runStability(const ExperimentSetup& setup, const StabilityOptions& options, const ProgressFn& progress)
@@ -340,10 +477,11 @@ void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows)
 
 void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows)
 {
-  precise(out) << "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged\n";
+  precise(out) << "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds\n";
   for (const ErrorSample& e : rows)
     out << e.variant << ',' << e.method << ',' << e.step << ',' << e.time << ',' << e.max_distance << ','
-        << e.rms_distance << ',' << e.max_displacement << ',' << e.energy << ',' << (e.diverged ? 1 : 0) << '\n';
+        << e.rms_distance << ',' << e.max_displacement << ',' << e.energy << ',' << (e.diverged ? 1 : 0) << ','
+        << e.step_seconds << '\n';
 }
 
 void writeSnapshotCsv(std::ostream& out, const Grid& grid, const std::vector<Snapshot>& snapshots)
@@ -359,11 +497,13 @@ void writeSnapshotCsv(std::ostream& out, const Grid& grid, const std::vector<Sna
 
 void writeStabilityCsv(std::ostream& out, const std::vector<StabilityRow>& rows)
 {
-  precise(out) << "variant,method,stable_dt,unstable_dt,trials,steps,tolerance,modal_bound,full_bound,below_stable\n";
+  precise(out) << "variant,method,stable_dt,unstable_dt,trials,steps,tolerance,modal_bound,full_bound,below_stable,"
+                  "check_dt,check_stable\n";
   for (const StabilityRow& r : rows)
     out << r.variant << ',' << r.method << ',' << r.stable_dt << ',' << r.unstable_dt << ',' << r.trials << ','
         << r.steps << ',' << r.tolerance << ',' << r.modal_bound << ',' << r.full_bound << ','
-        << (r.below_stable ? 1 : 0) << '\n';
+        << (r.below_stable ? 1 : 0) << ',' << r.check_dt << ',' << (r.check_dt > 0.0 ? (r.check_stable ? 1 : 0) : -1)
+        << '\n';
 }
 
 }  // namespace modal_mass_spring

@@ -57,6 +57,13 @@ struct AccuracyOptions
   int steps = 5000;
   int interval = 1000;  // snapshots of every particle every `interval` steps, as in the paper
   int sample = 10;      // error samples every `sample` steps (must divide `interval`)
+  // 0: the reference is `full` of the same setup at the same time step (the paper's comparison).
+  // > 0: the reference is `full` with the explicit integrator at this time step (s; time_step must be
+  // a whole multiple of it), method "reference" in the results; `full` of the setup is compared with
+  // it like the modal methods, and a second reference at half this step checks that the first one is
+  // converged (`reference_check`).
+  double reference_time_step = 0.0;
+  bool snapshots = true;  // keep the particle positions every `interval` steps
 };
 
 // One method at one step, against `full` at the same step. Distances are per particle, between the
@@ -70,6 +77,8 @@ struct ErrorSample
   double max_displacement = 0.0;  // of this method's particles from the initial positions
   double energy = 0.0;            // kinetic + spring + gravity
   bool diverged = false;          // the method diverged at or before this step: no distances
+  // Wall time per step over the `sample` steps that led here (0 at step 0 and for the reference).
+  double step_seconds = 0.0;
 };
 
 struct Snapshot
@@ -85,6 +94,10 @@ struct AccuracyResult
   std::vector<ErrorSample> errors;  // `full` included, with zero distances
   std::vector<Snapshot> snapshots;  // `full` included
   std::vector<std::string> messages;  // divergences, one line each
+  // With a reference_time_step: the reference at half that step against the one at that step
+  // (method "reference_half_step"), and the largest RMS and largest particle distance between them.
+  std::vector<ErrorSample> reference_check;
+  double reference_check_max_rms = 0.0, reference_check_max_distance = 0.0;
   // The basis of the setup (the same for every method).
   Eigen::VectorXd frequencies;
   int num_zero_modes = 0;
@@ -117,10 +130,19 @@ struct StabilityRow
   double full_bound = 0.0;
   // Whether 1/4, 1/2 and 3/4 of stable_dt are stable too: bisection assumes one boundary.
   bool below_stable = true;
+  // A direct check at one time step (see checkStableAt): the step (0: not checked) and the outcome.
+  double check_dt = 0.0;
+  bool check_stable = false;
 };
 
 std::vector<StabilityRow> runStability(const ExperimentSetup& setup, const StabilityOptions& options,
                                        const ProgressFn& progress = {});
+
+// time_step / reference_time_step when it is a whole number >= 1; throws std::invalid_argument otherwise.
+int referenceSubsteps(double time_step, double reference_time_step);
+
+// Whether `method` on the setup runs `steps` steps at time step `dt` without diverging.
+bool checkStableAt(const ExperimentSetup& setup, Method method, double dt, int steps);
 
 // Largest dense eigen-frequency of M^-1 K(x0) on the free dofs, NaN above `max_dofs`.
 double highestFrequencyAtRest(const Grid& grid, int max_dofs = 3000);
@@ -129,6 +151,16 @@ double highestFrequencyAtRest(const Grid& grid, int max_dofs = 3000);
 
 void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows);
 void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows);
+// The accuracy experiment's summary per variant and method: mean and largest RMS distance to the
+// reference, the distance at the end, and the median wall time per step.
+struct AccuracySummary
+{
+  std::string variant, method;
+  double mean_rms = 0.0, max_rms = 0.0, mean_max = 0.0, final_rms = 0.0;
+  double step_seconds_median = 0.0, step_seconds_mean = 0.0;
+  bool diverged = false;
+};
+std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& rows);
 void writeSnapshotCsv(std::ostream& out, const Grid& grid, const std::vector<Snapshot>& snapshots);
 void writeStabilityCsv(std::ostream& out, const std::vector<StabilityRow>& rows);
 

@@ -44,7 +44,14 @@ CSV files to the output folder plus a summary table on stdout.
   --quiet               no progress line on stderr
 
   accuracy:   --steps N (5000)  --interval N (1000, snapshots)  --sample N (10, error samples)
+              --reference-time-step DT (s; default: the reference is `full` at the same step, as in the
+                paper; with DT: `full`, explicit, at DT, checked against DT / 2, and every method,
+                `full` too, measured against it, with its wall time per step; DT must divide time_step)
+              --no-snapshots (no particle positions file)
   stability:  --stability-steps S (10000)  --tolerance T (1e-3, relative)
+              --check-factor F (0: off; with --vary integrator=explicit,implicit, each implicit
+                method is also run at F times the largest stable step of the same method under
+                the explicit integrator, and the summary says whether it stayed stable)
   cost:       --sizes LIST (5,10,20,40; square grids)  --repeats R (7)  --min-repeat-seconds T (0.02)
 )";
 
@@ -125,6 +132,7 @@ struct Options
   std::vector<std::pair<std::string, std::string>> sets;
   std::vector<std::pair<std::string, std::vector<std::string>>> varies;
   bool quiet = false;
+  double check_factor = 0.0;
   AccuracyOptions accuracy;
   StabilityOptions stability;
   CostOptions cost;
@@ -198,6 +206,12 @@ Options parseArguments(int argc, char** argv)
       o.accuracy.interval = parseInt(arg, value(i), 1);
     else if (arg == "--sample")
       o.accuracy.sample = parseInt(arg, value(i), 1);
+    else if (arg == "--reference-time-step")
+      o.accuracy.reference_time_step = parsePositive(arg, value(i));
+    else if (arg == "--no-snapshots")
+      o.accuracy.snapshots = false;
+    else if (arg == "--check-factor")
+      o.check_factor = parsePositive(arg, value(i));
     else if (arg == "--stability-steps")
       o.stability.steps = parseInt(arg, value(i), 1);
     else if (arg == "--tolerance")
@@ -304,6 +318,18 @@ void validate(const Options& o, const std::vector<ExperimentSetup>& setups)
     catch (const std::invalid_argument& e)
     {
       throw std::invalid_argument("config '" + o.config + "' (" + setup.variant + "): " + e.what());
+    }
+    if (o.accuracy.reference_time_step > 0.0 &&
+        std::find(o.experiments.begin(), o.experiments.end(), "accuracy") != o.experiments.end())
+    {
+      try
+      {
+        referenceSubsteps(setup.sim.time_step, o.accuracy.reference_time_step);
+      }
+      catch (const std::invalid_argument& e)
+      {
+        throw UsageError(std::string("--reference-time-step: ") + e.what());
+      }
     }
     const bool cost = std::find(o.experiments.begin(), o.experiments.end(), "cost") != o.experiments.end();
     if (cost)
@@ -418,6 +444,8 @@ void runCostExperiment(const Options& o, const std::vector<ExperimentSetup>& set
 
 void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>& setups, Progress& progress)
 {
+  const bool with_reference = o.accuracy.reference_time_step > 0.0;
+  const std::string reference = with_reference ? "reference" : "full";
   std::vector<ErrorSample> errors;
   std::vector<Snapshot> snapshots;
   std::vector<std::string> messages;
@@ -427,6 +455,7 @@ void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>&
   {
     const AccuracyResult result = runAccuracy(setup, o.accuracy, std::ref(progress));
     errors.insert(errors.end(), result.errors.begin(), result.errors.end());
+    errors.insert(errors.end(), result.reference_check.begin(), result.reference_check.end());
     snapshots.insert(snapshots.end(), result.snapshots.begin(), result.snapshots.end());
     messages.insert(messages.end(), result.messages.begin(), result.messages.end());
     std::ostringstream freq;
@@ -434,21 +463,40 @@ void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>&
       freq << (k ? " " : "") << fmt(result.frequencies[k]);
     std::cout << "basis (" << setup.variant << "): " << result.frequencies.size() << " modes, "
               << result.num_zero_modes << " zero, omega [rad/s] = " << freq.str() << "\n";
+    if (with_reference)
+      std::cout << "reference (" << setup.variant << "): full, explicit, dt = "
+                << fmt(o.accuracy.reference_time_step) << " s; against dt / 2: largest RMS distance "
+                << fmt(result.reference_check_max_rms) << " m, largest particle distance "
+                << fmt(result.reference_check_max_distance) << " m\n";
     for (const ErrorSample& e : result.errors)
-      if ((e.step % o.accuracy.interval == 0 || e.step == o.accuracy.steps) && e.method != "full")
+      if ((e.step % o.accuracy.interval == 0 || e.step == o.accuracy.steps) && e.method != reference)
         table.push_back({e.variant, e.method, std::to_string(e.step), fmt(e.time), fmt(e.max_distance),
                          fmt(e.rms_distance), fmt(e.max_displacement)});
     for (const ErrorSample& e : result.errors)
-      if ((e.step % o.accuracy.interval == 0 || e.step == o.accuracy.steps) && e.method == "full")
-        std::cout << "full (" << setup.variant << ") at step " << e.step
+      if ((e.step % o.accuracy.interval == 0 || e.step == o.accuracy.steps) && e.method == reference)
+        std::cout << reference << " (" << setup.variant << ") at step " << e.step
                   << ": max displacement " << fmt(e.max_displacement) << " m\n";
   }
   std::ofstream out = openCsv(o, "accuracy_" + o.tag + "_error.csv");
   writeErrorCsv(out, errors);
-  std::ofstream snap = openCsv(o, "accuracy_" + o.tag + "_snapshots.csv");
-  writeSnapshotCsv(snap, Grid(setups.front().grid), snapshots);
-  printTable("accuracy (" + o.tag + "): distance to full every " + std::to_string(o.accuracy.interval) + " steps",
+  if (o.accuracy.snapshots)
+  {
+    std::ofstream snap = openCsv(o, "accuracy_" + o.tag + "_snapshots.csv");
+    writeSnapshotCsv(snap, Grid(setups.front().grid), snapshots);
+  }
+  printTable("accuracy (" + o.tag + "): distance to " + reference + " every " + std::to_string(o.accuracy.interval) +
+                 " steps",
              table);
+  std::vector<std::vector<std::string>> summary{{"variant", "method", "mean RMS m", "largest RMS m", "mean largest m",
+                                                 "RMS at the end m", "step us (median)", "step us (mean)"}};
+  for (const AccuracySummary& s : summarizeAccuracy(errors))
+    if (s.method != reference && s.method != "reference_half_step")
+      summary.push_back({s.variant, s.method, fmt(s.mean_rms), fmt(s.max_rms), fmt(s.mean_max),
+                         s.diverged ? "diverged" : fmt(s.final_rms), fmt(1e6 * s.step_seconds_median),
+                         fmt(1e6 * s.step_seconds_mean)});
+  printTable("accuracy (" + o.tag + "): over every sample after step 0, against " + reference +
+                 "; wall time per step while running",
+             summary);
   for (const std::string& m : messages)
     std::cout << "note: " << m << "\n";
 }
@@ -461,6 +509,36 @@ void runStabilityExperiment(const Options& o, const std::vector<ExperimentSetup>
     const auto part = runStability(setup, o.stability, std::ref(progress));
     rows.insert(rows.end(), part.begin(), part.end());
   }
+  // Each implicit method at check_factor times the largest stable step of its explicit twin (the
+  // setup whose variant differs only in integrator=explicit).
+  std::vector<std::string> checks;
+  if (o.check_factor > 0.0)
+    for (const ExperimentSetup& setup : setups)
+    {
+      if (setup.sim.integrator != IntegratorKind::Implicit)
+        continue;
+      std::string twin = setup.variant;
+      const size_t at = twin.find("integrator=implicit");
+      if (at == std::string::npos)
+        continue;
+      twin.replace(at, std::string("integrator=implicit").size(), "integrator=explicit");
+      for (StabilityRow& row : rows)
+      {
+        if (row.variant != setup.variant)
+          continue;
+        const auto explicit_row = std::find_if(rows.begin(), rows.end(), [&](const StabilityRow& r) {
+          return r.variant == twin && r.method == row.method;
+        });
+        if (explicit_row == rows.end() || !(explicit_row->stable_dt > 0.0))
+          continue;
+        row.check_dt = o.check_factor * explicit_row->stable_dt;
+        row.check_stable = checkStableAt(setup, parseMethod(row.method), row.check_dt, o.stability.steps);
+        checks.push_back(row.variant + ", " + row.method + " at " + fmt(o.check_factor) + " x the explicit " +
+                         row.method + "'s largest stable step (" + fmt(1e3 * row.check_dt, 4) + " ms): " +
+                         (row.check_stable ? "stable" : "DIVERGED") + " over " + std::to_string(o.stability.steps) +
+                         " steps");
+      }
+    }
   std::ofstream out = openCsv(o, "stability_" + o.tag + ".csv");
   writeStabilityCsv(out, rows);
   std::vector<std::vector<std::string>> table{{"variant", "method", "largest stable dt s", "diverges at s", "trials",
@@ -471,6 +549,8 @@ void runStabilityExperiment(const Options& o, const std::vector<ExperimentSetup>
   printTable("stability (" + o.tag + "): " + std::to_string(o.stability.steps) + " steps without divergence, " +
                  "bisection to a relative " + fmt(o.stability.tolerance),
              table);
+  for (const std::string& c : checks)
+    std::cout << "check: " << c << "\n";
 }
 
 }  // namespace

@@ -79,20 +79,40 @@ TEST_F(ModalCompareTool, SmallRunEndToEndToPngs)
                           " --steps 200 --interval 100 --sample 20 --sizes 5 --repeats 2 --min-repeat-seconds 0.001"));
   ASSERT_EQ(r3.status, 0) << r3.output;
   EXPECT_NE(r2.output.find("accuracy (paper_2d)"), std::string::npos) << r2.output;  // the summary table
+  // Issue 5: the combinations against a converged reference, and the stability of both integrators
+  // with the implicit one checked at ten times the explicit one's step.
+  const CommandResult rc = run(tool("--config " + config("paper_2d.yaml") +
+                          " --tag combinations_paper_2d_dt1ms --experiment accuracy --vary integrator=explicit,implicit"
+                          " --steps 200 --interval 200 --sample 20 --reference-time-step 0.0005 --no-snapshots"));
+  ASSERT_EQ(rc.status, 0) << rc.output;
+  EXPECT_NE(rc.output.find("reference (integrator=implicit): full, explicit, dt = 0.0005 s"), std::string::npos)
+      << rc.output;
+  const CommandResult rs = run(tool("--config " + config("paper_2d.yaml") +
+                          " --tag integrators --experiment stability --methods physical --vary integrator=explicit,implicit"
+                          " --stability-steps 300 --tolerance 0.1 --check-factor 10"));
+  ASSERT_EQ(rs.status, 0) << rs.output;
+  EXPECT_NE(rs.output.find("check: integrator=implicit, physical at 10 x the explicit physical's largest stable step"),
+            std::string::npos)
+      << rs.output;
 
   const fs::path data = dir_ / "data";
   for (const char* name : {"cost_paper_2d.csv", "accuracy_paper_2d_error.csv", "accuracy_paper_2d_snapshots.csv",
                            "stability_paper_2d.csv", "cost_small_3d.csv", "accuracy_small_3d_snapshots.csv"})
     ASSERT_TRUE(fs::exists(data / name)) << name;
   EXPECT_EQ(firstLine(data / "accuracy_paper_2d_error.csv"),
-            "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged");
+            "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds");
+  EXPECT_EQ(firstLine(data / "stability_integrators.csv"),
+            "variant,method,stable_dt,unstable_dt,trials,steps,tolerance,modal_bound,full_bound,below_stable,"
+            "check_dt,check_stable");
+  EXPECT_FALSE(fs::exists(data / "accuracy_combinations_paper_2d_dt1ms_snapshots.csv")) << "--no-snapshots";
 
   const fs::path figures = dir_ / "figures";
   const CommandResult plot = run("MPLBACKEND=Agg /usr/bin/python3 " + std::string(MODAL_SOURCE_DIR) +
                        "/scripts/plot_comparison.py --data " + data.string() + " --out " + figures.string());
   ASSERT_EQ(plot.status, 0) << plot.output;
   for (const char* name : {"cost.png", "snapshots_paper_2d.png", "error_paper_2d.png", "stability_paper_2d.png",
-                           "snapshots_small_3d.png", "error_small_3d.png"})
+                           "snapshots_small_3d.png", "error_small_3d.png", "combinations.png",
+                           "error_combinations_paper_2d_dt1ms.png", "stability_integrators.png"})
   {
     ASSERT_TRUE(fs::exists(figures / name)) << name << "\n" << plot.output;
     EXPECT_GT(fs::file_size(figures / name), 5000u) << name;
@@ -128,6 +148,9 @@ TEST_F(ModalCompareTool, BadInputStopsBeforeAnyWorkWithAMessageNamingIt)
                         Case{paper + " --experiment cost --sizes 1,5", "--sizes"},
                         Case{paper + " --set num_modes=30 --experiment cost --sizes 5,3", "--sizes 3"},
                         Case{paper + " --sample 300", "--sample"},
+                        Case{paper + " --experiment accuracy --reference-time-step 0.0003", "--reference-time-step"},
+                        Case{paper + " --reference-time-step -1", "--reference-time-step"},
+                        Case{paper + " --check-factor zero", "--check-factor"},
                         Case{paper + " --frobnicate", "--frobnicate"},
                         Case{"--experiment accuracy", "--config"}})
   {

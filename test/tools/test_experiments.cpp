@@ -129,6 +129,57 @@ TEST(Accuracy, SamplesEveryMethodFromTheSameStateWithFullAsReference)
     EXPECT_EQ(s.points.cols(), 25);
 }
 
+// Issue 5: against a converged reference (full, explicit, at a tenth of the step), `full` at the
+// configured step is close to it, the reference agrees with itself at half its step, the modal
+// methods are further off, and every compared method carries its wall time per step.
+TEST(Accuracy, ConvergedReferenceMeasuresFullAndTheModalMethodsAlike)
+{
+  ExperimentSetup setup = loadSetup("config/compare/paper_2d.yaml");
+  AccuracyOptions options;
+  options.methods = {Method::Full, Method::Linear, Method::Physical};
+  options.steps = 1000;
+  options.interval = 500;
+  options.sample = 50;
+  options.reference_time_step = setup.sim.time_step / 10;
+  const AccuracyResult result = runAccuracy(setup, options);
+  ASSERT_TRUE(result.messages.empty()) << result.messages.front();
+  std::map<std::string, AccuracySummary> by_method;
+  for (const AccuracySummary& s : summarizeAccuracy(result.errors))
+    by_method[s.method] = s;
+  ASSERT_EQ(by_method.size(), 4u);  // reference, full, linear, physical
+  EXPECT_EQ(by_method["reference"].max_rms, 0.0);
+  EXPECT_GT(by_method["full"].max_rms, 0.0) << "full must be a separate run at the configured step";
+  EXPECT_LT(by_method["full"].max_rms, 1e-3);
+  EXPECT_LT(result.reference_check_max_rms, 0.1 * by_method["full"].max_rms + 1e-12);
+  EXPECT_GT(by_method["physical"].mean_rms, 10.0 * by_method["full"].mean_rms);
+  EXPECT_GT(by_method["linear"].mean_rms, by_method["physical"].mean_rms);
+  for (const char* m : {"full", "linear", "physical"})
+    EXPECT_GT(by_method[m].step_seconds_median, 0.0) << m;
+  EXPECT_EQ(result.reference_check.size(), 1000u / 50 + 1);
+  EXPECT_EQ(result.snapshots.size(), 4u * 3u);  // steps 0, 500, 1000
+
+  options.reference_time_step = setup.sim.time_step / 2.5;
+  EXPECT_THROW(runAccuracy(setup, options), std::invalid_argument);
+}
+
+// Issue 5: implicit physical stays stable at ten times the largest stable step of explicit physical.
+TEST(Stability, ImplicitPhysicalIsStableAtTenTimesTheExplicitStepOnThePaper2dSetup)
+{
+  ExperimentSetup setup = loadSetup("config/compare/paper_2d.yaml");
+  StabilityOptions options;
+  options.methods = {Method::Physical};
+  options.steps = 1000;
+  options.tolerance = 0.05;
+  const std::vector<StabilityRow> rows = runStability(setup, options);
+  ASSERT_EQ(rows.size(), 1u);
+  ASSERT_GT(rows[0].stable_dt, 0.0);
+  ASSERT_TRUE(std::isfinite(rows[0].unstable_dt));
+  EXPECT_FALSE(checkStableAt(setup, Method::Physical, rows[0].unstable_dt * 1.5, options.steps))
+      << "the explicit scheme must diverge above its bound";
+  setup.sim.integrator = IntegratorKind::Implicit;
+  EXPECT_TRUE(checkStableAt(setup, Method::Physical, 10.0 * rows[0].stable_dt, options.steps));
+}
+
 TEST(Accuracy, RejectsASampleThatDoesNotDivideTheInterval)
 {
   AccuracyOptions options;
