@@ -147,6 +147,7 @@ private:
   bool isModal() const { return params_.method != Method::Full; }
   ForceModel& forceModel();
   Integrator& integrator();
+  const ImplicitNewmark* implicitIntegrator() const;  // null under the explicit integrator
   void buildIntegrators();
   void initializeAcceleration();
   void setOffset(const Eigen::VectorXd& offset);

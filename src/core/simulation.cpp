@@ -153,18 +153,19 @@ void Simulation::buildIntegrators()
       make(MassDamping{Eigen::VectorXd::Ones(basis_.eigenvalues.size()), diagonalMatrix(modal_damping)});
 }
 
+const ImplicitNewmark* Simulation::implicitIntegrator() const
+{
+  return dynamic_cast<const ImplicitNewmark*>(isModal() ? modal_integrator_.get() : full_integrator_.get());
+}
+
 int Simulation::lastNewtonIterations() const
 {
-  const auto* implicit = dynamic_cast<const ImplicitNewmark*>(
-      isModal() ? modal_integrator_.get() : full_integrator_.get());
-  return implicit ? implicit->lastIterations() : 0;
+  return implicitIntegrator() ? implicitIntegrator()->lastIterations() : 0;
 }
 
 int Simulation::lastImplicitSubsteps() const
 {
-  const auto* implicit = dynamic_cast<const ImplicitNewmark*>(
-      isModal() ? modal_integrator_.get() : full_integrator_.get());
-  return implicit ? implicit->lastSubsteps() : 0;
+  return implicitIntegrator() ? implicitIntegrator()->lastSubsteps() : 0;
 }
 
 ForceModel& Simulation::forceModel()
