@@ -49,6 +49,7 @@ CSV files to the output folder plus a summary table on stdout.
                 `full` too, measured against it, with its wall time per step; DT must divide time_step)
               --no-snapshots (no particle positions file)
   stability:  --stability-steps S (10000)  --tolerance T (1e-3, relative)
+              --max-time-step DT (10 s; no divergence up to DT counts as unbounded)
               --check-factor F (0: off; with --vary integrator=explicit,implicit, each implicit
                 method is also run at F times the largest stable step of the same method under
                 the explicit integrator, and the summary says whether it stayed stable)
@@ -210,6 +211,8 @@ Options parseArguments(int argc, char** argv)
       o.accuracy.reference_time_step = parsePositive(arg, value(i));
     else if (arg == "--no-snapshots")
       o.accuracy.snapshots = false;
+    else if (arg == "--max-time-step")
+      o.stability.max_time_step = parsePositive(arg, value(i));
     else if (arg == "--check-factor")
       o.check_factor = parsePositive(arg, value(i));
     else if (arg == "--stability-steps")

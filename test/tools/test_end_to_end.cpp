@@ -151,6 +151,7 @@ TEST_F(ModalCompareTool, BadInputStopsBeforeAnyWorkWithAMessageNamingIt)
                         Case{paper + " --experiment accuracy --reference-time-step 0.0003", "--reference-time-step"},
                         Case{paper + " --reference-time-step -1", "--reference-time-step"},
                         Case{paper + " --check-factor zero", "--check-factor"},
+                        Case{paper + " --max-time-step 0", "--max-time-step"},
                         Case{paper + " --frobnicate", "--frobnicate"},
                         Case{"--experiment accuracy", "--config"}})
   {
