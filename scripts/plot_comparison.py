@@ -235,7 +235,7 @@ def plot_error(path, out):
         fig.set_size_inches(11, 4 + 0.2 * len(variants) * 2)
         handles, labels = axes[0].get_legend_handles_labels()
         fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8)
-        fig.tight_layout(rect=(0, 0.1 * len(variants) * 2 / (4 + 0.2 * len(variants) * 2) + 0.05, 1, 1))
+        fig.tight_layout(rect=(0, 0.1 * len(variants) * 2 / (4 + 0.2 * len(variants) * 2) + 0.1, 1, 1))
     target = out / f"error_{tag}.png"
     fig.savefig(target, dpi=110)
     plt.close(fig)
@@ -248,7 +248,8 @@ def plot_stability(path, out):
     labels = [r["method"] if r["variant"] == "base" else r["method"] + "\n" + r["variant"].replace(" ", "\n")
               for r in rows]
     values = [number(r["stable_dt"]) for r in rows]
-    fig, ax = plt.subplots(figsize=(max(5.5, 1.45 * len(rows)), 4.2 + 0.25 * max(l.count("\n") for l in labels)))
+    per_bar = 1.45 if all(r["variant"] == "base" for r in rows) else 1.9
+    fig, ax = plt.subplots(figsize=(max(5.5, per_bar * len(rows)), 4.2 + 0.25 * max(l.count("\n") for l in labels)))
     bars = ax.bar(range(len(rows)), values, color=[METHOD_COLORS.get(r["method"], "0.5") for r in rows])
     for bar, value, r in zip(bars, values, rows):
         unbounded = math.isinf(number(r["unstable_dt"]))
@@ -260,7 +261,7 @@ def plot_stability(path, out):
         ax.annotate(text, (bar.get_x() + bar.get_width() / 2, value), ha="center", va="bottom", fontsize=7)
     modal = ordered(number(r["modal_bound"]) for r in rows)
     full = ordered(number(r["full_bound"]) for r in rows)
-    for i, value in enumerate(modal):
+    for i, value in enumerate(v for v in modal if math.isfinite(v)):
         ax.axhline(value, color="tab:red", ls="--", lw=0.8, label="2/omega, highest mode of the basis" if i == 0 else None)
     for i, value in enumerate(v for v in full if not math.isnan(v)):
         ax.axhline(value, color="0.3", ls=":", lw=0.8, label="2/omega, highest of K(x0) (all dofs)" if i == 0 else None)
