@@ -1,8 +1,9 @@
 // Builds and validates the particle grid and its springs.
 #include "modal_mass_spring/grid.h"
 
+#include "modal_mass_spring/validation.h"
+
 #include <cmath>
-#include <sstream>
 #include <stdexcept>
 
 namespace modal_mass_spring
@@ -10,31 +11,23 @@ namespace modal_mass_spring
 namespace
 {
 
-template <typename T>
-[[noreturn]] void reject(const std::string& name, const T& value, const std::string& allowed)
-{
-  std::ostringstream msg;
-  msg << "invalid parameter '" << name << "' = " << value << ": " << allowed;
-  throw std::invalid_argument(msg.str());
-}
-
 void requirePositive(const std::string& name, double value)
 {
   if (!std::isfinite(value) || value <= 0.0)
-    reject(name, value, "must be a finite number > 0");
+    rejectParameter(name, value, "must be a finite number > 0");
 }
 
 void validate(const GridParams& p)
 {
   if (p.rows < 1)
-    reject("rows", p.rows, "must be an integer >= 1");
+    rejectParameter("rows", p.rows, "must be an integer >= 1");
   if (p.cols < 1)
-    reject("cols", p.cols, "must be an integer >= 1");
+    rejectParameter("cols", p.cols, "must be an integer >= 1");
   if (p.rows * p.cols < 2)
-    reject("rows x cols", std::to_string(p.rows) + " x " + std::to_string(p.cols),
+    rejectParameter("rows x cols", std::to_string(p.rows) + " x " + std::to_string(p.cols),
            "the grid must have at least 2 particles");
   if (p.dimension != 2 && p.dimension != 3)
-    reject("dimension", p.dimension, "must be 2 (planar, x-z) or 3");
+    rejectParameter("dimension", p.dimension, "must be 2 (planar, x-z) or 3");
   requirePositive("spacing", p.spacing);
   requirePositive("mass", p.mass);
   requirePositive("structural_stiffness", p.structural_stiffness);
@@ -42,27 +35,19 @@ void validate(const GridParams& p)
   if (p.bending)
     requirePositive("bending_stiffness", p.bending_stiffness);
   if (!p.gravity.allFinite())
-    reject("gravity", p.gravity.transpose(), "must be 3 finite numbers");
+    rejectParameter("gravity", p.gravity.transpose(), "must be 3 finite numbers");
   if (p.dimension == 2 && p.gravity.y() != 0.0)
-    reject("gravity", p.gravity.transpose(), "the y component must be 0 for a 2D grid (it lies in the x-z plane)");
+    rejectParameter("gravity", p.gravity.transpose(), "the y component must be 0 for a 2D grid (it lies in the x-z plane)");
   if (!std::isfinite(p.rotation_deg))
-    reject("rotation_deg", p.rotation_deg, "must be a finite angle in degrees");
+    rejectParameter("rotation_deg", p.rotation_deg, "must be a finite angle in degrees");
   if (p.dimension == 2 && p.rotation_deg != 0.0)
-    reject("rotation_deg", p.rotation_deg, "must be 0 for a 2D grid (a rotation about x leaves the x-z plane)");
+    rejectParameter("rotation_deg", p.rotation_deg, "must be 0 for a 2D grid (a rotation about x leaves the x-z plane)");
 
   const int n = p.rows * p.cols;
-  std::vector<bool> seen(n, false);
-  for (int index : p.fixed)
-  {
-    if (index < 0 || index >= n)
-      reject("fixed", index, "particle indices must be in [0, " + std::to_string(n - 1) + "]");
-    if (seen[index])
-      reject("fixed", index, "each particle index must be listed once");
-    seen[index] = true;
-  }
+  checkParticleIndices("fixed", p.fixed, n);
   const int num_fixed = p.fixed.empty() ? p.cols : static_cast<int>(p.fixed.size());
   if (num_fixed >= n)
-    reject("fixed", std::to_string(num_fixed) + " of " + std::to_string(n) + " particles",
+    rejectParameter("fixed", std::to_string(num_fixed) + " of " + std::to_string(n) + " particles",
            "at least one particle must be free");
 }
 

@@ -3,6 +3,7 @@
 
 #include "modal_mass_spring/equilibrium.h"
 #include "modal_mass_spring/spring_forces.h"
+#include "modal_mass_spring/validation.h"
 
 #include <cmath>
 #include <sstream>
@@ -16,21 +17,13 @@ namespace
 void requireNonNegative(const std::string& name, double value)
 {
   if (!std::isfinite(value) || value < 0.0)
-  {
-    std::ostringstream msg;
-    msg << "invalid parameter '" << name << "' = " << value << ": must be a finite number >= 0";
-    throw std::invalid_argument(msg.str());
-  }
+    rejectParameter(name, value, "must be a finite number >= 0");
 }
 
 void validateTimeStep(double dt)
 {
   if (!std::isfinite(dt) || dt <= 0.0)
-  {
-    std::ostringstream msg;
-    msg << "invalid parameter 'time_step' = " << dt << ": must be a finite number of seconds > 0";
-    throw std::invalid_argument(msg.str());
-  }
+    rejectParameter("time_step", dt, "must be a finite number of seconds > 0");
 }
 
 SparseMatrix diagonalMatrix(const Eigen::VectorXd& d)

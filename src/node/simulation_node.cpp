@@ -3,6 +3,7 @@
 
 #include "modal_mass_spring/Status.h"
 #include "modal_mass_spring/parameters.h"
+#include "modal_mass_spring/validation.h"
 #include "ros_parameter_source.h"
 
 #include <geometry_msgs/TransformStamped.h>
@@ -21,13 +22,6 @@ namespace
 // More steps per tick than this would stall the timer for seconds; it is a configuration mistake.
 constexpr double kMaxStepsPerTick = 100000.0;
 
-template <typename T>
-[[noreturn]] void reject(const std::string& name, const T& value, const std::string& allowed)
-{
-  std::ostringstream msg;
-  msg << "invalid parameter '" << name << "' = " << value << ": " << allowed;
-  throw std::invalid_argument(msg.str());
-}
 
 double positive(const ParameterSource& s, const std::string& name, double fallback, double max)
 {
@@ -36,7 +30,7 @@ double positive(const ParameterSource& s, const std::string& name, double fallba
   {
     std::ostringstream allowed;
     allowed << "must be a number > 0 and <= " << max;
-    reject(name, value, allowed.str());
+    rejectParameter(name, value, allowed.str());
   }
   return value;
 }
@@ -45,7 +39,7 @@ std::string frameId(const ParameterSource& s, const std::string& name, const std
 {
   const std::string value = s.getString(name).value_or(fallback);
   if (value.empty() || value.front() == '/' || value.find_first_of(" \t\n") != std::string::npos)
-    reject(name, "'" + value + "'", "must be a non-empty frame id without a leading '/' or spaces");
+    rejectParameter(name, "'" + value + "'", "must be a non-empty frame id without a leading '/' or spaces");
   return value;
 }
 
@@ -87,33 +81,25 @@ NodeParams loadNodeParams(const ParameterSource& s, const GridParams& grid, cons
     allowed << "real_time_factor / (publish_rate * time_step) = " << steps_per_tick
             << " steps per tick; must be at most " << kMaxStepsPerTick
             << " (lower real_time_factor, raise publish_rate or time_step)";
-    reject("real_time_factor", p.real_time_factor, allowed.str());
+    rejectParameter("real_time_factor", p.real_time_factor, allowed.str());
   }
 
   p.fixed_frame = frameId(s, "fixed_frame", p.fixed_frame);
   p.grid_frame = frameId(s, "grid_frame", p.grid_frame);
   if (p.grid_frame == p.fixed_frame)
-    reject("grid_frame", "'" + p.grid_frame + "'", "must differ from fixed_frame");
+    rejectParameter("grid_frame", "'" + p.grid_frame + "'", "must differ from fixed_frame");
 
   const int n = grid.rows * grid.cols;
   // The two bottom corners: the particles that move most under gravity.
   std::vector<int> corners{(grid.rows - 1) * grid.cols, n - 1};
   corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
   p.tf_particles = s.getIntList("tf_particles").value_or(corners);
-  std::vector<bool> seen(std::max(n, 0), false);
-  for (int index : p.tf_particles)
-  {
-    if (index < 0 || index >= n)
-      reject("tf_particles", index, "particle indices must be in [0, " + std::to_string(n - 1) + "] (row * cols + col)");
-    if (seen[index])
-      reject("tf_particles", index, "each particle index must be listed once");
-    seen[index] = true;
-  }
+  checkParticleIndices("tf_particles", p.tf_particles, n);
 
   if (const auto offset = s.getDoubleList("offset"))
   {
     if (offset->size() != 3 || !std::all_of(offset->begin(), offset->end(), [](double v) { return std::isfinite(v); }))
-      reject("offset", std::to_string(offset->size()) + " values", "must be a list of 3 finite numbers [x, y, z] in m");
+      rejectParameter("offset", std::to_string(offset->size()) + " values", "must be a list of 3 finite numbers [x, y, z] in m");
     p.offset = Eigen::Vector3d((*offset)[0], (*offset)[1], (*offset)[2]);
   }
   p.color_by_strain = s.getBool("color_by_strain").value_or(p.color_by_strain);
@@ -123,7 +109,7 @@ NodeParams loadNodeParams(const ParameterSource& s, const GridParams& grid, cons
   p.spring_width = positive(s, "spring_width", 0.06 * spacing, 1e6);
   p.status_log_period = s.getDouble("status_log_period").value_or(p.status_log_period);
   if (!std::isfinite(p.status_log_period) || p.status_log_period < 0.0)
-    reject("status_log_period", p.status_log_period, "must be a number of seconds >= 0 (0: no status lines)");
+    rejectParameter("status_log_period", p.status_log_period, "must be a number of seconds >= 0 (0: no status lines)");
   return p;
 }
 
