@@ -38,6 +38,8 @@ public:
   double energy(const Eigen::VectorXd& u) override;
 
 private:
+  void setPositions(const Eigen::VectorXd& u);  // x_ = x_ref + u
+
   const Grid& grid_;
   Eigen::VectorXd x_ref_, x_, f_all_;
 };
@@ -76,6 +78,8 @@ public:
   double energy(const Eigen::VectorXd& modal) override;
 
 private:
+  void setPositions(const Eigen::VectorXd& modal);  // x_ = x_ref + Phi X
+
   const Grid& grid_;
   const ModalBasis& basis_;
   Eigen::MatrixXd phi_t_, k_phi_t_;  // Phi^T, contiguous per dof, and (K Phi)^T

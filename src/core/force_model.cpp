@@ -11,10 +11,15 @@ FullForceModel::FullForceModel(const Grid& grid, const Eigen::VectorXd& x_ref)
 {
 }
 
-void FullForceModel::force(const Eigen::VectorXd& u, Eigen::VectorXd& f)
+void FullForceModel::setPositions(const Eigen::VectorXd& u)
 {
   x_ = x_ref_;
   grid_.addFree(u, x_);
+}
+
+void FullForceModel::force(const Eigen::VectorXd& u, Eigen::VectorXd& f)
+{
+  setPositions(u);
   springForces(grid_, x_, f_all_);
   f_all_ += grid_.gravityForce();
   f.resize(u.size());
@@ -25,15 +30,13 @@ void FullForceModel::force(const Eigen::VectorXd& u, Eigen::VectorXd& f)
 
 void FullForceModel::tangentStiffness(const Eigen::VectorXd& u, SparseMatrix& k)
 {
-  x_ = x_ref_;
-  grid_.addFree(u, x_);
+  setPositions(u);
   k = modal_mass_spring::tangentStiffness(grid_, x_);
 }
 
 double FullForceModel::energy(const Eigen::VectorXd& u)
 {
-  x_ = x_ref_;
-  grid_.addFree(u, x_);
+  setPositions(u);
   return springEnergy(grid_, x_) + gravityEnergy(grid_, x_);
 }
 
@@ -82,11 +85,16 @@ PhysicalModalForceModel::PhysicalModalForceModel(const Grid& grid, const ModalBa
 {
 }
 
-void PhysicalModalForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorXd& f)
+void PhysicalModalForceModel::setPositions(const Eigen::VectorXd& modal)
 {
   u_.noalias() = basis_.phi * modal;
   x_ = x_ref_;
   grid_.addFree(u_, x_);
+}
+
+void PhysicalModalForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorXd& f)
+{
+  setPositions(modal);
   springForces(grid_, x_, f_all_);
   f_all_ += grid_.gravityForce();
   const std::vector<int>& free = grid_.freeDofs();
@@ -97,17 +105,13 @@ void PhysicalModalForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorX
 
 double PhysicalModalForceModel::energy(const Eigen::VectorXd& modal)
 {
-  u_.noalias() = basis_.phi * modal;
-  x_ = x_ref_;
-  grid_.addFree(u_, x_);
+  setPositions(modal);
   return springEnergy(grid_, x_) + gravityEnergy(grid_, x_);
 }
 
 void PhysicalModalForceModel::tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k)
 {
-  u_.noalias() = basis_.phi * modal;
-  x_ = x_ref_;
-  grid_.addFree(u_, x_);
+  setPositions(modal);
   tangentTimesBasis(grid_, x_, phi_t_, k_phi_t_);
   const Eigen::MatrixXd reduced = k_phi_t_ * basis_.phi;
   k = reduced.sparseView();
