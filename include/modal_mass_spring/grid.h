@@ -26,6 +26,16 @@ struct GridParams
   double rotation_deg = 0.0;           // initial rotation of the sheet about the x axis (3D only)
 };
 
+// The largest grid: its stiffness matrix (about 120 entries per particle in 3D with bending springs)
+// must stay within the 32-bit indices of Eigen's sparse matrices.
+constexpr long long kMaxParticles = 10000000;
+
+// Throws std::invalid_argument (rejectParameter) for the first invalid grid parameter, naming it, its
+// value and what is allowed. Sizes are counted in 64 bits. Builds nothing.
+void validateGridParams(const GridParams& params);
+// The number of free degrees of freedom of a grid with these parameters (64 bits, not validated).
+long long countFreeDofs(const GridParams& params);
+
 struct Spring
 {
   int i;
@@ -36,7 +46,7 @@ struct Spring
 
 // Topology and initial state of a grid. Positions are flat vectors, `dimension` values per particle
 // (x, z in 2D; x, y, z in 3D). Construction validates the parameters and throws
-// std::invalid_argument naming the parameter, its value and what is allowed.
+// std::invalid_argument naming the parameter, its value and what is allowed (validateGridParams).
 class Grid
 {
 public:

@@ -5,6 +5,9 @@
 
 #include <Eigen/Core>
 
+#include <functional>
+#include <string>
+
 namespace modal_mass_spring
 {
 
@@ -18,11 +21,17 @@ struct ModalBasis
   double shift = 0.0;           // sigma of the shift-invert, negative so K - sigma M stays regular
   int deflation_passes = 0;     // extra Lanczos passes that looked for more of a large null space
   double build_seconds = 0.0;
+  double factorization_seconds = 0.0;  // of build_seconds, the sparse LDLT of K - sigma M
 };
+
+// Told the name of each stage of a long computation as it starts ("factorisation", "eigensolver"),
+// so a caller can say what a slow start-up is doing.
+using StageFn = std::function<void(const std::string& stage)>;
 
 // K: free-dof stiffness (symmetric, positive semi-definite); mass: the diagonal of M over the same
 // dofs. Throws std::invalid_argument for r outside [1, size] and std::runtime_error when the
 // eigensolver does not converge.
-ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorXd& mass, int r);
+ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorXd& mass, int r,
+                             const StageFn& on_stage = {});
 
 }  // namespace modal_mass_spring

@@ -68,7 +68,23 @@ struct SimulationParams
   IntegratorKind integrator = IntegratorKind::Explicit;
   InitialState initial_state = InitialState::Initial;
   int newton_max_iterations = 50;  // per implicit solve
+  // Refuse a problem whose build would need more memory than this (GB, estimated before anything is
+  // allocated): the default leaves room on a 24 GB machine.
+  double memory_limit_gb = 12.0;
 };
+
+// Throws std::invalid_argument (rejectParameter) for the first invalid parameter of either set,
+// naming it, its value and what is allowed: the grid's (validateGridParams), then the simulation's,
+// num_modes against the grid's free degrees of freedom, the scales the physics derives from them
+// (frequencies, forces, energies must stay far from overflow and underflow) and the memory the
+// build would need against memory_limit_gb. Builds nothing: cheap on any grid size.
+void validateParameters(const GridParams& grid, const SimulationParams& params);
+
+// Peak memory (bytes) a Simulation with these (valid) parameters needs: the stiffness matrix, its
+// sparse factorisations (basis, equilibrium, implicit full), the basis with the eigensolver's
+// vectors and the force models' copies, and the per-dof vectors. An estimate, within a factor of
+// about 1.5 of what was measured.
+double estimateMemoryBytes(const GridParams& grid, const SimulationParams& params);
 
 // What building the linearization point found.
 struct LinearizationInfo
@@ -77,6 +93,8 @@ struct LinearizationInfo
   int equilibrium_iterations = 0;
   double equilibrium_residual = 0.0;  // N
   int dropped_compressed_springs = 0; // springs whose compressive geometric stiffness was left out of K
+  double equilibrium_seconds = 0.0;   // time of the static equilibrium solve (0 when not solved)
+  double stiffness_seconds = 0.0;     // time to assemble K at the linearization point
 };
 
 struct StepResult
@@ -89,9 +107,18 @@ struct StepResult
 class Simulation
 {
 public:
-  // Validates both parameter sets and builds the basis; throws std::invalid_argument naming the
-  // offending parameter.
-  Simulation(const GridParams& grid_params, const SimulationParams& params);
+  // Validates both parameter sets (validateParameters) before building anything, then builds the
+  // linearization point and the basis, telling on_stage as each stage starts ("equilibrium",
+  // "stiffness", "factorisation", "eigensolver"). Throws std::invalid_argument naming the offending
+  // parameter, std::runtime_error when a stage fails.
+  Simulation(const GridParams& grid_params, const SimulationParams& params, const StageFn& on_stage = {});
+
+  // The force models and integrators refer to the grid, basis and matrices held here: a Simulation
+  // stays where it was built.
+  Simulation(const Simulation&) = delete;
+  Simulation& operator=(const Simulation&) = delete;
+  Simulation(Simulation&&) = delete;
+  Simulation& operator=(Simulation&&) = delete;
 
   const Grid& grid() const { return grid_; }
   const ModalBasis& basis() const { return basis_; }

@@ -17,15 +17,23 @@ void requirePositive(const std::string& name, double value)
     rejectParameter(name, value, "must be a finite number > 0");
 }
 
-void validate(const GridParams& p)
+}  // namespace
+
+void validateGridParams(const GridParams& p)
 {
   if (p.rows < 1)
     rejectParameter("rows", p.rows, "must be an integer >= 1");
   if (p.cols < 1)
     rejectParameter("cols", p.cols, "must be an integer >= 1");
-  if (p.rows * p.cols < 2)
-    rejectParameter("rows x cols", std::to_string(p.rows) + " x " + std::to_string(p.cols),
-           "the grid must have at least 2 particles");
+  // Counted in 64 bits: rows * cols overflows an int long before the machine runs out of memory.
+  const long long n = static_cast<long long>(p.rows) * p.cols;
+  const std::string size = std::to_string(p.rows) + " x " + std::to_string(p.cols);
+  if (n < 2)
+    rejectParameter("rows x cols", size, "the grid must have at least 2 particles");
+  if (n > kMaxParticles)
+    rejectParameter("rows x cols", size + " = " + std::to_string(n) + " particles",
+                    "must be at most " + std::to_string(kMaxParticles) +
+                        " particles (the sparse matrices index their entries with 32-bit integers)");
   if (p.dimension != 2 && p.dimension != 3)
     rejectParameter("dimension", p.dimension, "must be 2 (planar, x-z) or 3");
   requirePositive("spacing", p.spacing);
@@ -43,19 +51,22 @@ void validate(const GridParams& p)
   if (p.dimension == 2 && p.rotation_deg != 0.0)
     rejectParameter("rotation_deg", p.rotation_deg, "must be 0 for a 2D grid (a rotation about x leaves the x-z plane)");
 
-  const int n = p.rows * p.cols;
-  checkParticleIndices("fixed", p.fixed, n);
-  const int num_fixed = p.fixed.empty() ? p.cols : static_cast<int>(p.fixed.size());
+  checkParticleIndices("fixed", p.fixed, static_cast<int>(n));
+  const long long num_fixed = p.fixed.empty() ? p.cols : static_cast<long long>(p.fixed.size());
   if (num_fixed >= n)
     rejectParameter("fixed", std::to_string(num_fixed) + " of " + std::to_string(n) + " particles",
-           "at least one particle must be free");
+                    "at least one particle must be free");
 }
 
-}  // namespace
+long long countFreeDofs(const GridParams& p)
+{
+  const long long num_fixed = p.fixed.empty() ? p.cols : static_cast<long long>(p.fixed.size());
+  return p.dimension * (static_cast<long long>(p.rows) * p.cols - num_fixed);
+}
 
 Grid::Grid(const GridParams& params) : params_(params)
 {
-  validate(params_);
+  validateGridParams(params_);
   const int n = numParticles();
   const int dim = dimension();
   const double s = params_.spacing;

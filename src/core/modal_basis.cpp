@@ -87,9 +87,15 @@ void rayleighRitz(const SparseMatrix& a, int r, Eigen::VectorXd& values, Eigen::
 
 }  // namespace
 
-ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorXd& mass, int r)
+ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorXd& mass, int r,
+                             const StageFn& on_stage)
 {
+  auto stage = [&](const std::string& name) {
+    if (on_stage)
+      on_stage(name);
+  };
   const auto start = std::chrono::steady_clock::now();
+  auto seconds = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(); };
   const int n = static_cast<int>(stiffness.rows());
   if (r < 1 || r > n)
     throw std::invalid_argument("invalid parameter 'num_modes' = " + std::to_string(r) +
@@ -110,6 +116,7 @@ ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorX
     // r = n or n - 1: Lanczos needs more vectors than the space has; the whole spectrum is wanted
     // anyway.
     basis.sparse = false;
+    stage("eigensolver");
     const Eigen::MatrixXd dense_a = Eigen::MatrixXd(a);
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> dense(dense_a);
     values = dense.eigenvalues().head(r);
@@ -119,7 +126,10 @@ ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorX
   {
     // A negative shift keeps A - sigma I positive definite even when A has zero eigenvalues.
     basis.shift = -1e-4 * scale;
+    stage("factorisation");
     ShiftInvertLDLT op(a, basis.shift);
+    basis.factorization_seconds = seconds();
+    stage("eigensolver");
     lanczos(op, r, basis.shift, values, vectors);
     // A Krylov space holds one vector per eigenvalue, so a null space larger than a few vectors (a
     // flat 3D sheet at rest has one zero mode per free particle) is found only in part, and modes
@@ -162,7 +172,7 @@ ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorX
     basis.frequencies[k] = std::sqrt(std::max(lambda2, 0.0));
     basis.phi.col(k) = inv_sqrt_mass.asDiagonal() * vectors.col(order[k]);
   }
-  basis.build_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  basis.build_seconds = seconds();
   return basis;
 }
 

@@ -5,6 +5,7 @@
 #include "modal_mass_spring/spring_forces.h"
 #include "modal_mass_spring/validation.h"
 
+#include <chrono>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -24,6 +25,45 @@ void validateTimeStep(double dt)
 {
   if (!std::isfinite(dt) || dt <= 0.0)
     rejectParameter("time_step", dt, "must be a finite number of seconds > 0");
+}
+
+// A derived scale must be a number the physics can square and sum without overflow or underflow.
+bool representable(double value)
+{
+  return std::isfinite(value) && value > 0.0 && value >= 1e-100 && value <= 1e100;
+}
+
+// Refuses parameters whose combinations would give infinite or vanishing frequencies, forces or
+// energies later on (for example mass 1e300: lambda^2 = k / m underflows; spacing 1e-300: lengths
+// squared underflow), naming the parameters responsible.
+void validateScales(const GridParams& g)
+{
+  const double side = g.spacing * std::max(g.rows, g.cols);
+  if (!representable(g.spacing * g.spacing) || !representable(side * side))
+    rejectParameter("spacing", g.spacing,
+                    "must keep spacing^2 and the grid's side squared within [1e-100, 1e100] m^2 (lengths are squared)");
+  std::vector<std::pair<std::string, double>> stiffnesses{{"structural_stiffness", g.structural_stiffness},
+                                                          {"shear_stiffness", g.shear_stiffness}};
+  if (g.bending)
+    stiffnesses.emplace_back("bending_stiffness", g.bending_stiffness);
+  for (const auto& [name, k] : stiffnesses)
+  {
+    std::ostringstream value;
+    value << k << " with mass = " << g.mass << " and spacing = " << g.spacing;
+    if (!representable(k / g.mass))
+      rejectParameter(name + " / mass", value.str(),
+                      "lambda^2 = stiffness / mass must be within [1e-100, 1e100] s^-2 (frequencies would overflow or vanish)");
+    if (!representable(k * g.spacing * g.spacing * static_cast<double>(g.rows) * g.cols))
+      rejectParameter(name + " * spacing^2", value.str(),
+                      "spring energies (stiffness * spacing^2 per spring) must be within [1e-100, 1e100] J");
+  }
+  const double weight = g.mass * g.gravity.norm();
+  if (weight > 0.0 && !representable(weight * side * static_cast<double>(g.rows) * g.cols))
+  {
+    std::ostringstream value;
+    value << g.mass << " with gravity " << g.gravity.norm() << " m/s^2 and spacing = " << g.spacing;
+    rejectParameter("mass", value.str(), "the grid's weight times its size must be within [1e-100, 1e100] J");
+  }
 }
 
 SparseMatrix diagonalMatrix(const Eigen::VectorXd& d)
@@ -85,30 +125,81 @@ Method parseMethod(const std::string& name)
   return static_cast<Method>(parseName("method", name, methodNames()));
 }
 
-Simulation::Simulation(const GridParams& grid_params, const SimulationParams& params)
-  : grid_(grid_params), params_(params)
+void validateParameters(const GridParams& grid, const SimulationParams& p)
 {
-  requireNonNegative("alpha", params_.alpha);
-  requireNonNegative("beta", params_.beta);
-  validateTimeStep(params_.time_step);
-  requireNonNegative("divergence_limit", params_.divergence_limit);
-  const int n = grid_.numFreeDofs();
-  if (params_.num_modes < 1 || params_.num_modes > n)
-    throw std::invalid_argument("invalid parameter 'num_modes' = " + std::to_string(params_.num_modes) +
-                                ": must be in [1, " + std::to_string(n) + "], the number of free degrees of freedom");
+  validateGridParams(grid);
+  validateScales(grid);
+  const long long n = countFreeDofs(grid);
+  if (p.num_modes < 1 || p.num_modes > n)
+    rejectParameter("num_modes", p.num_modes,
+                    "must be in [1, " + std::to_string(n) + "], the number of free degrees of freedom");
+  requireNonNegative("alpha", p.alpha);
+  requireNonNegative("beta", p.beta);
+  validateTimeStep(p.time_step);
+  requireNonNegative("divergence_limit", p.divergence_limit);
+  if (p.newton_max_iterations < 1)
+    rejectParameter("newton_max_iterations", p.newton_max_iterations, "must be an integer >= 1");
+  if (!std::isfinite(p.memory_limit_gb) || p.memory_limit_gb <= 0.0)
+    rejectParameter("memory_limit_gb", p.memory_limit_gb, "must be a finite number of GB > 0");
+  const double needed_gb = estimateMemoryBytes(grid, p) / 1e9;
+  if (needed_gb > p.memory_limit_gb)
+  {
+    std::ostringstream value;
+    value << grid.rows << " x " << grid.cols << " grid (" << grid.dimension << "D), num_modes = " << p.num_modes;
+    std::ostringstream allowed;
+    allowed.precision(3);
+    allowed << "needs about " << needed_gb << " GB, above memory_limit_gb = " << p.memory_limit_gb
+            << " GB; use a smaller grid or fewer modes, or raise memory_limit_gb if the machine has the memory";
+    rejectParameter("rows, cols, num_modes", value.str(), allowed.str());
+  }
+}
 
+double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
+{
+  const double particles = static_cast<double>(g.rows) * g.cols;
+  const double dim = g.dimension;
+  const double n = static_cast<double>(countFreeDofs(g));
+  const double r = p.num_modes;
+  // Stiffness: a dim x dim block per particle and neighbour (8 structural and shear, 4 bending),
+  // 12 bytes an entry, held three times at once while the basis is built (K, M^-1/2 K M^-1/2,
+  // and the shifted copy).
+  const double blocks = 1.0 + 8.0 + (g.bending ? 4.0 : 0.0);
+  double bytes = 3.0 * 12.0 * blocks * dim * dim * particles;
+  // A sparse LDLT of a grid's stiffness with a fill-reducing ordering has about c n log2 n entries;
+  // one is alive at a time (basis, equilibrium Newton, implicit full).
+  const double fill = dim == 3 ? 8.0 : 5.0;
+  bytes += 12.0 * fill * n * std::log2(std::max(n, 2.0));
+  // The basis: Phi, the physical model's Phi^T and (K Phi)^T, the Lanczos vectors and the Ritz
+  // vectors of deflated passes; a dense eigensolver when r is close to n.
+  bytes += 8.0 * n * (3.0 * r + std::max(2.0 * r + 1.0, r + 20.0) + 2.0 * r);
+  if (r + 1.0 >= n)
+    bytes += 3.0 * 8.0 * n * n;
+  // Positions, forces, states and scratch vectors over all dofs, and the springs.
+  bytes += 8.0 * 40.0 * dim * particles + 24.0 * (blocks - 1.0) / 2.0 * particles;
+  return bytes;
+}
+
+Simulation::Simulation(const GridParams& grid_params, const SimulationParams& params, const StageFn& on_stage)
+  : grid_((validateParameters(grid_params, params), grid_params)), params_(params)
+{
+  auto stage = [&](const std::string& name) {
+    if (on_stage)
+      on_stage(name);
+  };
+  using Clock = std::chrono::steady_clock;
+  auto since = [](Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); };
+  const int n = grid_.numFreeDofs();
   const GridParams& g = grid_.params();
   limit_ = params_.divergence_limit > 0.0 ? params_.divergence_limit
                                           : 100.0 * g.spacing * std::max(g.rows, g.cols);
 
-  if (params_.newton_max_iterations < 1)
-    throw std::invalid_argument("invalid parameter 'newton_max_iterations' = " +
-                                std::to_string(params_.newton_max_iterations) + ": must be an integer >= 1");
-
   x_ref_ = x_start_ = grid_.initialPositions();
   if (params_.linearization == Linearization::Equilibrium || params_.initial_state == InitialState::Equilibrium)
   {
+    stage("equilibrium");
+    const auto start = Clock::now();
     const Equilibrium equilibrium = solveEquilibrium(grid_, grid_.initialPositions());
+    linearization_.equilibrium_seconds = since(start);
     linearization_.equilibrium_solved = true;
     linearization_.equilibrium_iterations = equilibrium.iterations;
     linearization_.equilibrium_residual = equilibrium.residual;
@@ -119,10 +210,13 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
   }
   // At a hanging equilibrium compressed springs would make K indefinite: their geometric part is
   // dropped so that no mode has a negative lambda^2. At rest no spring is compressed.
+  stage("stiffness");
+  const auto stiffness_start = Clock::now();
   stiffness_ = tangentStiffness(grid_, x_ref_, CompressedSprings::Drop, &linearization_.dropped_compressed_springs);
+  linearization_.stiffness_seconds = since(stiffness_start);
   mass_ = Eigen::VectorXd::Constant(n, grid_.particleMass());
   total_mass_ = mass_.sum();
-  basis_ = computeModalBasis(stiffness_, mass_, params_.num_modes);
+  basis_ = computeModalBasis(stiffness_, mass_, params_.num_modes, on_stage);
 
   full_force_ = std::make_unique<FullForceModel>(grid_, x_ref_);
   linear_force_ = std::make_unique<LinearModalForceModel>(grid_, basis_, x_ref_);
