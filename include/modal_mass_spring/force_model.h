@@ -18,13 +18,37 @@ public:
   virtual int size() const = 0;
   // Spring plus gravity force in these coordinates. Not const: models keep scratch buffers.
   virtual void force(const Eigen::VectorXd& q, Eigen::VectorXd& f) = 0;
-  // Potential energy E(q) with F = -dE/dq, for line searches.
+  // Potential energy E(q) with F = -dE/dq, for line searches and the energy check of a step; free
+  // at the q of the last force() (the models compute both in one pass over the springs).
   virtual double energy(const Eigen::VectorXd& q) = 0;
   // Tangent stiffness -dF/dq at q, for implicit integrators: sparse for the full model, dense
   // (r x r, stored sparse) for the physical one, diagonal for the linear one.
   virtual void tangentStiffness(const Eigen::VectorXd& q, SparseMatrix& k) = 0;
   // True when F is affine in q, so one Newton iteration solves an implicit step exactly.
   virtual bool isLinear() const { return false; }
+};
+
+// The spring energy of the last force evaluation, kept for energy() at the same q.
+class EnergyCache
+{
+public:
+  void store(const Eigen::VectorXd& q, double energy)
+  {
+    q_ = q;
+    energy_ = energy;
+  }
+  bool find(const Eigen::VectorXd& q, double& energy) const
+  {
+    if (q_.size() != q.size() || q_ != q)
+      return false;
+    energy = energy_;
+    return true;
+  }
+  void clear() { q_.resize(0); }
+
+private:
+  Eigen::VectorXd q_;
+  double energy_ = 0.0;
 };
 
 // `full`: eq. 13 forces on every free dof, no reduction.
@@ -42,15 +66,23 @@ private:
 
   const Grid& grid_;
   Eigen::VectorXd x_ref_, x_, f_all_;
+  EnergyCache cache_;
+};
+
+// A force model in modal coordinates: X = 0 stands for a reference configuration that a method
+// switch can move (the part of a displacement the modes cannot hold), the basis staying.
+class ModalForceModel : public ForceModel
+{
+public:
+  virtual void setReference(const Eigen::VectorXd& x_ref) = 0;
 };
 
 // `linear` (O'Brien): F = Phi^T (f(x_ref) + f_g) - Lambda X, the force linearised at x_ref.
-class LinearModalForceModel : public ForceModel
+class LinearModalForceModel : public ModalForceModel
 {
 public:
   LinearModalForceModel(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref);
-  // Moves the configuration X = 0 stands for (the basis and Lambda stay).
-  void setReference(const Eigen::VectorXd& x_ref);
+  void setReference(const Eigen::VectorXd& x_ref) override;
   int size() const override { return static_cast<int>(lambda_.size()); }
   void force(const Eigen::VectorXd& modal, Eigen::VectorXd& f) override;
   void tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k) override;
@@ -66,11 +98,15 @@ private:
 };
 
 // `physical` (Kobayashi et al.): x = x_ref + Phi X, F = Phi^T (f(x) + f_g).
-class PhysicalModalForceModel : public ForceModel
+class PhysicalModalForceModel : public ModalForceModel
 {
 public:
   PhysicalModalForceModel(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref);
-  void setReference(const Eigen::VectorXd& x_ref) { x_ref_ = x_ref; }
+  void setReference(const Eigen::VectorXd& x_ref) override
+  {
+    x_ref_ = x_ref;
+    cache_.clear();
+  }
   int size() const override { return static_cast<int>(basis_.phi.cols()); }
   void force(const Eigen::VectorXd& modal, Eigen::VectorXd& f) override;
   // Phi^T K(x) Phi at x = x_ref + Phi X, K(x) Phi summed spring by spring.
@@ -84,6 +120,7 @@ private:
   const ModalBasis& basis_;
   Eigen::MatrixXd phi_t_, k_phi_t_;  // Phi^T, contiguous per dof, and (K Phi)^T
   Eigen::VectorXd x_ref_, u_, x_, f_all_, f_free_;
+  EnergyCache cache_;
 };
 
 }  // namespace modal_mass_spring

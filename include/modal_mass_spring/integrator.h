@@ -38,6 +38,10 @@ public:
   // example an iteration that did not converge). Does not check for divergence.
   virtual bool step(ForceModel& model, const State& state, State& next) = 0;
   double timeStep() const { return dt_; }
+  // Newton iterations of the last solve, and how many solves the last step took (1 unless Newton
+  // failed and the step was split); 0 for a scheme without iterations.
+  virtual int lastIterations() const { return 0; }
+  virtual int lastSubsteps() const { return 0; }
 
 protected:
   Integrator(MassDamping system, double dt) : system_(std::move(system)), dt_(dt) {}
@@ -60,19 +64,23 @@ private:
   Eigen::VectorXd force_, rhs_;
 };
 
-// Newmark average acceleration (beta = 1/4, gamma = 1/2), implicit in the forces: each step solves
-// R(q') = M a' + C v' - F(q') = 0 by Newton with the tangent 4/dt^2 M + 2/dt C + K(q') and a line
-// search. Unconditionally stable and energy-conserving for linear systems. Where Newton does not
-// converge in max_iterations, the step is retried as two half steps (recursively, down to 1/16);
-// a step that still does not converge is refused, never taken.
+// Implicit Newmark with the Hilber-Hughes-Taylor alpha: each step solves
+//   R(q') = M a' + (1 + alpha) (C v' - F(q')) - alpha (C v - F(q)) = 0,
+// beta = (1 - alpha)^2 / 4, gamma = 1/2 - alpha, by Newton with the tangent
+// M / (beta dt^2) + (1 + alpha) (gamma / (beta dt) C + K(q')) and a line search. alpha = 0 is
+// Newmark average acceleration: unconditionally stable and energy-conserving for linear systems,
+// but not for stiff nonlinear springs at large steps, where energy can grow without bound; alpha in
+// [-1/3, 0) damps the highest frequencies (second order still), which keeps those steps bounded.
+// Where Newton does not converge in max_iterations, the step is retried as two half steps
+// (recursively, down to 1/16); a step that still does not converge is refused, never taken.
 class ImplicitNewmark : public Integrator
 {
 public:
-  ImplicitNewmark(MassDamping system, double dt, int max_iterations = 50, double tolerance = 1e-9);
+  ImplicitNewmark(MassDamping system, double dt, int max_iterations = 50, double hht_alpha = 0.0,
+                  double tolerance = 1e-9);
   bool step(ForceModel& model, const State& state, State& next) override;
-  // Newton iterations of the last solve, and how many solves the last step took (1 unless split).
-  int lastIterations() const { return last_iterations_; }
-  int lastSubsteps() const { return substeps_; }
+  int lastIterations() const override { return last_iterations_; }
+  int lastSubsteps() const override { return substeps_; }
 
 private:
   static constexpr int kMaxHalvings = 4;
@@ -88,6 +96,7 @@ private:
   // The residual below which round-off hides any further progress.
   double roundoff(const State& next) const;
 
+  const double alpha_, beta_, gamma_;  // HHT alpha and the Newmark parameters it implies
   int max_iterations_;
   double tolerance_;
   int last_iterations_ = 0;
@@ -95,10 +104,12 @@ private:
   double h_ = 0.0;             // the step size being solved
   SparseMatrix mass_matrix_;
   Eigen::SimplicialLDLT<SparseMatrix> ldlt_;
-  SparseMatrix inertia_;  // 4/h^2 M + 2/h C
+  SparseMatrix inertia_;  // M / (beta h^2) + (1 + alpha) gamma / (beta h) C
   SparseMatrix tangent_;
   std::vector<int> pattern_outer_, pattern_inner_;
   Eigen::VectorXd force_, residual_;
+  Eigen::VectorXd old_terms_;  // alpha (C v - F(q)): the HHT part of R from the start of the step
+  Eigen::VectorXd predicted_;  // y = q + h v + h^2 (1/2 - beta) a: q' = y + beta h^2 a
   double inertial_norm_ = 0.0;  // |M a' + C v'| at the last residual
 };
 

@@ -1,10 +1,10 @@
 // A simulation: a grid, its modal basis and the chosen method, stepped by an integrator.
 #pragma once
 
-#include "modal_mass_spring/force_model.h"
 #include "modal_mass_spring/grid.h"
-#include "modal_mass_spring/integrator.h"
+#include "modal_mass_spring/method_model.h"
 #include "modal_mass_spring/modal_basis.h"
+#include "modal_mass_spring/options.h"
 
 #include <memory>
 #include <string>
@@ -13,47 +13,6 @@
 namespace modal_mass_spring
 {
 
-enum class Method
-{
-  Full,      // no reduction: the reference
-  Linear,    // modal, F = -Lambda X
-  Physical,  // modal, F = Phi^T f(x0 + Phi X)
-};
-
-// Where K is taken and the modal coordinates are measured from.
-enum class Linearization
-{
-  Rest,         // the initial positions (the paper)
-  Equilibrium,  // the static equilibrium under gravity
-};
-
-enum class IntegratorKind
-{
-  Explicit,  // the paper's scheme
-  Implicit,  // Newmark average acceleration with Newton iterations
-};
-
-// Where a run (and a reset) starts.
-enum class InitialState
-{
-  Initial,      // the initial, unloaded positions, at rest
-  Equilibrium,  // the static equilibrium, at rest
-};
-
-// "full", "linear", "physical"
-std::string toString(Method method);
-// Throws std::invalid_argument naming the valid methods.
-Method parseMethod(const std::string& name);
-const std::vector<std::string>& methodNames();
-// "rest", "equilibrium"; "explicit", "implicit"; "initial", "equilibrium". The parsers throw
-// std::invalid_argument naming the parameter and the valid values.
-std::string toString(Linearization linearization);
-Linearization parseLinearization(const std::string& name);
-std::string toString(IntegratorKind integrator);
-IntegratorKind parseIntegrator(const std::string& name);
-std::string toString(InitialState initial_state);
-InitialState parseInitialState(const std::string& name);
-
 struct SimulationParams
 {
   Method method = Method::Physical;
@@ -61,13 +20,20 @@ struct SimulationParams
   double alpha = 0.0;       // Rayleigh damping C = alpha M + beta K(x0)
   double beta = 0.0;
   double time_step = 1e-3;  // s
-  // A step diverges when the state is not finite or the mass-weighted RMS displacement exceeds this
-  // (m). 0: 100 times the grid's larger side.
+  // A step diverges when the state is not finite, when the mass-weighted RMS displacement from the
+  // start of the run exceeds divergence_limit (m; 0: 100 times the grid's larger side), or when
+  // the energy rises above its start by more than energy_tolerance times the grid's energy scale
+  // (energyScale()): with gravity the only load and non-negative damping, it may not rise at all.
   double divergence_limit = 0.0;
+  double energy_tolerance = 0.01;
   Linearization linearization = Linearization::Rest;
   IntegratorKind integrator = IntegratorKind::Explicit;
   InitialState initial_state = InitialState::Initial;
   int newton_max_iterations = 50;  // per implicit solve
+  // The implicit integrator's Hilber-Hughes-Taylor alpha in [-1/3, 0]: 0 is Newmark average
+  // acceleration, which lets stiff nonlinear springs gain energy without bound at large steps;
+  // negative values damp the highest frequencies and keep those steps bounded (see ImplicitNewmark).
+  double hht_alpha = -0.1;
   // Refuse a problem whose build would need more memory than this (GB, estimated before anything is
   // allocated): the default leaves room on a 24 GB machine.
   double memory_limit_gb = 12.0;
@@ -123,7 +89,7 @@ public:
   const Grid& grid() const { return grid_; }
   const ModalBasis& basis() const { return basis_; }
   const SimulationParams& params() const { return params_; }
-  Method method() const { return params_.method; }
+  Method method() const { return model_->method(); }
 
   // Switches method, carrying the motion over without moving a particle: going to a modal method,
   // X = Phi^T M u and the rest of u, which the modes cannot carry, stays frozen as an offset of the
@@ -147,8 +113,8 @@ public:
   const Eigen::VectorXd& startPositions() const { return x_start_; }
   // Newton iterations of the last implicit solve, and the solves the last step took (1 unless
   // Newton failed and the step was split); both 0 under the explicit integrator.
-  int lastNewtonIterations() const;
-  int lastImplicitSubsteps() const;
+  int lastNewtonIterations() const { return model_->integrator().lastIterations(); }
+  int lastImplicitSubsteps() const { return model_->integrator().lastSubsteps(); }
 
   // Takes up to `steps` steps; stops at the first that diverges and keeps the state before it.
   StepResult step(int steps = 1);
@@ -158,7 +124,7 @@ public:
   double time() const { return step_count_ * params_.time_step; }
 
   // The generalized state of the current method (u for full, X for the modal methods).
-  const State& state() const { return state_; }
+  const State& state() const { return model_->state(); }
   // Free-dof displacement (from the linearization point) and velocity, whatever the method.
   Eigen::VectorXd displacement() const;
   Eigen::VectorXd velocity() const;
@@ -169,36 +135,42 @@ public:
   double kineticEnergy() const;
   // Kinetic + spring + gravity potential energy, from the physical positions.
   double totalEnergy() const;
+  // The energy the divergence check measures growth against (J): the grid's weight times its
+  // larger side, plus the spring and kinetic energy of the start (the last reset or
+  // setPhysicalState), plus the energy of every spring stretched by 1% (so that it is never 0).
+  double energyScale() const { return energy_scale_; }
+  // The energy the current method's dynamics conserve without damping (see MethodModel::energy),
+  // and its value at the start of the run (moved by a method switch so that the growth since the
+  // start carries over).
+  double methodEnergy() const;
+  double startEnergy() const { return start_energy_; }
 
 private:
-  bool isModal() const { return params_.method != Method::Full; }
-  ForceModel& forceModel();
-  Integrator& integrator();
-  const ImplicitNewmark* implicitIntegrator() const;  // null under the explicit integrator
-  void buildIntegrators();
-  void initializeAcceleration();
-  void setOffset(const Eigen::VectorXd& offset);
-  void assignState(const Eigen::VectorXd& displacement, const Eigen::VectorXd& velocity);  // keeps the offset
+  IntegratorSettings integratorSettings() const;
+  // Replaces the method object, carrying (u, v) over; Keep: no particle moves (a switch).
+  void install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder);
+  // Why `next` may not be taken, or empty.
+  std::string divergence(bool integrator_ok, const State& next);
 
   Grid grid_;
   SimulationParams params_;
   LinearizationInfo linearization_;
-  Eigen::VectorXd x_ref_;    // linearization point: q measures displacement from here
+  Eigen::VectorXd x_ref_;    // linearization point: u measures displacement from here
   Eigen::VectorXd x_start_;  // where reset() puts the grid
+  Eigen::VectorXd u_start_;  // the same as a free-dof displacement from x_ref_
   ModalBasis basis_;
   SparseMatrix stiffness_;  // K at x_ref on the free dofs
   Eigen::VectorXd mass_;    // diagonal of M on the free dofs
   double total_mass_ = 0.0;  // weighs the divergence check into an RMS displacement in metres
-  std::unique_ptr<FullForceModel> full_force_;
-  std::unique_ptr<LinearModalForceModel> linear_force_;
-  std::unique_ptr<PhysicalModalForceModel> physical_force_;
-  std::unique_ptr<Integrator> full_integrator_, modal_integrator_;
-  State state_, next_;
+  std::unique_ptr<MethodModel> model_;
   long step_count_ = 0;
   bool diverged_ = false;
+  std::string divergence_message_;
   double limit_ = 0.0;
+  double base_energy_scale_ = 0.0;  // the grid's weight times its side, plus every spring stretched by 1%
+  double energy_scale_ = 0.0;       // the base plus the start's spring and kinetic energy
+  double start_energy_ = 0.0;  // the method's energy at the start of the run, carried over switches
   double projection_error_ = 0.0;
-  Eigen::VectorXd offset_;  // free-dof displacement frozen under a modal method (see setMethod)
 };
 
 }  // namespace modal_mass_spring

@@ -10,8 +10,9 @@ namespace modal_mass_spring
 
 using SparseMatrix = Eigen::SparseMatrix<double>;
 
-// Sum of all spring forces on every dof at positions x (gravity not included).
-void springForces(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f);
+// Sum of all spring forces on every dof at positions x (gravity not included); with `energy`, also
+// the spring energy, from the same lengths at little extra cost.
+void springForces(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f, double* energy = nullptr);
 
 // Total spring energy sum 1/2 k (l - l0)^2.
 double springEnergy(const Grid& grid, const Eigen::VectorXd& x);

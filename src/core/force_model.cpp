@@ -20,7 +20,9 @@ void FullForceModel::setPositions(const Eigen::VectorXd& u)
 void FullForceModel::force(const Eigen::VectorXd& u, Eigen::VectorXd& f)
 {
   setPositions(u);
-  springForces(grid_, x_, f_all_);
+  double spring_energy = 0.0;
+  springForces(grid_, x_, f_all_, &spring_energy);
+  cache_.store(u, spring_energy + gravityEnergy(grid_, x_));
   f_all_ += grid_.gravityForce();
   f.resize(u.size());
   const std::vector<int>& free = grid_.freeDofs();
@@ -36,6 +38,9 @@ void FullForceModel::tangentStiffness(const Eigen::VectorXd& u, SparseMatrix& k)
 
 double FullForceModel::energy(const Eigen::VectorXd& u)
 {
+  double cached = 0.0;
+  if (cache_.find(u, cached))
+    return cached;
   setPositions(u);
   return springEnergy(grid_, x_) + gravityEnergy(grid_, x_);
 }
@@ -95,7 +100,9 @@ void PhysicalModalForceModel::setPositions(const Eigen::VectorXd& modal)
 void PhysicalModalForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorXd& f)
 {
   setPositions(modal);
-  springForces(grid_, x_, f_all_);
+  double spring_energy = 0.0;
+  springForces(grid_, x_, f_all_, &spring_energy);
+  cache_.store(modal, spring_energy + gravityEnergy(grid_, x_));
   f_all_ += grid_.gravityForce();
   const std::vector<int>& free = grid_.freeDofs();
   for (size_t k = 0; k < free.size(); ++k)
@@ -105,6 +112,9 @@ void PhysicalModalForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorX
 
 double PhysicalModalForceModel::energy(const Eigen::VectorXd& modal)
 {
+  double cached = 0.0;
+  if (cache_.find(modal, cached))
+    return cached;
   setPositions(modal);
   return springEnergy(grid_, x_) + gravityEnergy(grid_, x_);
 }

@@ -66,8 +66,14 @@ bool ExplicitNewmark::step(ForceModel& model, const State& s, State& next)
 namespace modal_mass_spring
 {
 
-ImplicitNewmark::ImplicitNewmark(MassDamping system, double dt, int max_iterations, double tolerance)
-  : Integrator(std::move(system), dt), max_iterations_(max_iterations), tolerance_(tolerance)
+ImplicitNewmark::ImplicitNewmark(MassDamping system, double dt, int max_iterations, double hht_alpha,
+                                 double tolerance)
+  : Integrator(std::move(system), dt),
+    alpha_(hht_alpha),
+    beta_(0.25 * (1.0 - hht_alpha) * (1.0 - hht_alpha)),
+    gamma_(0.5 - hht_alpha),
+    max_iterations_(max_iterations),
+    tolerance_(tolerance)
 {
   mass_matrix_.resize(system_.mass.size(), system_.mass.size());
   mass_matrix_.setIdentity();
@@ -80,7 +86,7 @@ void ImplicitNewmark::setStepSize(double h)
   if (h == h_)
     return;
   h_ = h;
-  inertia_ = (4.0 / (h * h)) * mass_matrix_ + (2.0 / h) * system_.damping;
+  inertia_ = (1.0 / (beta_ * h * h)) * mass_matrix_ + ((1.0 + alpha_) * gamma_ / (beta_ * h)) * system_.damping;
 }
 
 bool ImplicitNewmark::step(ForceModel& model, const State& s, State& next)
@@ -126,23 +132,33 @@ void ImplicitNewmark::analyzeIfNewPattern(const SparseMatrix& jacobian)
 
 void ImplicitNewmark::kinematics(const State& s, State& next) const
 {
-  next.a = (4.0 / (h_ * h_)) * (next.q - s.q - h_ * s.v) - s.a;
-  next.v = (2.0 / h_) * (next.q - s.q) - s.v;
+  next.a = (next.q - predicted_) / (beta_ * h_ * h_);
+  next.v = s.v + h_ * ((1.0 - gamma_) * s.a + gamma_ * next.a);
 }
 
 bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
 {
+  predicted_ = s.q + h_ * s.v + ((0.5 - beta_) * h_ * h_) * s.a;
+  old_terms_.setZero(s.q.size());
+  if (alpha_ != 0.0)
+  {
+    model.force(s.q, force_);
+    old_terms_ = alpha_ * (system_.damping * s.v - force_);
+  }
   // Predictor: constant velocity. The explicit extrapolation, with a step far past the explicit
   // bound, lands too far away.
   next.q = s.q + h_ * s.v;
-  const Eigen::VectorXd y = s.q + h_ * s.v + (0.25 * h_ * h_) * s.a;
   // R(q') is the gradient of the incremental potential
-  //   G(q') = 2/dt^2 |q' - y|_M^2 + 1/dt |q' - q|_C^2 - v^T C q' + E(q'),
+  //   G(q') = |q' - y|_M^2 / (2 beta h^2) + (1 + alpha) gamma / (2 beta h) |q' - y|_C^2
+  //           + (1 + alpha) (E(q') + (C (v + h (1 - gamma) a)) . q') - alpha (C v - F(q)) . q',
   // so a Newton direction that descends G, found with a line search on G, converges from far away.
+  const Eigen::VectorXd linear_term =
+      (1.0 + alpha_) * (system_.damping * (s.v + (h_ * (1.0 - gamma_)) * s.a)) - old_terms_;
   auto incremental = [&](const Eigen::VectorXd& q) {
-    const Eigen::VectorXd dy = q - y, dq = q - s.q;
-    return 2.0 / (h_ * h_) * dy.dot(system_.mass.cwiseProduct(dy)) + dq.dot(system_.damping * dq) / h_ -
-           s.v.dot(system_.damping * q) + model.energy(q);
+    const Eigen::VectorXd dy = q - predicted_;
+    return (dy.dot(system_.mass.cwiseProduct(dy)) + (1.0 + alpha_) * gamma_ * h_ * dy.dot(system_.damping * dy)) /
+               (2.0 * beta_ * h_ * h_) +
+           (1.0 + alpha_) * model.energy(q) + linear_term.dot(q);
   };
 
   for (last_iterations_ = 1; last_iterations_ <= max_iterations_; ++last_iterations_)
@@ -158,7 +174,7 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
     model.tangentStiffness(next.q, tangent_);
     for (double extra = 0.0; extra < 1e8; extra = std::max(1e-3, 10.0 * extra))
     {
-      SparseMatrix jacobian = (1.0 + extra) * inertia_ + tangent_;
+      SparseMatrix jacobian = (1.0 + extra) * inertia_ + (1.0 + alpha_) * tangent_;
       jacobian.makeCompressed();
       analyzeIfNewPattern(jacobian);
       ldlt_.factorize(jacobian);
@@ -208,18 +224,19 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
 
 double ImplicitNewmark::roundoff(const State& next) const
 {
-  // a' = 4/h^2 (q' - q - h v) - a differences nearly equal numbers: its round-off is about
-  // eps 4/h^2 |q'|, which no Newton iteration removes when the motion is tiny.
-  return 100.0 * std::numeric_limits<double>::epsilon() * 4.0 / (h_ * h_) * system_.mass.cwiseProduct(next.q).norm();
+  // a' = (q' - y) / (beta h^2) differences nearly equal numbers: its round-off is about
+  // eps |q'| / (beta h^2), which no Newton iteration removes when the motion is tiny.
+  return 100.0 * std::numeric_limits<double>::epsilon() / (beta_ * h_ * h_) * system_.mass.cwiseProduct(next.q).norm();
 }
 
 double ImplicitNewmark::residual(ForceModel& model, const State& s, State& next)
 {
   kinematics(s, next);
   model.force(next.q, force_);
-  residual_ = system_.mass.cwiseProduct(next.a) + system_.damping * next.v;
+  force_ *= 1.0 + alpha_;
+  residual_ = system_.mass.cwiseProduct(next.a) + (1.0 + alpha_) * (system_.damping * next.v);
   inertial_norm_ = residual_.norm();
-  residual_ -= force_;
+  residual_ -= force_ + old_terms_;
   return residual_.norm();
 }
 

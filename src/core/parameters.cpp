@@ -52,6 +52,8 @@ SimulationParams loadSimulationParams(const ParameterSource& s)
   if (const auto name = s.getString("initial_state"))
     p.initial_state = parseInitialState(*name);
   p.newton_max_iterations = s.getInt("newton_max_iterations").value_or(p.newton_max_iterations);
+  p.hht_alpha = s.getDouble("hht_alpha").value_or(p.hht_alpha);
+  p.energy_tolerance = s.getDouble("energy_tolerance").value_or(p.energy_tolerance);
   p.memory_limit_gb = s.getDouble("memory_limit_gb").value_or(p.memory_limit_gb);
   return p;
 }

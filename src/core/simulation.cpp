@@ -1,4 +1,5 @@
-// Wires grid, basis, force models and integrators into the three methods.
+// A simulation: validation, the linearization point and basis, and the current method stepped with
+// its divergence checks.
 #include "modal_mass_spring/simulation.h"
 
 #include "modal_mass_spring/equilibrium.h"
@@ -66,64 +67,7 @@ void validateScales(const GridParams& g)
   }
 }
 
-SparseMatrix diagonalMatrix(const Eigen::VectorXd& d)
-{
-  SparseMatrix m(d.size(), d.size());
-  m.reserve(Eigen::VectorXi::Ones(d.size()));
-  for (int k = 0; k < d.size(); ++k)
-    m.insert(k, k) = d[k];
-  return m;
-}
-
-// Finds `name` among `names` (the enum's values in order) or throws naming the parameter.
-int parseName(const std::string& parameter, const std::string& name, const std::vector<std::string>& names)
-{
-  for (size_t k = 0; k < names.size(); ++k)
-    if (names[k] == name)
-      return static_cast<int>(k);
-  std::string allowed;
-  for (size_t k = 0; k < names.size(); ++k)
-    allowed += (k ? ", " : "") + names[k];
-  throw std::invalid_argument("invalid parameter '" + parameter + "' = '" + name + "': must be one of " + allowed);
-}
-
-const std::vector<std::string> kLinearizations{"rest", "equilibrium"};
-const std::vector<std::string> kIntegrators{"explicit", "implicit"};
-const std::vector<std::string> kInitialStates{"initial", "equilibrium"};
-
 }  // namespace
-
-std::string toString(Linearization value) { return kLinearizations[static_cast<int>(value)]; }
-Linearization parseLinearization(const std::string& name)
-{
-  return static_cast<Linearization>(parseName("linearization", name, kLinearizations));
-}
-std::string toString(IntegratorKind value) { return kIntegrators[static_cast<int>(value)]; }
-IntegratorKind parseIntegrator(const std::string& name)
-{
-  return static_cast<IntegratorKind>(parseName("integrator", name, kIntegrators));
-}
-std::string toString(InitialState value) { return kInitialStates[static_cast<int>(value)]; }
-InitialState parseInitialState(const std::string& name)
-{
-  return static_cast<InitialState>(parseName("initial_state", name, kInitialStates));
-}
-
-const std::vector<std::string>& methodNames()
-{
-  static const std::vector<std::string> names{"full", "linear", "physical"};
-  return names;
-}
-
-std::string toString(Method method)
-{
-  return methodNames()[static_cast<int>(method)];
-}
-
-Method parseMethod(const std::string& name)
-{
-  return static_cast<Method>(parseName("method", name, methodNames()));
-}
 
 void validateParameters(const GridParams& grid, const SimulationParams& p)
 {
@@ -137,8 +81,13 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
   requireNonNegative("beta", p.beta);
   validateTimeStep(p.time_step);
   requireNonNegative("divergence_limit", p.divergence_limit);
+  if (!std::isfinite(p.energy_tolerance) || p.energy_tolerance <= 0.0)
+    rejectParameter("energy_tolerance", p.energy_tolerance,
+                    "must be a finite number > 0 (the energy rise, relative to the grid's energy scale, that counts as divergence)");
   if (p.newton_max_iterations < 1)
     rejectParameter("newton_max_iterations", p.newton_max_iterations, "must be an integer >= 1");
+  if (!std::isfinite(p.hht_alpha) || p.hht_alpha < -1.0 / 3.0 || p.hht_alpha > 0.0)
+    rejectParameter("hht_alpha", p.hht_alpha, "must be in [-1/3, 0] (0: Newmark average acceleration)");
   if (!std::isfinite(p.memory_limit_gb) || p.memory_limit_gb <= 0.0)
     rejectParameter("memory_limit_gb", p.memory_limit_gb, "must be a finite number of GB > 0");
   const double needed_gb = estimateMemoryBytes(grid, p) / 1e9;
@@ -218,138 +167,96 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
   total_mass_ = mass_.sum();
   basis_ = computeModalBasis(stiffness_, mass_, params_.num_modes, on_stage);
 
-  full_force_ = std::make_unique<FullForceModel>(grid_, x_ref_);
-  linear_force_ = std::make_unique<LinearModalForceModel>(grid_, basis_, x_ref_);
-  physical_force_ = std::make_unique<PhysicalModalForceModel>(grid_, basis_, x_ref_);
-  buildIntegrators();
+  if (!basis_.phi.allFinite() || !basis_.eigenvalues.allFinite() || !basis_.frequencies.allFinite())
+  {
+    std::ostringstream value;
+    value << "mass = " << g.mass << ", structural_stiffness = " << g.structural_stiffness
+          << ", shear_stiffness = " << g.shear_stiffness << ", spacing = " << g.spacing;
+    rejectParameter("mass, stiffnesses, spacing", value.str(),
+                    "give a modal basis that is not finite; keep stiffness / mass and spacing in a range where "
+                    "frequencies and lengths are representable");
+  }
+
+  u_start_ = grid_.gatherFree(x_start_ - x_ref_);
+  double stretched = 0.0;
+  for (const Spring& spring : grid_.springs())
+    stretched += 0.5 * spring.stiffness * std::pow(0.01 * spring.rest_length, 2);
+  base_energy_scale_ = total_mass_ * g.gravity.norm() * g.spacing * std::max(g.rows, g.cols) + stretched;
   reset();
 }
 
-void Simulation::buildIntegrators()
+IntegratorSettings Simulation::integratorSettings() const
 {
-  auto make = [this](MassDamping system) -> std::unique_ptr<Integrator> {
-    if (params_.integrator == IntegratorKind::Implicit)
-      return std::make_unique<ImplicitNewmark>(std::move(system), params_.time_step, params_.newton_max_iterations);
-    return std::make_unique<ExplicitNewmark>(std::move(system), params_.time_step);
-  };
-  // Rayleigh damping with the constant K of the linearization point: alpha M + beta K(x_ref); in
-  // modal coordinates diag(alpha + beta lambda^2).
-  full_integrator_ = make(MassDamping{mass_, params_.alpha * diagonalMatrix(mass_) + params_.beta * stiffness_});
-  const Eigen::VectorXd modal_damping = (params_.alpha + params_.beta * basis_.eigenvalues.array()).matrix();
-  modal_integrator_ =
-      make(MassDamping{Eigen::VectorXd::Ones(basis_.eigenvalues.size()), diagonalMatrix(modal_damping)});
+  return IntegratorSettings{params_.integrator, params_.time_step, params_.newton_max_iterations,
+                            params_.hht_alpha,  params_.alpha,     params_.beta};
 }
 
-const ImplicitNewmark* Simulation::implicitIntegrator() const
+void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder)
 {
-  return dynamic_cast<const ImplicitNewmark*>(isModal() ? modal_integrator_.get() : full_integrator_.get());
-}
-
-int Simulation::lastNewtonIterations() const
-{
-  return implicitIntegrator() ? implicitIntegrator()->lastIterations() : 0;
-}
-
-int Simulation::lastImplicitSubsteps() const
-{
-  return implicitIntegrator() ? implicitIntegrator()->lastSubsteps() : 0;
-}
-
-ForceModel& Simulation::forceModel()
-{
-  switch (params_.method)
-  {
-    case Method::Full:
-      return *full_force_;
-    case Method::Linear:
-      return *linear_force_;
-    default:
-      return *physical_force_;
-  }
-}
-
-Integrator& Simulation::integrator()
-{
-  return isModal() ? *modal_integrator_ : *full_integrator_;
-}
-
-void Simulation::initializeAcceleration()
-{
-  integrator().initialize(forceModel(), state_);
+  const LinearizedGrid linearized{grid_, basis_, x_ref_, stiffness_, mass_};
+  model_ = makeMethod(method, linearized, integratorSettings());
+  params_.method = method;
+  projection_error_ = model_->assign(u, v, remainder);
+  model_->setAnchor(u_start_);
+  diverged_ = false;
+  divergence_message_.clear();
 }
 
 void Simulation::setMethod(Method method)
 {
-  const Eigen::VectorXd u = displacement();
-  const Eigen::VectorXd v = velocity();
-  const bool was_modal = isModal();
-  params_.method = method;
-  if (!isModal())
-  {
-    setPhysicalState(u, v);
-  }
-  else if (was_modal)
-  {
-    assignState(u - offset_, v);  // the same X
-  }
-  else
-  {
-    const Eigen::VectorXd modal = basis_.phi.transpose() * mass_.cwiseProduct(u);
-    setOffset(u - basis_.phi * modal);
-    assignState(basis_.phi * modal, v);
-  }
-}
-
-void Simulation::setOffset(const Eigen::VectorXd& offset)
-{
-  offset_ = offset;
-  Eigen::VectorXd reference = x_ref_;
-  grid_.addFree(offset_, reference);
-  linear_force_->setReference(reference);
-  physical_force_->setReference(reference);
+  // The energy measures differ between methods (linear conserves its quadratic model's): the rise
+  // since the start carries over, so that switching back and forth never resets the check.
+  const double rise = methodEnergy() - start_energy_;
+  install(method, displacement(), velocity(), Remainder::Keep);
+  start_energy_ = methodEnergy() - rise;
 }
 
 void Simulation::setPhysicalState(const Eigen::VectorXd& u, const Eigen::VectorXd& v)
 {
-  setOffset(Eigen::VectorXd::Zero(u.size()));
-  assignState(u, v);
-}
-
-void Simulation::assignState(const Eigen::VectorXd& u, const Eigen::VectorXd& v)
-{
-  projection_error_ = 0.0;
-  if (isModal())
-  {
-    // Mass-orthonormal basis: the M-orthogonal projection onto span(Phi) is X = Phi^T M u.
-    state_.q = basis_.phi.transpose() * mass_.cwiseProduct(u);
-    state_.v = basis_.phi.transpose() * mass_.cwiseProduct(v);
-    const Eigen::VectorXd residual = u - basis_.phi * state_.q;
-    const int dim = grid_.dimension();
-    for (int k = 0; k + dim <= residual.size(); k += dim)
-      projection_error_ = std::max(projection_error_, residual.segment(k, dim).norm());
-  }
-  else
-  {
-    state_.q = u;
-    state_.v = v;
-  }
-  initializeAcceleration();
-  diverged_ = false;
+  install(params_.method, u, v, Remainder::Drop);
+  start_energy_ = methodEnergy();
+  energy_scale_ = base_energy_scale_ + kineticEnergy() + springEnergy(grid_, positions());
 }
 
 void Simulation::setTimeStep(double dt)
 {
-  validateTimeStep(dt);
+  SimulationParams changed = params_;
+  changed.time_step = dt;
+  validateParameters(grid_.params(), changed);
   params_.time_step = dt;
-  buildIntegrators();
-  initializeAcceleration();
+  model_->configure(integratorSettings());
 }
 
 void Simulation::reset()
 {
-  const Eigen::VectorXd start = grid_.gatherFree(x_start_ - x_ref_);
-  setPhysicalState(start, Eigen::VectorXd::Zero(start.size()));
+  setPhysicalState(u_start_, Eigen::VectorXd::Zero(u_start_.size()));
   step_count_ = 0;
+}
+
+std::string Simulation::divergence(bool integrator_ok, const State& next)
+{
+  if (!integrator_ok)
+    return "the implicit Newton iteration did not converge in newton_max_iterations = " +
+           std::to_string(params_.newton_max_iterations) + ", even in 1/16 of the step";
+  if (!next.q.allFinite() || !next.v.allFinite() || !next.a.allFinite())
+    return "non-finite state";
+  const double distance = std::sqrt(model_->anchorDistanceSquared(next.q) / total_mass_);
+  std::ostringstream msg;
+  if (distance > limit_)
+  {
+    msg << "mass-weighted RMS displacement from the start " << distance << " m beyond divergence_limit " << limit_
+        << " m";
+    return msg.str();
+  }
+  // Damping only removes energy and gravity is conservative: a rise is the integrator's doing.
+  const double energy = model_->energy(next);
+  if (!std::isfinite(energy) || energy > start_energy_ + params_.energy_tolerance * energy_scale_)
+  {
+    msg << "energy " << energy << " J rose above its start " << start_energy_ << " J by more than energy_tolerance "
+        << params_.energy_tolerance << " x the energy scale " << energy_scale_ << " J";
+    return msg.str();
+  }
+  return "";
 }
 
 StepResult Simulation::step(int steps)
@@ -358,45 +265,36 @@ StepResult Simulation::step(int steps)
   if (diverged_)
   {
     result.diverged = true;
-    result.message = "the simulation diverged at step " + std::to_string(step_count_) +
-                     "; reset or switch method to go on";
+    result.message = divergence_message_ + " (step " + std::to_string(step_count_) +
+                     "); reset or switch method to go on";
     return result;
   }
   for (int k = 0; k < steps; ++k)
   {
-    const bool ok = integrator().step(forceModel(), state_, next_);
-    const double norm2 = isModal() ? next_.q.squaredNorm() : next_.q.cwiseAbs2().dot(mass_);
-    const bool finite = next_.q.allFinite() && next_.v.allFinite() && next_.a.allFinite();
-    if (!ok || !finite || std::sqrt(norm2 / total_mass_) > limit_)
+    const bool ok = model_->step();
+    const std::string why = divergence(ok, model_->next());
+    if (!why.empty())
     {
       diverged_ = true;
       result.diverged = true;
       std::ostringstream msg;
-      msg << "method '" << toString(params_.method) << "' diverged at step " << step_count_ + 1
-          << " with time_step " << params_.time_step << " s ("
-          << (!ok ? "the implicit Newton iteration did not converge in newton_max_iterations = " +
-                        std::to_string(params_.newton_max_iterations) + ", even in 1/16 of the step"
-                  : !finite ? "non-finite state" : "displacement beyond divergence_limit")
-          << "); the last good state is kept; a smaller time_step or more damping may help";
-      result.message = msg.str();
+      msg << "method '" << toString(method()) << "' diverged at step " << step_count_ + 1 << " with time_step "
+          << params_.time_step << " s (" << why << "); the last good state is kept; a smaller time_step"
+          << (params_.integrator == IntegratorKind::Explicit ? ", the implicit integrator" : "")
+          << " or more damping may help";
+      divergence_message_ = result.message = msg.str();
       return result;
     }
-    std::swap(state_, next_);
+    model_->commit();
     ++step_count_;
     ++result.steps_taken;
   }
   return result;
 }
 
-Eigen::VectorXd Simulation::displacement() const
-{
-  return isModal() ? Eigen::VectorXd(offset_ + basis_.phi * state_.q) : state_.q;
-}
+Eigen::VectorXd Simulation::displacement() const { return model_->displacement(model_->state()); }
 
-Eigen::VectorXd Simulation::velocity() const
-{
-  return isModal() ? Eigen::VectorXd(basis_.phi * state_.v) : state_.v;
-}
+Eigen::VectorXd Simulation::velocity() const { return model_->velocity(model_->state()); }
 
 Eigen::VectorXd Simulation::positions() const
 {
@@ -405,11 +303,9 @@ Eigen::VectorXd Simulation::positions() const
   return x;
 }
 
-double Simulation::kineticEnergy() const
-{
-  // Phi is mass-orthonormal, so 1/2 V^T V is the physical kinetic energy of u' = Phi V.
-  return isModal() ? 0.5 * state_.v.squaredNorm() : 0.5 * state_.v.cwiseAbs2().dot(mass_);
-}
+double Simulation::kineticEnergy() const { return model_->kineticEnergy(model_->state()); }
+
+double Simulation::methodEnergy() const { return model_->energy(model_->state()); }
 
 double Simulation::totalEnergy() const
 {

@@ -9,18 +9,23 @@ namespace
 {
 
 template <int Dim>
-void springForcesDim(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f)
+void springForcesDim(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f, double* energy)
 {
   using Vec = Eigen::Matrix<double, Dim, 1>;
   f.setZero(x.size());
+  double twice_energy = 0.0;
   for (const Spring& s : grid.springs())
   {
     const Vec d = x.segment<Dim>(Dim * s.j) - x.segment<Dim>(Dim * s.i);
     const double l = d.norm();
-    const Vec fi = s.stiffness * (l - s.rest_length) / l * d;
+    const double stretch = l - s.rest_length;
+    const Vec fi = s.stiffness * stretch / l * d;
     f.segment<Dim>(Dim * s.i) += fi;
     f.segment<Dim>(Dim * s.j) -= fi;
+    twice_energy += s.stiffness * stretch * stretch;
   }
+  if (energy)
+    *energy = 0.5 * twice_energy;
 }
 
 template <int Dim>
@@ -121,12 +126,12 @@ void tangentTimesBasis(const Grid& grid, const Eigen::VectorXd& x, const Eigen::
     tangentTimesBasisDim<3>(grid, x, phi_t, k_phi_t);
 }
 
-void springForces(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f)
+void springForces(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f, double* energy)
 {
   if (grid.dimension() == 2)
-    springForcesDim<2>(grid, x, f);
+    springForcesDim<2>(grid, x, f, energy);
   else
-    springForcesDim<3>(grid, x, f);
+    springForcesDim<3>(grid, x, f, energy);
 }
 
 double springEnergy(const Grid& grid, const Eigen::VectorXd& x)

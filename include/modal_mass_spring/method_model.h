@@ -1,0 +1,141 @@
+// One object per method: its coordinates q, its force model and integrator, and the map between q
+// and free-dof displacements u (from the linearization point): u = q for `full`, u = offset + Phi X
+// for the modal methods.
+#pragma once
+
+#include "modal_mass_spring/force_model.h"
+#include "modal_mass_spring/grid.h"
+#include "modal_mass_spring/integrator.h"
+#include "modal_mass_spring/modal_basis.h"
+#include "modal_mass_spring/options.h"
+
+#include <Eigen/Core>
+
+#include <memory>
+
+namespace modal_mass_spring
+{
+
+// The parts of a linearized grid that every method refers to. The Simulation owns them and never
+// moves, so the references stay valid for the methods' lifetime.
+struct LinearizedGrid
+{
+  const Grid& grid;
+  const ModalBasis& basis;
+  const Eigen::VectorXd& x_ref;   // linearization point: q = 0 stands for it
+  const SparseMatrix& stiffness;  // K(x_ref) on the free dofs
+  const Eigen::VectorXd& mass;    // the diagonal of M on the free dofs
+};
+
+// What a method's integrator is built from besides its force model.
+struct IntegratorSettings
+{
+  IntegratorKind kind = IntegratorKind::Explicit;
+  double time_step = 1e-3;
+  int newton_max_iterations = 50;
+  double hht_alpha = 0.0;          // the implicit integrator's HHT alpha
+  double alpha = 0.0, beta = 0.0;  // Rayleigh damping alpha M + beta K(x_ref)
+};
+
+// What a method does with the part of a displacement its coordinates cannot hold.
+enum class Remainder
+{
+  Keep,  // frozen as an offset of the reference, so that no particle moves (a method switch)
+  Drop,  // discarded: the state is the projection (a start or reset)
+};
+
+class MethodModel
+{
+public:
+  virtual ~MethodModel() = default;
+  Method method() const { return method_; }
+
+  // (Re)builds the integrator, keeping q and v; the acceleration follows from them.
+  void configure(const IntegratorSettings& settings);
+  const Integrator& integrator() const { return *integrator_; }
+
+  // Sets q and v from a free-dof displacement and velocity, with zero offset unless `remainder` is
+  // Keep. Returns the largest particle distance (m) between the requested and the represented
+  // positions (0 with Keep).
+  virtual double assign(const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder) = 0;
+  virtual Eigen::VectorXd displacement(const State& s) const = 0;
+  virtual Eigen::VectorXd velocity(const State& s) const = 0;
+  virtual double kineticEnergy(const State& s) const = 0;
+  // Sets the displacement that distances are measured from (the start of the run), and measures a
+  // state's mass-weighted squared distance |u(q) - anchor|_M^2 from it, in O(size of q).
+  virtual void setAnchor(const Eigen::VectorXd& u_anchor) = 0;
+  virtual double anchorDistanceSquared(const Eigen::VectorXd& q) const = 0;
+  // Kinetic plus potential energy in this method's own measure, the one its dynamics conserve
+  // without damping: the physical energy for `full` and `physical`, the quadratic model's for `linear`.
+  double energy(const State& s) { return kineticEnergy(s) + force_->energy(s.q); }
+
+  // Takes one step from state() into next(); false when the integrator refuses it. commit() makes
+  // next() the state.
+  bool step() { return integrator_->step(*force_, state_, next_); }
+  void commit() { std::swap(state_, next_); }
+  const State& state() const { return state_; }
+  const State& next() const { return next_; }
+
+protected:
+  MethodModel(Method method, const LinearizedGrid& linearized, std::unique_ptr<ForceModel> force);
+  // Mass and damping in this method's coordinates.
+  virtual MassDamping massDamping(double alpha, double beta) const = 0;
+  // Sets the state to (q, v), with the acceleration the forces give.
+  void setState(const Eigen::VectorXd& q, const Eigen::VectorXd& v);
+  ForceModel& forceModel() { return *force_; }
+
+  const LinearizedGrid lin_;
+
+private:
+  Method method_;
+  std::unique_ptr<ForceModel> force_;
+  std::unique_ptr<Integrator> integrator_;
+  State state_, next_;
+};
+
+// `full`: q = u.
+class FullMethod : public MethodModel
+{
+public:
+  FullMethod(const LinearizedGrid& linearized, const IntegratorSettings& settings);
+  double assign(const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder) override;
+  Eigen::VectorXd displacement(const State& s) const override { return s.q; }
+  Eigen::VectorXd velocity(const State& s) const override { return s.v; }
+  double kineticEnergy(const State& s) const override;
+  void setAnchor(const Eigen::VectorXd& u_anchor) override { anchor_ = u_anchor; }
+  double anchorDistanceSquared(const Eigen::VectorXd& q) const override;
+
+private:
+  MassDamping massDamping(double alpha, double beta) const override;
+  Eigen::VectorXd anchor_;
+};
+
+// `linear` and `physical`: q = X, u = offset + Phi X with a mass-orthonormal Phi.
+class ModalMethod : public MethodModel
+{
+public:
+  ModalMethod(Method method, const LinearizedGrid& linearized, const IntegratorSettings& settings);
+  double assign(const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder) override;
+  Eigen::VectorXd displacement(const State& s) const override;
+  Eigen::VectorXd velocity(const State& s) const override;
+  // Phi is mass-orthonormal: 1/2 V^T V is the kinetic energy of u' = Phi V.
+  double kineticEnergy(const State& s) const override { return 0.5 * s.v.squaredNorm(); }
+  void setAnchor(const Eigen::VectorXd& u_anchor) override;
+  double anchorDistanceSquared(const Eigen::VectorXd& q) const override;
+
+private:
+  MassDamping massDamping(double alpha, double beta) const override;
+  void setOffset(const Eigen::VectorXd& offset);
+
+  ModalForceModel* modal_force_;  // owned by the base
+  Eigen::VectorXd offset_;        // free-dof displacement the modes cannot hold, frozen
+  Eigen::VectorXd anchor_;
+  // |offset + Phi X - anchor|_M^2 = c + 2 b.X + X.X with b = Phi^T M (offset - anchor).
+  Eigen::VectorXd anchor_b_;
+  double anchor_c_ = 0.0;
+};
+
+std::unique_ptr<MethodModel> makeMethod(Method method, const LinearizedGrid& linearized,
+                                        const IntegratorSettings& settings);
+
+}  // namespace modal_mass_spring

@@ -1,0 +1,51 @@
+// The named choices of a simulation, with the names the parameters use.
+#pragma once
+
+#include <string>
+#include <vector>
+
+namespace modal_mass_spring
+{
+
+enum class Method
+{
+  Full,      // no reduction: the reference
+  Linear,    // modal, F = -Lambda X
+  Physical,  // modal, F = Phi^T f(x0 + Phi X)
+};
+
+// Where K is taken and the modal coordinates are measured from.
+enum class Linearization
+{
+  Rest,         // the initial positions (the paper)
+  Equilibrium,  // the static equilibrium under gravity
+};
+
+enum class IntegratorKind
+{
+  Explicit,  // the paper's scheme
+  Implicit,  // Newmark average acceleration with Newton iterations
+};
+
+// Where a run (and a reset) starts.
+enum class InitialState
+{
+  Initial,      // the initial, unloaded positions, at rest
+  Equilibrium,  // the static equilibrium, at rest
+};
+
+// "full", "linear", "physical"
+std::string toString(Method method);
+// Throws std::invalid_argument naming the valid methods.
+Method parseMethod(const std::string& name);
+const std::vector<std::string>& methodNames();
+// "rest", "equilibrium"; "explicit", "implicit"; "initial", "equilibrium". The parsers throw
+// std::invalid_argument naming the parameter and the valid values.
+std::string toString(Linearization linearization);
+Linearization parseLinearization(const std::string& name);
+std::string toString(IntegratorKind integrator);
+IntegratorKind parseIntegrator(const std::string& name);
+std::string toString(InitialState initial_state);
+InitialState parseInitialState(const std::string& name);
+
+}  // namespace modal_mass_spring

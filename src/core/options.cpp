@@ -1,0 +1,53 @@
+// Names of the simulation's choices.
+#include "modal_mass_spring/options.h"
+
+#include <stdexcept>
+
+namespace modal_mass_spring
+{
+namespace
+{
+
+// Finds `name` among `names` (the enum's values in order) or throws naming the parameter.
+int parseName(const std::string& parameter, const std::string& name, const std::vector<std::string>& names)
+{
+  for (size_t k = 0; k < names.size(); ++k)
+    if (names[k] == name)
+      return static_cast<int>(k);
+  std::string allowed;
+  for (size_t k = 0; k < names.size(); ++k)
+    allowed += (k ? ", " : "") + names[k];
+  throw std::invalid_argument("invalid parameter '" + parameter + "' = '" + name + "': must be one of " + allowed);
+}
+
+const std::vector<std::string> kLinearizations{"rest", "equilibrium"};
+const std::vector<std::string> kIntegrators{"explicit", "implicit"};
+const std::vector<std::string> kInitialStates{"initial", "equilibrium"};
+
+}  // namespace
+
+const std::vector<std::string>& methodNames()
+{
+  static const std::vector<std::string> names{"full", "linear", "physical"};
+  return names;
+}
+std::string toString(Method method) { return methodNames()[static_cast<int>(method)]; }
+Method parseMethod(const std::string& name) { return static_cast<Method>(parseName("method", name, methodNames())); }
+
+std::string toString(Linearization value) { return kLinearizations[static_cast<int>(value)]; }
+Linearization parseLinearization(const std::string& name)
+{
+  return static_cast<Linearization>(parseName("linearization", name, kLinearizations));
+}
+std::string toString(IntegratorKind value) { return kIntegrators[static_cast<int>(value)]; }
+IntegratorKind parseIntegrator(const std::string& name)
+{
+  return static_cast<IntegratorKind>(parseName("integrator", name, kIntegrators));
+}
+std::string toString(InitialState value) { return kInitialStates[static_cast<int>(value)]; }
+InitialState parseInitialState(const std::string& name)
+{
+  return static_cast<InitialState>(parseName("initial_state", name, kInitialStates));
+}
+
+}  // namespace modal_mass_spring
