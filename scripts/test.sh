@@ -1,13 +1,41 @@
 #!/usr/bin/env bash
-# Sets up, builds and runs every test of the package (gtest and rostest), then prints
-# 'N passed, N failed' on the last line. Exits non-zero on any failure or error.
+# Sets up, builds and runs every test of the package (gtest and rostest), then runs the core's and
+# the comparison tool's gtests once more under AddressSanitizer and UndefinedBehaviorSanitizer, and
+# prints 'N passed, N failed' on the last line. Exits non-zero on any failure or error.
 set -uo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
-bash "$REPO_DIR/scripts/build.sh" || { echo "0 passed, 1 failed"; exit 1; }
+bash "$REPO_DIR/scripts/build.sh" -DWARNINGS_AS_ERRORS=ON -DSANITIZE=OFF || { echo "0 passed, 1 failed"; exit 1; }
 cd "$WS_DIR"
 rm -rf build/test_results
 set +u; source devel/setup.bash; set -u  # catkin's setup reads unset variables
 catkin_make -j2 run_tests
+
+# The sanitized gtests, in a workspace of their own; each writes its results beside the others.
+# Warnings are not errors there: the sanitizers' instrumentation makes GCC see uninitialised values
+# in the standard library that are not.
+SANITIZE_WS="${WS_DIR}_sanitize"
+results="$WS_DIR/build/test_results/modal_mass_spring"
+mkdir -p "$SANITIZE_WS/src" "$results"
+ln -sfn "$REPO_DIR" "$SANITIZE_WS/src/modal_mass_spring"
+if (cd "$SANITIZE_WS" && catkin_make -j2 -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSANITIZE=ON \
+      -DWARNINGS_AS_ERRORS=OFF test_core test_compare); then
+  for test in test_core test_compare; do
+    xml="$results/sanitized-$test.xml"
+    # The tool's end-to-end tests run from the source folder, as catkin runs them.
+    (cd "$REPO_DIR" && ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1 \
+        "$SANITIZE_WS/devel/lib/modal_mass_spring/$test" --gtest_output="xml:$xml")
+    status=$?
+    if [ $status -ne 0 ] && ! grep -q "<failure" "$xml" 2>/dev/null; then
+      # A sanitizer report ends the run before gtest writes a failure: record one.
+      printf '<testsuites><testsuite name="sanitized"><testcase classname="sanitized" name="%s"><failure message="exit status %s under AddressSanitizer and UndefinedBehaviorSanitizer"/></testcase></testsuite></testsuites>\n' \
+        "$test" "$status" > "$xml"
+    fi
+  done
+else
+  printf '<testsuites><testsuite name="sanitized"><testcase classname="sanitized" name="build"><failure message="the sanitized build failed"/></testcase></testsuite></testsuites>\n' \
+    > "$results/sanitized-build.xml"
+fi
+
 catkin_test_results build/test_results
 results_status=$?
 /usr/bin/python3 "$REPO_DIR/scripts/count_results.py" build/test_results

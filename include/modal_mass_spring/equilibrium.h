@@ -21,7 +21,9 @@ struct Equilibrium
 // out-of-plane stiffness); a backtracking line search on the energy makes it converge from far away,
 // such as a sheet rotated 45 degrees out of the vertical. Converged when every unbalanced force
 // component is below `tolerance` times one particle's weight, or, once the line search can make no
-// more progress (round-off), below its square root. Throws std::runtime_error otherwise.
+// more progress (round-off), below its square root; never below ten times the round-off of the
+// spring forces (about stiffness x coordinates x machine epsilon), which on stiff grids is the
+// larger. Throws std::runtime_error otherwise.
 Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int max_iterations = 1000,
                              double tolerance = 1e-9);
 

@@ -6,6 +6,7 @@
 #include <Eigen/SparseCholesky>
 
 #include <cmath>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -35,6 +36,16 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
   // Forces are compared with one particle's weight, or without gravity with a small spring force.
   const double weight = p.mass * p.gravity.norm();
   const double scale = weight > 0.0 ? weight : p.structural_stiffness * p.spacing;
+  // No iteration gets the unbalanced force below the round-off of the spring forces: a spring's
+  // force k (l - l0) d / l is computed from coordinates of size |x|, so it carries an error of about
+  // k |x| eps, and a particle sums up to 12 of them. On stiff grids that is above 1e-9 of a weight.
+  double stiffest = std::max(p.structural_stiffness, p.shear_stiffness);
+  if (p.bending)
+    stiffest = std::max(stiffest, p.bending_stiffness);
+  const double extent = std::max(start.cwiseAbs().maxCoeff(), p.spacing * std::max(p.rows, p.cols));
+  const double roundoff = 12.0 * stiffest * extent * std::numeric_limits<double>::epsilon();
+  const double target = std::max(tolerance * scale, 10.0 * roundoff);
+  const double fallback = std::max(std::sqrt(tolerance) * scale, 1000.0 * roundoff);
 
   Equilibrium result;
   result.positions = start;
@@ -43,7 +54,7 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
   for (result.iterations = 0; result.iterations < max_iterations; ++result.iterations)
   {
     result.residual = r.cwiseAbs().maxCoeff();
-    if (result.residual <= tolerance * scale)
+    if (result.residual <= target)
       return result;
 
     // The exact Hessian where it is positive definite (Newton converges quadratically near a
@@ -90,7 +101,7 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
     {
       // No further progress: the unbalanced force is at the round-off of the spring forces.
       // Accept when that is small anyway (the square root of the tolerance).
-      if (r.cwiseAbs().maxCoeff() <= std::sqrt(tolerance) * scale)
+      if (r.cwiseAbs().maxCoeff() <= fallback)
       {
         result.residual = r.cwiseAbs().maxCoeff();
         return result;
@@ -99,12 +110,13 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
     }
   }
   result.residual = r.cwiseAbs().maxCoeff();
-  if (result.residual <= tolerance * scale)
+  if (result.residual <= target)
     return result;
   std::ostringstream msg;
   msg << "static equilibrium not found: Newton stopped after " << result.iterations
-      << " iterations with an unbalanced force of " << result.residual << " N (tolerance " << tolerance * scale
-      << " N); stiffer springs or a smaller load may help, or use linearization 'rest'";
+      << " iterations with an unbalanced force of " << result.residual << " N (tolerance " << target
+      << " N, of which the spring forces' round-off is about " << roundoff
+      << " N); use linearization 'rest' and initial_state 'initial', which need no equilibrium";
   throw std::runtime_error(msg.str());
 }
 

@@ -62,7 +62,9 @@ TEST(Simulation, SingleDampedModeUnderLinearFollowsClosedForm)
     for (int other = 0; other < 4; ++other)
     {
       if (other != mode)
+      {
         ASSERT_NEAR(sim.state().q[other], 0.0, 1e-14);
+      }
     }
   }
   // Newmark's phase error is O((omega dt)^2) per radian; here that is below 1e-4 of the amplitude.
