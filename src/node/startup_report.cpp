@@ -104,9 +104,14 @@ void StartupProgress::poll()
     if (!new_stage && t - last_report_ < repeat_seconds_)
       return;
     std::ostringstream out;
-    out << "starting up for " << seconds(t - start_) << ": " << describeStage(stage_);
+    char text[128];
+    std::snprintf(text, sizeof text, "starting up for %.1f s: ", t - start_);
+    out << text << describeStage(stage_);
     if (!new_stage || t - stage_start_ >= quiet_seconds_)
-      out << ", for " << seconds(t - stage_start_) << " so far";
+    {
+      std::snprintf(text, sizeof text, ", for %.1f s so far", t - stage_start_);
+      out << text;
+    }
     line = out.str();
     reported_stage_ = stage_;
     last_report_ = t;
