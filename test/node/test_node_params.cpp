@@ -6,7 +6,12 @@
 #include "xmlrpc_parameter_source.h"
 
 #include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
 
+#include <filesystem>
+#include <functional>
+
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -332,6 +337,49 @@ TEST(XmlRpcParameterSource, FeedsTheNodeConfiguration)
   EXPECT_EQ(c.grid.structural_stiffness, 3.0e3);
   EXPECT_EQ(c.grid.gravity, Eigen::Vector3d(0.0, 0.0, -1.0));
   EXPECT_EQ(c.unknown_keys, std::vector<std::string>{"publsh_rate"});
+}
+
+// A YAML node as the parameter server would hold it (scalars: integer, number, bool or string).
+XmlRpc::XmlRpcValue toXmlRpc(const YAML::Node& node)
+{
+  if (node.IsSequence())
+  {
+    XmlRpc::XmlRpcValue list;
+    list.setSize(static_cast<int>(node.size()));
+    for (size_t k = 0; k < node.size(); ++k)
+      list[static_cast<int>(k)] = toXmlRpc(node[k]);
+    return list;
+  }
+  const std::string text = node.Scalar();
+  if (const auto i = parseInteger(text))
+    return XmlRpc::XmlRpcValue(*i);
+  if (const auto d = parseNumber(text))
+    return XmlRpc::XmlRpcValue(*d);
+  if (text == "true" || text == "false")
+    return XmlRpc::XmlRpcValue(text == "true");
+  return XmlRpc::XmlRpcValue(text);
+}
+
+// Every config the node ships loads and passes every check, core and node, with no key the node
+// does not read.
+TEST(NodeParams, EveryShippedNodeConfigLoads)
+{
+  std::vector<std::string> loaded;
+  for (const auto& entry : std::filesystem::directory_iterator(std::string(MODAL_SOURCE_DIR) + "/config"))
+  {
+    if (entry.path().extension() != ".yaml")
+      continue;
+    SCOPED_TRACE(entry.path().string());
+    XmlRpc::XmlRpcValue params;
+    params.begin();
+    for (const auto& item : YAML::LoadFile(entry.path().string()))
+      params[item.first.as<std::string>()] = toXmlRpc(item.second);
+    const XmlRpcParameterSource source(params);
+    EXPECT_EQ(loadNodeConfiguration(source, source.keys()).unknown_keys, std::vector<std::string>{});
+    loaded.push_back(entry.path().filename().string());
+  }
+  std::sort(loaded.begin(), loaded.end());
+  EXPECT_EQ(loaded, (std::vector<std::string>{"cloth.yaml", "paper_2d.yaml", "paper_3d.yaml"}));
 }
 
 }  // namespace
