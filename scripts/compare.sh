@@ -27,7 +27,7 @@ rm -f "$data"/*.csv
   # The paper's experiments: cost over grid sizes, accuracy against full, largest stable step.
   "$tool" --config "$configs/paper_2d.yaml" --experiment all --sizes 5,10,20,40,80 --output "$data" "$@"
   "$tool" --config "$configs/paper_3d.yaml" --experiment all --sizes 5,10,20,40,80 --output "$data" "$@"
-  # Beyond the paper (issue 5): every method x linearization x integrator on the paper's 2D and 3D
+  # Beyond the paper: every method x linearization x integrator on the paper's 2D and 3D
   # setups (the 3D sheet keeps its 45 degree start under both linearizations), from the unloaded
   # start, 5 s, against a converged reference (full, explicit, 0.1 ms, checked against 0.05 ms), at
   # three time steps; the error sampled every 50 ms, with the wall time per step.

@@ -3,8 +3,10 @@
 
 #include "modal_mass_spring/SetMethod.h"
 #include "modal_mass_spring/simulation.h"
+#include "node_params.h"
 
 #include <diagnostic_updater/diagnostic_updater.h>
+#include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
@@ -12,54 +14,34 @@
 #include <tf2_ros/transform_broadcaster.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <atomic>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
 namespace modal_mass_spring
 {
 
-class ParameterSource;
-
-// Parameters of the node itself, on top of the core's GridParams and SimulationParams.
-struct NodeParams
-{
-  double real_time_factor = 1.0;  // simulated seconds per wall second
-  double publish_rate = 30.0;     // Hz: timer ticks, markers, TF and status
-  std::string fixed_frame = "world";
-  std::string grid_frame = "grid";       // static child of fixed_frame, translated by offset
-  std::vector<int> tf_particles;         // broadcast as <grid_frame>/particle_<index>
-  Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // m, where the grid is drawn in fixed_frame
-  bool color_by_strain = true;
-  double strain_scale = 0.1;      // |strain| drawn in full colour
-  double particle_diameter = 0.0; // m
-  double spring_width = 0.0;      // m
-  double status_log_period = 5.0; // s of wall time between status lines in the log; 0: never
-};
-
-// Reads and validates the node's own parameters; defaults that depend on the grid (tf_particles, the
-// marker sizes) come from `grid`. Throws std::invalid_argument naming the parameter, its value and
-// what is allowed.
-NodeParams loadNodeParams(const ParameterSource& source, const GridParams& grid, const SimulationParams& sim);
-
-// The child frame of a broadcast particle.
-std::string particleFrame(const std::string& grid_frame, int particle);
-
 class SimulationNode
 {
 public:
-  // Reads all parameters from private_nh, builds the simulation and starts the timer. Throws
-  // std::invalid_argument for a bad parameter (the message names it), std::runtime_error when the
-  // basis cannot be computed.
+  // Reads and validates every parameter from private_nh before building anything, then builds the
+  // simulation (saying what a slow start-up is doing), and starts the timer on nh's queue and the
+  // services on a queue and thread of their own. Throws std::invalid_argument for a bad parameter
+  // (the message names it), std::runtime_error when the basis cannot be computed.
   SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh);
+  ~SimulationNode();
 
 private:
+  // Holds the simulation for a service callback; the timer's step loop lets it in between two steps.
+  class ServiceLock;
+
+  void buildSimulation();
   void onTick(const ros::TimerEvent& event);
-  void publish(const ros::Time& stamp, bool send_tf);
-  visualization_msgs::MarkerArray makeMarkers(const Eigen::Matrix3Xd& points, const ros::Time& stamp) const;
   void publishStaticFrame();
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
-  uint8_t state() const;
+  uint8_t state() const;  // with mutex_ held
   std::string stateName() const;
 
   bool setMethod(SetMethod::Request& request, SetMethod::Response& response);
@@ -67,19 +49,26 @@ private:
   bool pause(std_srvs::SetBool::Request& request, std_srvs::SetBool::Response& response);
 
   ros::NodeHandle nh_, private_nh_;
-  NodeParams params_;
-  std::unique_ptr<Simulation> simulation_;
+  NodeConfiguration config_;
+  const NodeParams& params_ = config_.node;
 
+  // The simulation and the state around it, shared by the timer and the service thread.
+  std::mutex mutex_;
+  std::atomic<int> services_waiting_{0};
+  long state_changes_ = 0;  // by a service: pause, reset, set_method; ends the tick's stepping
+  std::unique_ptr<Simulation> simulation_;
   double steps_per_tick_ = 0.0;  // real_time_factor / (publish_rate * time_step), not whole
   double owed_steps_ = 0.0;      // the fraction of a step carried to the next tick
   bool paused_ = false;
   std::string divergence_message_;
   Eigen::Matrix3Xd last_points_;  // the last published (finite) positions
+  double last_energy_ = 0.0;      // and the last finite total energy
 
-  // This tick's steps and cost; the counters behind the diagnostics since their last update.
+  // This tick's steps and cost; the counters behind the diagnostics since their last update (timer
+  // thread only).
   int tick_steps_ = 0;
   double tick_step_seconds_ = 0.0;
-  int diag_ticks_ = 0, diag_slow_ticks_ = 0, diag_late_ticks_ = 0;
+  int diag_ticks_ = 0, diag_late_ticks_ = 0;
   double diag_step_seconds_ = 0.0;
   ros::Time last_tf_stamp_;
   ros::WallTime last_status_log_;
@@ -87,7 +76,9 @@ private:
   ros::Publisher markers_pub_, status_pub_;
   tf2_ros::TransformBroadcaster tf_broadcaster_;
   tf2_ros::StaticTransformBroadcaster static_broadcaster_;
-  diagnostic_updater::Updater diagnostics_;
+  std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
+  ros::CallbackQueue service_queue_;
+  std::unique_ptr<ros::AsyncSpinner> service_spinner_;
   ros::ServiceServer set_method_srv_, reset_srv_, pause_srv_;
   ros::Timer timer_;
 };

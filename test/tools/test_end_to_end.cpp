@@ -79,7 +79,7 @@ TEST_F(ModalCompareTool, SmallRunEndToEndToPngs)
                           " --steps 200 --interval 100 --sample 20 --sizes 5 --repeats 2 --min-repeat-seconds 0.001"));
   ASSERT_EQ(r3.status, 0) << r3.output;
   EXPECT_NE(r2.output.find("accuracy (paper_2d)"), std::string::npos) << r2.output;  // the summary table
-  // Issue 5: the combinations against a converged reference, and the stability of both integrators
+  // Beyond the paper: the combinations against a converged reference, and the stability of both integrators
   // with the implicit one checked at ten times the explicit one's step.
   const CommandResult rc = run(tool("--config " + config("paper_2d.yaml") +
                           " --tag combinations_paper_2d_dt1ms --experiment accuracy --vary integrator=explicit,implicit"

@@ -129,7 +129,7 @@ TEST(Accuracy, SamplesEveryMethodFromTheSameStateWithFullAsReference)
     EXPECT_EQ(s.points.cols(), 25);
 }
 
-// Issue 5: against a converged reference (full, explicit, at a tenth of the step), `full` at the
+// Beyond the paper: against a converged reference (full, explicit, at a tenth of the step), `full` at the
 // configured step is close to it, the reference agrees with itself at half its step, the modal
 // methods are further off, and every compared method carries its wall time per step.
 TEST(Accuracy, ConvergedReferenceMeasuresFullAndTheModalMethodsAlike)
@@ -162,7 +162,7 @@ TEST(Accuracy, ConvergedReferenceMeasuresFullAndTheModalMethodsAlike)
   EXPECT_THROW(runAccuracy(setup, options), std::invalid_argument);
 }
 
-// Issue 5: implicit physical stays stable at ten times the largest stable step of explicit physical.
+// Beyond the paper: implicit physical stays stable at ten times the largest stable step of explicit physical.
 TEST(Stability, ImplicitPhysicalIsStableAtTenTimesTheExplicitStepOnThePaper2dSetup)
 {
   ExperimentSetup setup = loadSetup("config/compare/paper_2d.yaml");

@@ -1,0 +1,154 @@
+// Every node parameter, its default and its range, in one place.
+#include "node_params.h"
+
+#include "modal_mass_spring/validation.h"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+#include <sstream>
+
+namespace modal_mass_spring
+{
+namespace
+{
+
+// More steps per tick than this would stall the timer for seconds; it is a configuration mistake.
+constexpr double kMaxStepsPerTick = 100000.0;
+// Lengths and scales beyond this (m, or a strain) are typing mistakes, and would overflow the markers.
+constexpr double kMaxLength = 1e6;
+
+// Remembers which keys were asked for, so the keys nobody reads can be named.
+class RecordingSource : public ParameterSource
+{
+public:
+  explicit RecordingSource(const ParameterSource& source) : source_(source) {}
+  std::optional<int> getInt(const std::string& key) const override { return note(key), source_.getInt(key); }
+  std::optional<double> getDouble(const std::string& key) const override { return note(key), source_.getDouble(key); }
+  std::optional<bool> getBool(const std::string& key) const override { return note(key), source_.getBool(key); }
+  std::optional<std::string> getString(const std::string& key) const override
+  {
+    return note(key), source_.getString(key);
+  }
+  std::optional<std::vector<int>> getIntList(const std::string& key) const override
+  {
+    return note(key), source_.getIntList(key);
+  }
+  std::optional<std::vector<double>> getDoubleList(const std::string& key) const override
+  {
+    return note(key), source_.getDoubleList(key);
+  }
+  const std::set<std::string>& queried() const { return queried_; }
+
+private:
+  void note(const std::string& key) const { queried_.insert(key); }
+  const ParameterSource& source_;
+  mutable std::set<std::string> queried_;
+};
+
+// A number in (0, max].
+double positive(const ParameterSource& s, const std::string& name, double fallback, double max, const std::string& unit)
+{
+  const double value = s.getDouble(name).value_or(fallback);
+  if (!std::isfinite(value) || value <= 0.0 || value > max)
+  {
+    std::ostringstream allowed;
+    allowed << "must be a number > 0 and <= " << max << unit;
+    rejectParameter(name, value, allowed.str());
+  }
+  return value;
+}
+
+// A number in [0, max].
+double nonNegative(const ParameterSource& s, const std::string& name, double fallback, double max,
+                   const std::string& unit)
+{
+  const double value = s.getDouble(name).value_or(fallback);
+  if (!std::isfinite(value) || value < 0.0 || value > max)
+  {
+    std::ostringstream allowed;
+    allowed << "must be a number >= 0 and <= " << max << unit;
+    rejectParameter(name, value, allowed.str());
+  }
+  return value;
+}
+
+std::string frameId(const ParameterSource& s, const std::string& name, const std::string& fallback)
+{
+  const std::string value = s.getString(name).value_or(fallback);
+  if (value.empty() || value.front() == '/' || value.find_first_of(" \t\n\r") != std::string::npos)
+    rejectParameter(name, "'" + value + "'", "must be a non-empty frame id without a leading '/' or spaces");
+  return value;
+}
+
+}  // namespace
+
+std::string particleFrame(const std::string& grid_frame, int particle)
+{
+  return grid_frame + "/particle_" + std::to_string(particle);
+}
+
+NodeParams loadNodeParams(const ParameterSource& s, const GridParams& grid, const SimulationParams& sim)
+{
+  NodeParams p;
+  p.real_time_factor = positive(s, "real_time_factor", p.real_time_factor, 1000.0, "");
+  p.publish_rate = positive(s, "publish_rate", p.publish_rate, 1000.0, " Hz");
+  const double steps_per_tick = p.real_time_factor / (p.publish_rate * sim.time_step);
+  if (steps_per_tick > kMaxStepsPerTick)
+  {
+    std::ostringstream allowed;
+    allowed << "real_time_factor / (publish_rate * time_step) = " << steps_per_tick
+            << " steps per tick; must be at most " << kMaxStepsPerTick
+            << " (lower real_time_factor, raise publish_rate or time_step)";
+    rejectParameter("real_time_factor", p.real_time_factor, allowed.str());
+  }
+
+  p.fixed_frame = frameId(s, "fixed_frame", p.fixed_frame);
+  p.grid_frame = frameId(s, "grid_frame", p.grid_frame);
+  if (p.grid_frame == p.fixed_frame)
+    rejectParameter("grid_frame", "'" + p.grid_frame + "'", "must differ from fixed_frame");
+
+  // validateParameters bounds the grid far below 2^31 particles.
+  const int n = grid.rows * grid.cols;
+  // The two bottom corners: the particles that move most under gravity.
+  std::vector<int> corners{(grid.rows - 1) * grid.cols, n - 1};
+  corners.erase(std::unique(corners.begin(), corners.end()), corners.end());
+  p.tf_particles = s.getIntList("tf_particles").value_or(corners);
+  checkParticleIndices("tf_particles", p.tf_particles, n);
+
+  if (const auto offset = s.getDoubleList("offset"))
+  {
+    const auto bad = std::find_if(offset->begin(), offset->end(),
+                                  [](double v) { return !std::isfinite(v) || std::abs(v) > kMaxLength; });
+    if (offset->size() != 3)
+      rejectParameter("offset", std::to_string(offset->size()) + " values",
+                      "must be a list of 3 numbers [x, y, z] in m, each in [-1e+06, 1e+06]");
+    if (bad != offset->end())
+      rejectParameter("offset", *bad, "must be a list of 3 numbers [x, y, z] in m, each in [-1e+06, 1e+06]");
+    p.offset = Eigen::Vector3d((*offset)[0], (*offset)[1], (*offset)[2]);
+  }
+  p.color_by_strain = s.getBool("color_by_strain").value_or(p.color_by_strain);
+  p.strain_scale = positive(s, "strain_scale", p.strain_scale, kMaxLength, "");
+  p.particle_diameter = positive(s, "particle_diameter", 0.3 * grid.spacing, kMaxLength, " m");
+  p.spring_width = positive(s, "spring_width", 0.06 * grid.spacing, kMaxLength, " m");
+  p.status_log_period = nonNegative(s, "status_log_period", p.status_log_period, 86400.0, " s (0: no status lines)");
+  p.diagnostic_period = positive(s, "diagnostic_period", p.diagnostic_period, 3600.0, " s");
+  return p;
+}
+
+NodeConfiguration loadNodeConfiguration(const ParameterSource& source, const std::vector<std::string>& present_keys)
+{
+  const RecordingSource recording(source);
+  NodeConfiguration c;
+  c.grid = loadGridParams(recording);
+  c.simulation = loadSimulationParams(recording);
+  // The node's own checks (tf_particles, steps per tick) rely on a valid grid and time step.
+  validateParameters(c.grid, c.simulation);
+  c.node = loadNodeParams(recording, c.grid, c.simulation);
+  for (const auto& key : present_keys)
+    if (!recording.queried().count(key))
+      c.unknown_keys.push_back(key);
+  return c;
+}
+
+}  // namespace modal_mass_spring

@@ -1,0 +1,57 @@
+// The node's parameters: its own on top of the core's, read and validated before anything is built.
+#pragma once
+
+#include "modal_mass_spring/grid.h"
+#include "modal_mass_spring/parameters.h"
+#include "modal_mass_spring/simulation.h"
+
+#include <Eigen/Core>
+
+#include <string>
+#include <vector>
+
+namespace modal_mass_spring
+{
+
+// Parameters of the node itself, on top of the core's GridParams and SimulationParams.
+struct NodeParams
+{
+  double real_time_factor = 1.0;  // simulated seconds per wall second
+  double publish_rate = 30.0;     // Hz: timer ticks, markers, TF and status
+  std::string fixed_frame = "world";
+  std::string grid_frame = "grid";       // static child of fixed_frame, translated by offset
+  std::vector<int> tf_particles;         // broadcast as <grid_frame>/particle_<index>
+  Eigen::Vector3d offset = Eigen::Vector3d::Zero();  // m, where the grid is drawn in fixed_frame
+  bool color_by_strain = true;
+  double strain_scale = 0.1;      // |strain| drawn in full colour
+  double particle_diameter = 0.0; // m
+  double spring_width = 0.0;      // m
+  double status_log_period = 5.0; // s of wall time between status lines in the log; 0: never
+  double diagnostic_period = 1.0; // s between /diagnostics messages (diagnostic_updater reads it too)
+};
+
+// Reads and validates the node's own parameters, each named once here with its range; defaults that
+// depend on the grid (tf_particles, the marker sizes) come from `grid`. `grid` and `sim` must be valid
+// (validateParameters). Throws std::invalid_argument naming the parameter, its value and what is
+// allowed.
+NodeParams loadNodeParams(const ParameterSource& source, const GridParams& grid, const SimulationParams& sim);
+
+// Everything the node is configured with.
+struct NodeConfiguration
+{
+  GridParams grid;
+  SimulationParams simulation;
+  NodeParams node;
+  std::vector<std::string> unknown_keys;  // present but read by nobody: typos, or another node's keys
+};
+
+// Reads and validates every parameter of the node, builds nothing, so a bad parameter fails at once
+// whatever the grid's size: the core's (loadGridParams, loadSimulationParams, validateParameters),
+// then the node's (loadNodeParams). `present_keys` are the keys set for the node; the ones no getter
+// asked for end in unknown_keys. Throws std::invalid_argument naming the first bad parameter.
+NodeConfiguration loadNodeConfiguration(const ParameterSource& source, const std::vector<std::string>& present_keys);
+
+// The child frame of a broadcast particle.
+std::string particleFrame(const std::string& grid_frame, int particle);
+
+}  // namespace modal_mass_spring

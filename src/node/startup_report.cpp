@@ -1,0 +1,122 @@
+// Start-up lines: times per stage, the modes in plain words, progress of a slow start-up.
+#include "startup_report.h"
+
+#include <cstdio>
+#include <sstream>
+
+namespace modal_mass_spring
+{
+namespace
+{
+
+std::string seconds(double s)
+{
+  char text[32];
+  if (s < 1.0)
+    std::snprintf(text, sizeof text, "%.3g ms", 1e3 * s);
+  else
+    std::snprintf(text, sizeof text, "%.3g s", s);
+  return text;
+}
+
+std::string number(double value)
+{
+  char text[32];
+  std::snprintf(text, sizeof text, "%.4g", value);
+  return text;
+}
+
+}  // namespace
+
+std::string describeModes(const Eigen::VectorXd& frequencies, int num_zero_modes)
+{
+  const int r = static_cast<int>(frequencies.size());
+  std::ostringstream out;
+  out << r << (r == 1 ? " mode, " : " modes, ");
+  if (r == 0)
+    return out.str() + "none found";
+  if (num_zero_modes >= r)
+  {
+    out << (r == 1 ? "zero" : "all zero")
+        << " (frequency 0 rad/s: the grid has no stiffness along "
+        << (r == 1 ? "it" : "any of them") << " at the linearization point, so the modal methods cannot "
+        << "resist motion there; linearization: equilibrium gives a hanging sheet stiffness)";
+    return out.str();
+  }
+  const Eigen::VectorXd nonzero = frequencies.tail(r - num_zero_modes);
+  if (num_zero_modes == 0)
+    out << number(frequencies.minCoeff()) << " to " << number(frequencies.maxCoeff()) << " rad/s, none zero";
+  else
+    out << num_zero_modes << " zero, the non-zero " << (r - num_zero_modes == 1 ? "one " : "ones ")
+        << number(nonzero.minCoeff()) << " to " << number(nonzero.maxCoeff()) << " rad/s";
+  return out.str();
+}
+
+std::string describeStartupTimes(const LinearizationInfo& linearization, const ModalBasis& basis, double total_seconds)
+{
+  std::ostringstream out;
+  out << "start-up " << seconds(total_seconds) << ": ";
+  if (linearization.equilibrium_solved)
+    out << "equilibrium " << seconds(linearization.equilibrium_seconds) << ", ";
+  out << "stiffness " << seconds(linearization.stiffness_seconds);
+  if (basis.factorization_seconds > 0.0)
+    out << ", factorisation " << seconds(basis.factorization_seconds);
+  out << ", eigensolver " << seconds(std::max(0.0, basis.build_seconds - basis.factorization_seconds));
+  return out.str();
+}
+
+std::string describeStage(const std::string& stage)
+{
+  if (stage == "equilibrium")
+    return "solving the static equilibrium under gravity (equilibrium)";
+  if (stage == "stiffness")
+    return "assembling the stiffness matrix (stiffness)";
+  if (stage == "factorisation")
+    return "factorising the shifted stiffness matrix (factorisation)";
+  if (stage == "eigensolver")
+    return "computing the modes (eigensolver)";
+  return stage;
+}
+
+StartupProgress::StartupProgress(std::function<void(const std::string&)> log, std::function<double()> now,
+                                 double quiet_seconds, double repeat_seconds)
+  : log_(std::move(log)), now_(std::move(now)), quiet_seconds_(quiet_seconds), repeat_seconds_(repeat_seconds)
+{
+  start_ = stage_start_ = now_();
+}
+
+void StartupProgress::onStage(const std::string& stage)
+{
+  std::lock_guard<std::mutex> lock(mutex_);
+  stage_ = stage;
+  stage_start_ = now_();
+}
+
+void StartupProgress::poll()
+{
+  std::string line;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const double t = now_();
+    if (t - start_ < quiet_seconds_)
+      return;
+    const bool new_stage = stage_ != reported_stage_;
+    if (!new_stage && t - last_report_ < repeat_seconds_)
+      return;
+    std::ostringstream out;
+    char text[128];
+    std::snprintf(text, sizeof text, "starting up for %.1f s: ", t - start_);
+    out << text << describeStage(stage_);
+    if (!new_stage || t - stage_start_ >= quiet_seconds_)
+    {
+      std::snprintf(text, sizeof text, ", for %.1f s so far", t - stage_start_);
+      out << text;
+    }
+    line = out.str();
+    reported_stage_ = stage_;
+    last_report_ = t;
+  }
+  log_(line);
+}
+
+}  // namespace modal_mass_spring

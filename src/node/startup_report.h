@@ -1,0 +1,50 @@
+// What the node says about its start-up: the time of each stage, the modes found, and, while a slow
+// start-up runs, what it is doing.
+#pragma once
+
+#include "modal_mass_spring/modal_basis.h"
+#include "modal_mass_spring/simulation.h"
+
+#include <Eigen/Core>
+
+#include <functional>
+#include <mutex>
+#include <string>
+
+namespace modal_mass_spring
+{
+
+// "4 modes, 5.186 to 18.85 rad/s, none zero"; "30 modes, 12 zero, the non-zero ones 0.5 to 9 rad/s";
+// "30 modes, all zero (no stiffness along any of them: ...)".
+std::string describeModes(const Eigen::VectorXd& frequencies, int num_zero_modes);
+
+// "start-up 3.1 s: equilibrium 3.02 s, stiffness 2.1 ms, factorisation 4.9 ms, eigensolver 28.9 ms"
+// (equilibrium only when it was solved); `total_seconds` is the whole Simulation construction.
+std::string describeStartupTimes(const LinearizationInfo& linearization, const ModalBasis& basis, double total_seconds);
+
+// "solving the static equilibrium under gravity" for "equilibrium", and so on for the core's stages.
+std::string describeStage(const std::string& stage);
+
+// Follows the core's start-up stages (onStage is a StageFn) and, once the start-up has taken longer
+// than `quiet_seconds`, logs what it is doing: at once, then at each new stage, and every
+// `repeat_seconds` within a long one. poll() is called from another thread (or a test) with the time;
+// `now` gives seconds on any monotonic clock.
+class StartupProgress
+{
+public:
+  StartupProgress(std::function<void(const std::string&)> log, std::function<double()> now,
+                  double quiet_seconds = 1.0, double repeat_seconds = 10.0);
+
+  void onStage(const std::string& stage);
+  void poll();
+
+private:
+  std::function<void(const std::string&)> log_;
+  std::function<double()> now_;
+  double quiet_seconds_, repeat_seconds_;
+  std::mutex mutex_;
+  double start_ = 0.0, stage_start_ = 0.0, last_report_ = 0.0;
+  std::string stage_ = "building the grid", reported_stage_;
+};
+
+}  // namespace modal_mass_spring

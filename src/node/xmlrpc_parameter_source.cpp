@@ -1,0 +1,197 @@
+// XmlRpc types to the ParameterSource getters; wrong types are errors naming the key, never guesses.
+#include "xmlrpc_parameter_source.h"
+
+#include "parameter_values.h"
+
+#include <sstream>
+#include <stdexcept>
+
+namespace modal_mass_spring
+{
+namespace
+{
+
+using XmlRpc::XmlRpcValue;
+
+std::string describe(const XmlRpcValue& constant)
+{
+  XmlRpcValue value = constant;  // XmlRpcValue's conversions are not const
+  std::ostringstream out;
+  switch (value.getType())
+  {
+    case XmlRpcValue::TypeString:
+      out << "'" << static_cast<std::string>(value) << "' (a string)";
+      break;
+    case XmlRpcValue::TypeBoolean:
+      out << (static_cast<bool>(value) ? "true" : "false") << " (a bool)";
+      break;
+    case XmlRpcValue::TypeInt:
+      out << static_cast<int>(value) << " (an integer)";
+      break;
+    case XmlRpcValue::TypeDouble:
+      out << static_cast<double>(value) << " (a floating-point number)";
+      break;
+    case XmlRpcValue::TypeArray:
+      out << "a list of " << value.size() << " values";
+      break;
+    case XmlRpcValue::TypeStruct:
+      out << "a map";
+      break;
+    default:
+      out << "a value of XmlRpc type " << value.getType();
+  }
+  return out.str();
+}
+
+[[noreturn]] void throwWrongType(const std::string& key, const std::string& expected, const XmlRpcValue& value)
+{
+  throw std::invalid_argument(wrongType(key, expected) + ", got " + describe(value));
+}
+
+std::string asString(const XmlRpcValue& value)
+{
+  return static_cast<std::string>(const_cast<XmlRpcValue&>(value));
+}
+
+std::optional<int> toInt(const XmlRpcValue& value)
+{
+  if (value.getType() == XmlRpcValue::TypeInt)
+    return static_cast<int>(const_cast<XmlRpcValue&>(value));
+  if (value.getType() == XmlRpcValue::TypeString)
+    return parseInteger(asString(value));
+  return std::nullopt;
+}
+
+std::optional<double> toDouble(const XmlRpcValue& value)
+{
+  auto& v = const_cast<XmlRpcValue&>(value);
+  if (value.getType() == XmlRpcValue::TypeInt)
+    return static_cast<double>(static_cast<int>(v));
+  if (value.getType() == XmlRpcValue::TypeDouble)
+    return static_cast<double>(v);
+  if (value.getType() == XmlRpcValue::TypeString)
+    return parseNumber(asString(value));
+  return std::nullopt;
+}
+
+// A list from an XmlRpc array or from the text of a YAML list; `convert` turns one element (an
+// XmlRpc value, or a string from the text) into T.
+template <typename T, typename Convert>
+std::vector<T> toList(const std::string& key, const XmlRpcValue& value, const std::string& expected,
+                      const std::string& example, Convert convert)
+{
+  const std::string hint = expected + ", e.g. " + example + " (on the rosrun command line: _" + key + ":='" +
+                           example + "')";
+  std::vector<XmlRpcValue> items;
+  if (value.getType() == XmlRpcValue::TypeArray)
+  {
+    for (int k = 0; k < value.size(); ++k)
+      items.push_back(value[k]);
+  }
+  else if (value.getType() == XmlRpcValue::TypeString)
+  {
+    const auto texts = parseListText(asString(value));
+    if (!texts)
+      throwWrongType(key, hint, value);
+    for (const auto& text : *texts)
+      items.emplace_back(text);
+  }
+  else
+  {
+    throwWrongType(key, hint, value);
+  }
+  std::vector<T> list;
+  for (size_t k = 0; k < items.size(); ++k)
+  {
+    const std::optional<T> item = convert(items[k]);
+    if (!item)
+      throw std::invalid_argument(wrongType(key, hint) + ", element " + std::to_string(k) + " is " +
+                                  describe(items[k]));
+    list.push_back(*item);
+  }
+  return list;
+}
+
+}  // namespace
+
+XmlRpcParameterSource::XmlRpcParameterSource(const XmlRpc::XmlRpcValue& params) : params_(params)
+{
+  if (params_.getType() != XmlRpcValue::TypeStruct)
+    params_ = XmlRpcValue();
+}
+
+const XmlRpc::XmlRpcValue* XmlRpcParameterSource::find(const std::string& key) const
+{
+  if (params_.getType() != XmlRpcValue::TypeStruct || !params_.hasMember(key))
+    return nullptr;
+  return &params_[key];
+}
+
+std::vector<std::string> XmlRpcParameterSource::keys() const
+{
+  std::vector<std::string> names;
+  if (params_.getType() == XmlRpcValue::TypeStruct)
+    for (auto it = params_.begin(); it != params_.end(); ++it)
+      names.push_back(it->first);
+  return names;
+}
+
+std::optional<int> XmlRpcParameterSource::getInt(const std::string& key) const
+{
+  const XmlRpcValue* value = find(key);
+  if (!value)
+    return std::nullopt;
+  const auto result = toInt(*value);
+  if (!result)
+    throwWrongType(key, "an integer", *value);
+  return result;
+}
+
+std::optional<double> XmlRpcParameterSource::getDouble(const std::string& key) const
+{
+  const XmlRpcValue* value = find(key);
+  if (!value)
+    return std::nullopt;
+  const auto result = toDouble(*value);
+  if (!result)
+    throwWrongType(key, "a number", *value);
+  return result;
+}
+
+std::optional<bool> XmlRpcParameterSource::getBool(const std::string& key) const
+{
+  const XmlRpcValue* value = find(key);
+  if (!value)
+    return std::nullopt;
+  if (value->getType() != XmlRpcValue::TypeBoolean)
+    throwWrongType(key, "true or false", *value);
+  return static_cast<bool>(const_cast<XmlRpcValue&>(*value));
+}
+
+std::optional<std::string> XmlRpcParameterSource::getString(const std::string& key) const
+{
+  const XmlRpcValue* value = find(key);
+  if (!value)
+    return std::nullopt;
+  if (value->getType() != XmlRpcValue::TypeString)
+    throwWrongType(key, "a string", *value);
+  return asString(*value);
+}
+
+std::optional<std::vector<int>> XmlRpcParameterSource::getIntList(const std::string& key) const
+{
+  const XmlRpcValue* value = find(key);
+  if (!value)
+    return std::nullopt;
+  return toList<int>(key, *value, "a list of integers", "[20, 24]", toInt);
+}
+
+std::optional<std::vector<double>> XmlRpcParameterSource::getDoubleList(const std::string& key) const
+{
+  const XmlRpcValue* value = find(key);
+  if (!value)
+    return std::nullopt;
+  return toList<double>(key, *value, "a list of numbers", "[0.0, 0.0, -9.81]", toDouble);
+}
+
+}  // namespace modal_mass_spring

@@ -1,0 +1,141 @@
+#!/usr/bin/env python3
+"""Rostest sweep of bad node parameters: for each case the node is started on the paper's 2D config
+with one thing wrong (on the parameter server, or on the command line as rosrun passes it), and must
+exit with code 1 (not a signal, not a hang) and one FATAL line naming the parameter, before it builds
+anything (no start-up line). One master (rostest's) serves every case."""
+import re
+import os
+import subprocess
+import sys
+import unittest
+
+import rospkg
+import rospy
+import rostest
+import yaml
+from roslib.packages import find_node
+
+NAN = float("nan")
+
+# (parameters set on the server, rosrun command-line arguments, the names the FATAL may give)
+CASES = [
+    ({"rows": 0}, [], ["rows"]),
+    ({"rows": -3}, [], ["rows"]),
+    ({"rows": "abc"}, [], ["rows"]),
+    ({"rows": 5.5}, [], ["rows"]),
+    ({"cols": 0}, [], ["cols"]),
+    ({"rows": 1, "cols": 1}, [], ["rows", "cols"]),
+    ({"rows": 100000000}, [], ["rows"]),
+    ({"spacing": 0.0}, [], ["spacing"]),
+    ({"spacing": -0.1}, [], ["spacing"]),
+    ({}, ["_spacing:=ten"], ["spacing"]),
+    ({"dimension": 4}, [], ["dimension"]),
+    ({"mass": 0.0}, [], ["mass"]),
+    ({"mass": NAN}, [], ["mass"]),
+    ({"structural_stiffness": -1.0}, [], ["structural_stiffness"]),
+    ({"structural_stiffness": "3.0e6x"}, [], ["structural_stiffness"]),
+    ({"shear_stiffness": 0.0}, [], ["shear_stiffness"]),
+    ({"bending": "yes"}, [], ["bending"]),
+    ({"bending": True, "bending_stiffness": 0.0}, [], ["bending_stiffness"]),
+    ({"fixed": [25]}, [], ["fixed"]),
+    ({"fixed": [0, 0]}, [], ["fixed"]),
+    ({"fixed": list(range(25))}, [], ["fixed"]),
+    ({"fixed": "none"}, [], ["fixed"]),
+    ({"gravity": [0.0, 0.0]}, [], ["gravity"]),
+    ({}, ["_gravity:=[0,0"], ["gravity"]),
+    ({}, ["_gravity:=[0,x,0]"], ["gravity"]),
+    ({"gravity": [0.0, 1.0, -9.81]}, [], ["gravity"]),
+    ({"gravity": [0.0, 0.0, NAN]}, [], ["gravity"]),
+    ({"rotation_deg": 45.0}, [], ["rotation_deg"]),
+    ({}, ["_method:=bogus"], ["method"]),
+    ({"method": 3}, [], ["method"]),
+    ({"num_modes": 0}, [], ["num_modes"]),
+    ({"num_modes": 60}, [], ["num_modes"]),
+    ({"alpha": -1.0}, [], ["alpha"]),
+    ({"beta": -1.0}, [], ["beta"]),
+    ({"time_step": 0.0}, [], ["time_step"]),
+    ({"time_step": -0.001}, [], ["time_step"]),
+    ({"divergence_limit": -1.0}, [], ["divergence_limit"]),
+    ({"linearization": "bogus"}, [], ["linearization"]),
+    ({"integrator": "bogus"}, [], ["integrator"]),
+    ({"initial_state": "bogus"}, [], ["initial_state"]),
+    ({"newton_max_iterations": 0}, [], ["newton_max_iterations"]),
+    ({"memory_limit_gb": 0.0}, [], ["memory_limit_gb"]),
+    ({"memory_limit_gb": -1.0}, [], ["memory_limit_gb"]),
+    ({"rows": 3000, "cols": 3000, "dimension": 3, "num_modes": 30}, [], ["rows"]),  # names memory_limit_gb too
+    ({"real_time_factor": 0.0}, [], ["real_time_factor"]),
+    ({"real_time_factor": 10000.0}, [], ["real_time_factor"]),
+    ({"real_time_factor": 1000.0, "publish_rate": 1.0}, [], ["real_time_factor"]),
+    ({"publish_rate": -5.0}, [], ["publish_rate"]),
+    ({"publish_rate": 0}, [], ["publish_rate"]),
+    ({}, ["_publish_rate:=fast"], ["publish_rate"]),
+    ({"fixed_frame": ""}, [], ["fixed_frame"]),
+    ({"fixed_frame": "/world"}, [], ["fixed_frame"]),
+    ({"grid_frame": "world"}, [], ["grid_frame"]),
+    ({"tf_particles": [25]}, [], ["tf_particles"]),
+    ({"tf_particles": [1, 1]}, [], ["tf_particles"]),
+    ({"tf_particles": [0.5]}, [], ["tf_particles"]),
+    ({}, ["_tf_particles:=[0,"], ["tf_particles"]),
+    ({"offset": [0.0, 0.0]}, [], ["offset"]),
+    ({"offset": [0.0, NAN, 0.0]}, [], ["offset"]),
+    ({"color_by_strain": "yes"}, [], ["color_by_strain"]),
+    ({"strain_scale": 0.0}, [], ["strain_scale"]),
+    ({"particle_diameter": -1.0}, [], ["particle_diameter"]),
+    ({"spring_width": 0.0}, [], ["spring_width"]),
+    ({"status_log_period": -1.0}, [], ["status_log_period"]),
+    ({}, ["_diagnostic_period:=-1"], ["diagnostic_period"]),
+    ({"diagnostic_period": 0.0}, [], ["diagnostic_period"]),
+    # A grid whose equilibrium and basis would take minutes: the node parameter fails at once.
+    ({"rows": 600, "cols": 600, "dimension": 3, "num_modes": 30, "linearization": "equilibrium",
+      "tf_particles": [360000]}, [], ["tf_particles"]),
+    ({"rows": 600, "cols": 600, "dimension": 3, "num_modes": 30, "linearization": "equilibrium",
+      "publish_rate": -1.0}, [], ["publish_rate"]),
+]
+
+
+def named(fatal, names):
+    """Whether the FATAL line's quoted parameter ('rows', or 'rows x cols' for a pair) is one of names."""
+    quoted = re.search(r"invalid parameter '([^']*)'", fatal)
+    return bool(quoted) and any(re.search(r"\b%s\b" % n, quoted.group(1)) for n in names)
+
+
+class NodeBadInputs(unittest.TestCase):
+    def test_every_bad_input_is_refused_by_name(self):
+        package = rospkg.RosPack().get_path("modal_mass_spring")
+        with open(os.path.join(package, "config", "paper_2d.yaml")) as config:
+            base = yaml.safe_load(config)
+        executable = find_node("modal_mass_spring", "modal_mass_spring_node")
+        self.assertTrue(executable, "modal_mass_spring_node not found")
+        env = dict(os.environ, ROSCONSOLE_FORMAT="[${severity}] ${message}")
+        self.assertGreaterEqual(len(CASES), 40)
+        failures = []
+        for index, (params, args, names) in enumerate(CASES):
+            name = "bad_%02d" % index
+            rospy.set_param("/" + name, dict(base, **params))
+            what = "case %d: %s %s" % (index, params if len(str(params)) < 120 else "(large)", " ".join(args))
+            try:
+                run = subprocess.run([executable[0], "__name:=" + name] + args, env=env, stdout=subprocess.PIPE,
+                                     stderr=subprocess.STDOUT, text=True, errors="replace", timeout=60)
+            except subprocess.TimeoutExpired:
+                failures.append("%s: no exit within 60 s (it came up, or hangs)" % what)
+                continue
+            finally:
+                rospy.delete_param("/" + name)
+            output = run.stdout
+            fatal = [line for line in output.splitlines() if "[FATAL]" in line]
+            if run.returncode != 1:
+                failures.append("%s: exit code %d (negative: a signal)\n%s" % (what, run.returncode, output))
+            elif len(fatal) != 1:
+                failures.append("%s: %d FATAL lines\n%s" % (what, len(fatal), output))
+            elif not named(fatal[0], names):
+                failures.append("%s: the FATAL names none of %s: %s" % (what, names, fatal[0]))
+            elif re.search(r"grid \(\dD, \d+ particles", output):
+                failures.append("%s: built a simulation before refusing\n%s" % (what, output))
+            else:
+                print("%s -> %s" % (what, fatal[0]))
+        self.assertEqual(failures, [], "\n\n".join(failures))
+
+
+if __name__ == "__main__":
+    rospy.init_node("node_bad_inputs", anonymous=True)
+    rostest.rosrun("modal_mass_spring", "node_bad_inputs", NodeBadInputs, sys.argv)

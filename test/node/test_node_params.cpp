@@ -1,0 +1,391 @@
+// The node's parameters without a ROS master: every range check of loadNodeParams, the order of the
+// checks (all of them before anything is built), the unknown-key report, and the conversions of
+// the XmlRpc source (numbers and lists given as text).
+#include "node_params.h"
+#include "parameter_values.h"
+#include "xmlrpc_parameter_source.h"
+
+#include <gtest/gtest.h>
+#include <yaml-cpp/yaml.h>
+
+#include <filesystem>
+#include <functional>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <variant>
+#include <vector>
+
+namespace
+{
+
+using namespace modal_mass_spring;
+
+using Value = std::variant<int, double, bool, std::string, std::vector<int>, std::vector<double>>;
+
+// Parameters as the parameter server would hold them, without one.
+class FakeSource : public ParameterSource
+{
+public:
+  FakeSource(std::map<std::string, Value> values = {}) : values_(std::move(values)) {}
+
+  std::optional<int> getInt(const std::string& key) const override { return get<int>(key, "an integer"); }
+  std::optional<double> getDouble(const std::string& key) const override
+  {
+    const auto it = values_.find(key);
+    if (it != values_.end() && std::holds_alternative<int>(it->second))
+      return std::get<int>(it->second);
+    return get<double>(key, "a number");
+  }
+  std::optional<bool> getBool(const std::string& key) const override { return get<bool>(key, "true or false"); }
+  std::optional<std::string> getString(const std::string& key) const override { return get<std::string>(key, "a string"); }
+  std::optional<std::vector<int>> getIntList(const std::string& key) const override
+  {
+    return get<std::vector<int>>(key, "a list of integers");
+  }
+  std::optional<std::vector<double>> getDoubleList(const std::string& key) const override
+  {
+    return get<std::vector<double>>(key, "a list of numbers");
+  }
+
+  std::vector<std::string> keys() const
+  {
+    std::vector<std::string> names;
+    for (const auto& entry : values_)
+      names.push_back(entry.first);
+    return names;
+  }
+
+private:
+  template <typename T>
+  std::optional<T> get(const std::string& key, const std::string& expected) const
+  {
+    const auto it = values_.find(key);
+    if (it == values_.end())
+      return std::nullopt;
+    if (!std::holds_alternative<T>(it->second))
+      throw std::invalid_argument(wrongType(key, expected));
+    return std::get<T>(it->second);
+  }
+  std::map<std::string, Value> values_;
+};
+
+// The message of the std::invalid_argument that loading `values` throws, or "" when it loads.
+std::string refusal(const std::map<std::string, Value>& values)
+{
+  const FakeSource source(values);
+  try
+  {
+    loadNodeConfiguration(source, source.keys());
+  }
+  catch (const std::invalid_argument& error)
+  {
+    return error.what();
+  }
+  return "";
+}
+
+const double kNaN = std::numeric_limits<double>::quiet_NaN();
+const double kInf = std::numeric_limits<double>::infinity();
+
+TEST(NodeParams, DefaultsOnThePaperGrid)
+{
+  const FakeSource source;
+  const NodeConfiguration c = loadNodeConfiguration(source, source.keys());
+  EXPECT_EQ(c.node.tf_particles, (std::vector<int>{20, 24}));  // the bottom corners of 5 x 5
+  EXPECT_DOUBLE_EQ(c.node.particle_diameter, 0.3 * 0.1);
+  EXPECT_DOUBLE_EQ(c.node.spring_width, 0.06 * 0.1);
+  EXPECT_DOUBLE_EQ(c.node.publish_rate, 30.0);
+  EXPECT_DOUBLE_EQ(c.node.diagnostic_period, 1.0);
+  EXPECT_EQ(c.node.fixed_frame, "world");
+  EXPECT_EQ(c.node.grid_frame, "grid");
+  EXPECT_TRUE(c.unknown_keys.empty());
+}
+
+TEST(NodeParams, ValuesAtTheEndsOfTheirRangesLoad)
+{
+  const FakeSource source({{"publish_rate", 1000.0},
+                           {"real_time_factor", 1000.0},
+                           {"time_step", 0.01},
+                           {"status_log_period", 0},
+                           {"diagnostic_period", 3600.0},
+                           {"offset", std::vector<double>{-1e6, 0.0, 1e6}},
+                           {"tf_particles", std::vector<int>{}},
+                           {"color_by_strain", false}});
+  const NodeParams p = loadNodeConfiguration(source, source.keys()).node;
+  EXPECT_DOUBLE_EQ(p.publish_rate, 1000.0);
+  EXPECT_DOUBLE_EQ(p.real_time_factor, 1000.0);
+  EXPECT_DOUBLE_EQ(p.status_log_period, 0.0);
+  EXPECT_DOUBLE_EQ(p.diagnostic_period, 3600.0);
+  EXPECT_EQ(p.offset, Eigen::Vector3d(-1e6, 0.0, 1e6));
+  EXPECT_TRUE(p.tf_particles.empty());
+  EXPECT_FALSE(p.color_by_strain);
+}
+
+struct BadCase
+{
+  std::map<std::string, Value> values;
+  std::string expected;  // the start of the message: the parameter and its value
+};
+
+TEST(NodeParams, EveryNodeParameterHasARangeCheck)
+{
+  const std::vector<BadCase> cases{
+      {{{"real_time_factor", 0.0}}, "invalid parameter 'real_time_factor' = 0: must be a number > 0 and <= 1000"},
+      {{{"real_time_factor", -1.0}}, "invalid parameter 'real_time_factor' = -1"},
+      {{{"real_time_factor", 1000.5}}, "invalid parameter 'real_time_factor' = 1000.5"},
+      {{{"real_time_factor", kNaN}}, "invalid parameter 'real_time_factor' = nan"},
+      {{{"real_time_factor", 500.0}, {"publish_rate", 1.0}}, "invalid parameter 'real_time_factor' = 500: "
+                                                             "real_time_factor / (publish_rate * time_step) = 500000"},
+      {{{"publish_rate", 0.0}}, "invalid parameter 'publish_rate' = 0: must be a number > 0 and <= 1000 Hz"},
+      {{{"publish_rate", -5}}, "invalid parameter 'publish_rate' = -5"},
+      {{{"publish_rate", 2000.0}}, "invalid parameter 'publish_rate' = 2000"},
+      {{{"publish_rate", kInf}}, "invalid parameter 'publish_rate' = inf"},
+      {{{"fixed_frame", std::string()}}, "invalid parameter 'fixed_frame' = '': must be a non-empty frame id"},
+      {{{"fixed_frame", std::string("/world")}}, "invalid parameter 'fixed_frame' = '/world'"},
+      {{{"grid_frame", std::string("my grid")}}, "invalid parameter 'grid_frame' = 'my grid'"},
+      {{{"grid_frame", std::string("world")}}, "invalid parameter 'grid_frame' = 'world': must differ from fixed_frame"},
+      {{{"tf_particles", std::vector<int>{25}}}, "invalid parameter 'tf_particles' = 25: particle indices must be in [0, 24]"},
+      {{{"tf_particles", std::vector<int>{-1}}}, "invalid parameter 'tf_particles' = -1"},
+      {{{"tf_particles", std::vector<int>{3, 3}}}, "invalid parameter 'tf_particles' = 3: each particle index must be listed once"},
+      {{{"offset", std::vector<double>{1.0, 2.0}}}, "invalid parameter 'offset' = 2 values: must be a list of 3 numbers"},
+      {{{"offset", std::vector<double>{0.0, kNaN, 0.0}}}, "invalid parameter 'offset' = nan"},
+      {{{"offset", std::vector<double>{0.0, 0.0, 2e6}}}, "invalid parameter 'offset' = 2e+06"},
+      {{{"strain_scale", 0.0}}, "invalid parameter 'strain_scale' = 0: must be a number > 0"},
+      {{{"particle_diameter", -0.1}}, "invalid parameter 'particle_diameter' = -0.1"},
+      {{{"spring_width", 0.0}}, "invalid parameter 'spring_width' = 0"},
+      {{{"spring_width", 1e7}}, "invalid parameter 'spring_width' = 1e+07"},
+      {{{"status_log_period", -1.0}}, "invalid parameter 'status_log_period' = -1: must be a number >= 0"},
+      {{{"status_log_period", kInf}}, "invalid parameter 'status_log_period' = inf"},
+      {{{"diagnostic_period", -1.0}}, "invalid parameter 'diagnostic_period' = -1: must be a number > 0 and <= 3600 s"},
+      {{{"diagnostic_period", 0}}, "invalid parameter 'diagnostic_period' = 0"},
+      // Wrong types: the source names the key.
+      {{{"color_by_strain", 1}}, "invalid parameter 'color_by_strain': wrong type, must be true or false"},
+      {{{"fixed_frame", 3}}, "invalid parameter 'fixed_frame': wrong type, must be a string"},
+      {{{"tf_particles", std::vector<double>{1.5}}}, "invalid parameter 'tf_particles': wrong type, must be a list of integers"},
+      {{{"publish_rate", std::string("fast")}}, "invalid parameter 'publish_rate': wrong type, must be a number"},
+  };
+  for (const auto& c : cases)
+  {
+    const std::string message = refusal(c.values);
+    EXPECT_EQ(message.substr(0, c.expected.size()), c.expected) << "got: " << message;
+  }
+}
+
+// The core's checks come first (the node's rely on a valid grid), and all of them come before anything
+// is built: a bad node parameter on a grid whose basis would take minutes fails in no time, which
+// here means loading returns at all, since it builds nothing.
+TEST(NodeParams, CoreParametersAreCheckedFirst)
+{
+  EXPECT_EQ(refusal({{"rows", 0}, {"publish_rate", -1.0}}).rfind("invalid parameter 'rows' = 0", 0), 0u);
+  EXPECT_EQ(refusal({{"method", std::string("bogus")}}).rfind("invalid parameter 'method' = 'bogus'", 0), 0u);
+  EXPECT_EQ(refusal({{"time_step", -1.0}, {"real_time_factor", 2000.0}}).rfind("invalid parameter 'time_step'", 0), 0u);
+}
+
+TEST(NodeParams, HugeGridWithABadNodeParameterNamesTheNodeParameter)
+{
+  const std::map<std::string, Value> huge{{"rows", 600}, {"cols", 600}, {"dimension", 3}, {"num_modes", 30},
+                                          {"linearization", std::string("equilibrium")}};
+  EXPECT_EQ(refusal(huge), "") << "the grid itself must be valid for this test";
+  auto bad_tf = huge;
+  bad_tf["tf_particles"] = std::vector<int>{360000};
+  EXPECT_EQ(refusal(bad_tf).rfind("invalid parameter 'tf_particles' = 360000: particle indices must be in [0, 359999]", 0), 0u)
+      << refusal(bad_tf);
+  auto bad_rate = huge;
+  bad_rate["publish_rate"] = -1.0;
+  EXPECT_EQ(refusal(bad_rate).rfind("invalid parameter 'publish_rate' = -1", 0), 0u) << refusal(bad_rate);
+}
+
+TEST(NodeParams, UnknownKeysAreReportedAndKnownOnesAreNot)
+{
+  // Every key of a shipped config, plus the node's keys the configs leave out.
+  const FakeSource source({{"rows", 5}, {"cols", 5}, {"spacing", 0.1}, {"dimension", 2}, {"mass", 0.01},
+                           {"structural_stiffness", 10.0}, {"shear_stiffness", 5.0}, {"bending", false},
+                           {"bending_stiffness", 1.0}, {"fixed", std::vector<int>{}},
+                           {"gravity", std::vector<double>{0.0, 0.0, -9.81}}, {"rotation_deg", 0.0},
+                           {"method", std::string("physical")}, {"num_modes", 4}, {"alpha", 0.0}, {"beta", 0.0},
+                           {"time_step", 0.001}, {"divergence_limit", 0.0}, {"linearization", std::string("rest")},
+                           {"integrator", std::string("explicit")}, {"initial_state", std::string("initial")},
+                           {"newton_max_iterations", 50}, {"memory_limit_gb", 12.0}, {"real_time_factor", 1.0},
+                           {"publish_rate", 30.0}, {"fixed_frame", std::string("world")},
+                           {"grid_frame", std::string("grid")}, {"tf_particles", std::vector<int>{20, 24}},
+                           {"offset", std::vector<double>{0.0, 0.0, 0.0}}, {"color_by_strain", true},
+                           {"strain_scale", 0.1}, {"particle_diameter", 0.03}, {"spring_width", 0.006},
+                           {"status_log_period", 5.0}, {"diagnostic_period", 1.0}});
+  EXPECT_EQ(loadNodeConfiguration(source, source.keys()).unknown_keys, std::vector<std::string>{});
+
+  const FakeSource typos({{"publish_rat", 10.0}, {"rows", 6}, {"num_mode", 3}});
+  EXPECT_EQ(loadNodeConfiguration(typos, typos.keys()).unknown_keys, (std::vector<std::string>{"num_mode", "publish_rat"}));
+}
+
+// ---------------------------------------------------------------- numbers and lists as text
+
+TEST(ParameterValues, NumbersSpelledByTheWholeString)
+{
+  EXPECT_EQ(parseNumber("3.0e6"), 3.0e6);
+  EXPECT_EQ(parseNumber(" -1e-3 "), -1e-3);
+  EXPECT_EQ(parseNumber("5"), 5.0);
+  EXPECT_FALSE(parseNumber("ten"));
+  EXPECT_FALSE(parseNumber("3.0e6m"));
+  EXPECT_FALSE(parseNumber(""));
+  EXPECT_FALSE(parseNumber("1e999")) << "overflow is not a number written";
+  EXPECT_EQ(parseInteger("20"), 20);
+  EXPECT_FALSE(parseInteger("2.5"));
+  EXPECT_FALSE(parseInteger("99999999999"));
+}
+
+TEST(ParameterValues, ListsAsYamlText)
+{
+  EXPECT_EQ(parseListText("[0,0,-9.81]"), (std::vector<std::string>{"0", "0", "-9.81"}));
+  EXPECT_EQ(parseListText("[]"), std::vector<std::string>{});
+  EXPECT_FALSE(parseListText("[0, 0"));
+  EXPECT_FALSE(parseListText("0.5"));
+  EXPECT_FALSE(parseListText("[[1], 2]"));
+}
+
+XmlRpc::XmlRpcValue params(const std::map<std::string, XmlRpc::XmlRpcValue>& values)
+{
+  XmlRpc::XmlRpcValue p;
+  p.begin();  // an empty struct, not an invalid value
+  for (const auto& entry : values)
+    p[entry.first] = entry.second;
+  return p;
+}
+
+XmlRpc::XmlRpcValue array(const std::vector<XmlRpc::XmlRpcValue>& items)
+{
+  XmlRpc::XmlRpcValue a;
+  a.setSize(static_cast<int>(items.size()));
+  for (size_t k = 0; k < items.size(); ++k)
+    a[static_cast<int>(k)] = items[k];
+  return a;
+}
+
+std::string thrown(const std::function<void()>& f)
+{
+  try
+  {
+    f();
+  }
+  catch (const std::invalid_argument& error)
+  {
+    return error.what();
+  }
+  return "";
+}
+
+TEST(XmlRpcParameterSource, AStringThatIsANumberIsANumber)
+{
+  const XmlRpcParameterSource source(params({{"structural_stiffness", XmlRpc::XmlRpcValue("3.0e6")},
+                                             {"rows", XmlRpc::XmlRpcValue("20")},
+                                             {"spacing", XmlRpc::XmlRpcValue("ten")},
+                                             {"cols", XmlRpc::XmlRpcValue("2.5")},
+                                             {"mass", XmlRpc::XmlRpcValue(2)}}));
+  EXPECT_EQ(source.getDouble("structural_stiffness"), 3.0e6);
+  EXPECT_EQ(source.getInt("rows"), 20);
+  EXPECT_EQ(source.getDouble("mass"), 2.0);
+  EXPECT_EQ(thrown([&] { source.getDouble("spacing"); }),
+            "invalid parameter 'spacing': wrong type, must be a number, got 'ten' (a string)");
+  EXPECT_EQ(thrown([&] { source.getInt("cols"); }),
+            "invalid parameter 'cols': wrong type, must be an integer, got '2.5' (a string)");
+  EXPECT_FALSE(source.getDouble("alpha"));
+}
+
+TEST(XmlRpcParameterSource, AStringThatIsAYamlListIsAList)
+{
+  const XmlRpcParameterSource source(
+      params({{"gravity", XmlRpc::XmlRpcValue("[0,0,-9.81]")},
+              {"tf_particles", XmlRpc::XmlRpcValue("[20, 24]")},
+              {"offset", array({XmlRpc::XmlRpcValue(1), XmlRpc::XmlRpcValue("3.0e6"), XmlRpc::XmlRpcValue(0.5)})},
+              {"fixed", XmlRpc::XmlRpcValue("[0, 1")},
+              {"bad_items", XmlRpc::XmlRpcValue("[0, x, 1]")},
+              {"scalar", XmlRpc::XmlRpcValue(4.0)}}));
+  EXPECT_EQ(source.getDoubleList("gravity"), (std::vector<double>{0.0, 0.0, -9.81}));
+  EXPECT_EQ(source.getIntList("tf_particles"), (std::vector<int>{20, 24}));
+  EXPECT_EQ(source.getDoubleList("offset"), (std::vector<double>{1.0, 3.0e6, 0.5}));
+  const std::string unparsed = thrown([&] { source.getIntList("fixed"); });
+  EXPECT_EQ(unparsed.rfind("invalid parameter 'fixed': wrong type, must be a list of integers", 0), 0u) << unparsed;
+  EXPECT_NE(unparsed.find("_fixed:='[20, 24]'"), std::string::npos) << "says how to give a list: " << unparsed;
+  EXPECT_NE(thrown([&] { source.getDoubleList("bad_items"); }).find("element 1 is 'x' (a string)"), std::string::npos);
+  EXPECT_NE(thrown([&] { source.getDoubleList("scalar"); }).find("got 4 (a floating-point number)"), std::string::npos);
+}
+
+TEST(XmlRpcParameterSource, OtherTypesAreRefusedAndKeysListed)
+{
+  const XmlRpcParameterSource source(params({{"bending", XmlRpc::XmlRpcValue("true")},
+                                             {"method", XmlRpc::XmlRpcValue(1)},
+                                             {"publish_rat", XmlRpc::XmlRpcValue(10.0)}}));
+  EXPECT_EQ(thrown([&] { source.getBool("bending"); }),
+            "invalid parameter 'bending': wrong type, must be true or false, got 'true' (a string)");
+  EXPECT_EQ(thrown([&] { source.getString("method"); }),
+            "invalid parameter 'method': wrong type, must be a string, got 1 (an integer)");
+  EXPECT_EQ(source.keys(), (std::vector<std::string>{"bending", "method", "publish_rat"}));
+  EXPECT_TRUE(XmlRpcParameterSource(XmlRpc::XmlRpcValue()).keys().empty()) << "no parameters at all";
+}
+
+// The whole path of the node without a master: a typo is reported, a number as text is read.
+TEST(XmlRpcParameterSource, FeedsTheNodeConfiguration)
+{
+  const XmlRpcParameterSource source(params({{"structural_stiffness", XmlRpc::XmlRpcValue("3.0e3")},
+                                             {"gravity", XmlRpc::XmlRpcValue("[0, 0, -1]")},
+                                             {"publsh_rate", XmlRpc::XmlRpcValue(10.0)}}));
+  const NodeConfiguration c = loadNodeConfiguration(source, source.keys());
+  EXPECT_EQ(c.grid.structural_stiffness, 3.0e3);
+  EXPECT_EQ(c.grid.gravity, Eigen::Vector3d(0.0, 0.0, -1.0));
+  EXPECT_EQ(c.unknown_keys, std::vector<std::string>{"publsh_rate"});
+}
+
+// A YAML node as the parameter server would hold it (scalars: integer, number, bool or string).
+XmlRpc::XmlRpcValue toXmlRpc(const YAML::Node& node)
+{
+  if (node.IsSequence())
+  {
+    XmlRpc::XmlRpcValue list;
+    list.setSize(static_cast<int>(node.size()));
+    for (size_t k = 0; k < node.size(); ++k)
+      list[static_cast<int>(k)] = toXmlRpc(node[k]);
+    return list;
+  }
+  const std::string text = node.Scalar();
+  if (const auto i = parseInteger(text))
+    return XmlRpc::XmlRpcValue(*i);
+  if (const auto d = parseNumber(text))
+    return XmlRpc::XmlRpcValue(*d);
+  if (text == "true" || text == "false")
+    return XmlRpc::XmlRpcValue(text == "true");
+  return XmlRpc::XmlRpcValue(text);
+}
+
+// Every config the node ships loads and passes every check, core and node, with no key the node
+// does not read.
+TEST(NodeParams, EveryShippedNodeConfigLoads)
+{
+  std::vector<std::string> loaded;
+  for (const auto& entry : std::filesystem::directory_iterator(std::string(MODAL_SOURCE_DIR) + "/config"))
+  {
+    if (entry.path().extension() != ".yaml")
+      continue;
+    SCOPED_TRACE(entry.path().string());
+    XmlRpc::XmlRpcValue params;
+    params.begin();
+    for (const auto& item : YAML::LoadFile(entry.path().string()))
+      params[item.first.as<std::string>()] = toXmlRpc(item.second);
+    const XmlRpcParameterSource source(params);
+    EXPECT_EQ(loadNodeConfiguration(source, source.keys()).unknown_keys, std::vector<std::string>{});
+    loaded.push_back(entry.path().filename().string());
+  }
+  std::sort(loaded.begin(), loaded.end());
+  EXPECT_EQ(loaded, (std::vector<std::string>{"cloth.yaml", "paper_2d.yaml", "paper_3d.yaml"}));
+}
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+  testing::InitGoogleTest(&argc, argv);
+  return RUN_ALL_TESTS();
+}

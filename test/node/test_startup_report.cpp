@@ -1,0 +1,103 @@
+// The start-up lines: times per stage, the modes said plainly (also when all are zero), and what a
+// slow start-up is doing, on a clock the test sets.
+#include "startup_report.h"
+
+#include <gtest/gtest.h>
+
+#include <string>
+#include <vector>
+
+namespace
+{
+
+using namespace modal_mass_spring;
+
+TEST(StartupReport, AllZeroModesAreSaidPlainly)
+{
+  const std::string line = describeModes(Eigen::VectorXd::Zero(30), 30);
+  EXPECT_EQ(line.rfind("30 modes, all zero (frequency 0 rad/s", 0), 0u) << line;
+  EXPECT_EQ(line.find("0 to 0"), std::string::npos) << line;
+  EXPECT_EQ(line.find("lowest non-zero"), std::string::npos) << line;
+}
+
+TEST(StartupReport, ModesWithAndWithoutZeroOnes)
+{
+  Eigen::VectorXd f(4);
+  f << 5.1862, 7.0, 12.0, 18.853;
+  EXPECT_EQ(describeModes(f, 0), "4 modes, 5.186 to 18.85 rad/s, none zero");
+  Eigen::VectorXd g(4);
+  g << 0.0, 0.0, 0.5, 9.0;
+  EXPECT_EQ(describeModes(g, 2), "4 modes, 2 zero, the non-zero ones 0.5 to 9 rad/s");
+}
+
+TEST(StartupReport, EveryStageHasItsTime)
+{
+  LinearizationInfo lin;
+  lin.equilibrium_solved = true;
+  lin.equilibrium_seconds = 3.02;
+  lin.stiffness_seconds = 0.0021;
+  ModalBasis basis;
+  basis.build_seconds = 0.0338;
+  basis.factorization_seconds = 0.0049;
+  EXPECT_EQ(describeStartupTimes(lin, basis, 3.1),
+            "start-up 3.1 s: equilibrium 3.02 s, stiffness 2.1 ms, factorisation 4.9 ms, eigensolver 28.9 ms");
+  lin.equilibrium_solved = false;
+  const std::string rest = describeStartupTimes(lin, basis, 0.05);
+  EXPECT_EQ(rest.find("equilibrium"), std::string::npos) << rest;
+  EXPECT_EQ(rest.rfind("start-up 50 ms: stiffness", 0), 0u) << rest;
+}
+
+struct FakeClockLog
+{
+  double now = 0.0;
+  std::vector<std::string> lines;
+  StartupProgress progress{[this](const std::string& line) { lines.push_back(line); }, [this] { return now; }};
+  void at(double t)
+  {
+    now = t;
+    progress.poll();
+  }
+};
+
+TEST(StartupProgress, AFastStartUpSaysNothing)
+{
+  FakeClockLog log;
+  log.now = 0.1;
+  log.progress.onStage("stiffness");
+  log.at(0.5);
+  log.now = 0.6;
+  log.progress.onStage("eigensolver");
+  log.at(0.95);
+  EXPECT_TRUE(log.lines.empty());
+}
+
+TEST(StartupProgress, ASlowStartUpSaysWhatItIsDoing)
+{
+  FakeClockLog log;
+  log.now = 0.1;
+  log.progress.onStage("equilibrium");
+  log.at(0.9);
+  EXPECT_TRUE(log.lines.empty()) << "quiet for the first second";
+  log.at(1.05);
+  ASSERT_EQ(log.lines.size(), 1u);
+  EXPECT_NE(log.lines[0].find("static equilibrium"), std::string::npos) << log.lines[0];
+  log.at(1.2);
+  EXPECT_EQ(log.lines.size(), 1u) << "not again within the same stage";
+  log.now = 3.0;
+  log.progress.onStage("factorisation");
+  log.at(3.1);
+  ASSERT_EQ(log.lines.size(), 2u);
+  EXPECT_NE(log.lines[1].find("(factorisation)"), std::string::npos) << log.lines[1];
+  log.now = 3.2;
+  log.progress.onStage("eigensolver");
+  log.at(3.3);
+  ASSERT_EQ(log.lines.size(), 3u);
+  EXPECT_NE(log.lines[2].find("(eigensolver)"), std::string::npos) << log.lines[2];
+  log.at(13.0);
+  EXPECT_EQ(log.lines.size(), 3u);
+  log.at(13.4);
+  ASSERT_EQ(log.lines.size(), 4u) << "a long stage is repeated every 10 s";
+  EXPECT_NE(log.lines[3].find("(eigensolver), for 10.2 s so far"), std::string::npos) << log.lines[3];
+}
+
+}  // namespace
