@@ -206,9 +206,12 @@ int referenceSubsteps(double time_step, double reference_time_step)
   // Checked before the conversion: a ratio beyond int is undefined behaviour to convert.
   if (!(reference_time_step > 0.0) || !std::isfinite(ratio) || whole < 1.0 || whole > kMaxReferenceSubsteps ||
       std::abs(ratio - whole) > 1e-6 * ratio)
-    rejectParameter("--reference-time-step", reference_time_step,
-                    "must divide time_step = " + std::to_string(time_step) + " s a whole number of times, at most " +
-                        std::to_string(kMaxReferenceSubsteps));
+  {
+    std::ostringstream allowed;
+    allowed << "must divide time_step = " << time_step << " s a whole number of times, at most "
+            << kMaxReferenceSubsteps;
+    rejectParameter("--reference-time-step", reference_time_step, allowed.str());
+  }
   return static_cast<int>(whole);
 }
 

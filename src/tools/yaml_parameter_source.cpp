@@ -3,6 +3,7 @@
 
 #include "modal_mass_spring/validation.h"
 
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <stdexcept>
@@ -22,6 +23,8 @@ YamlParameterSource::YamlParameterSource(YAML::Node root, std::string origin)
 YamlParameterSource YamlParameterSource::fromFile(const std::string& path)
 {
   std::ifstream file(path);
+  if (std::filesystem::is_directory(path))
+    throw std::invalid_argument("cannot read config '" + path + "': is a folder, not a YAML file");
   if (!file)
     throw std::invalid_argument("cannot read config '" + path + "': no such file or not readable");
   YAML::Node root;
@@ -32,6 +35,10 @@ YamlParameterSource YamlParameterSource::fromFile(const std::string& path)
   catch (const YAML::Exception& e)
   {
     throw std::invalid_argument("cannot read config '" + path + "': not valid YAML: " + e.what());
+  }
+  catch (const std::exception& e)  // a folder, a read error
+  {
+    throw std::invalid_argument("cannot read config '" + path + "': " + e.what());
   }
   return YamlParameterSource(checkedRoot(root, "config '" + path + "'"), path);
 }
