@@ -125,7 +125,9 @@ struct StabilityOptions
   double max_time_step = 10.0;  // s; no divergence up to here counts as unbounded
   double min_time_step = 1e-9;  // s; divergence down to here counts as no stable step
   // The scan: doubling (or halving) from the setup's time_step to the first divergence, then upward
-  // in steps of this ratio through the last octave, then bisection of the first divergence found.
+  // in steps of this ratio through the last octave, then bisection of the first divergence found,
+  // then a look for pockets of divergence over the scan step below it, at the tolerance's
+  // resolution (at most 20 trials a scan step).
   double scan_ratio = 1.02;
   // Stable windows are looked for by the same scan from the boundary up to this multiple of it (and
   // at most max_time_step).

@@ -139,6 +139,25 @@ TEST(Stability, NonMonotoneStabilityReportsTheFirstBoundaryAndTheWindowsAbove)
   }
 }
 
+// paper_2d's explicit `full` diverges at 35.96-36.00 ms, runs at 36.04-36.36 ms and diverges from
+// 36.40 ms on: a pocket narrower than a scan step (2 %) just below the boundary, which the search
+// must look for rather than report 36.4 ms. (The stable steps above it fall between two steps of the
+// window scan, which has the scan's resolution.)
+TEST(Stability, FindsAPocketOfDivergenceNarrowerThanAScanStep)
+{
+  const ExperimentSetup setup = loadSetup("config/compare/paper_2d.yaml");
+  ASSERT_FALSE(checkStableAt(setup, Method::Full, 0.03598, 10000));
+  ASSERT_TRUE(checkStableAt(setup, Method::Full, 0.0362, 10000));
+  StabilityOptions options;
+  options.methods = {Method::Full};
+  const std::vector<StabilityRow> rows = runStability(setup, options);
+  ASSERT_EQ(rows.size(), 1u);
+  EXPECT_LT(rows[0].stable_dt, 0.03596);
+  EXPECT_GT(rows[0].stable_dt, 0.0355);
+  for (const StabilityTrial& t : rows[0].tried)
+    EXPECT_TRUE(t.stable || t.dt > rows[0].stable_dt) << t.dt << " s: tried below the reported step and diverged";
+}
+
 // A tolerance finer than doubles resolve is refused: the bisection could never reach it.
 TEST(Stability, RefusesOptionsWithWhichTheSearchCannotEnd)
 {
