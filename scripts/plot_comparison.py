@@ -266,13 +266,15 @@ def plot_stability(path, out):
     per_bar = 1.45 if all(r["variant"] == "base" for r in rows) else 1.9
     fig, ax = plt.subplots(figsize=(max(5.5, per_bar * len(rows)), 4.2 + 0.25 * max(l.count("\n") for l in labels)))
     bars = ax.bar(range(len(rows)), values, color=[METHOD_COLORS.get(r["method"], "0.5") for r in rows])
+    window_label = "stable windows above the boundary"
     for i, (bar, value, r) in enumerate(zip(bars, values, rows)):
         if unbounded(r):
             bar.set_hatch("//")
         text = f">= {value:.3g} s\n(no divergence found)" if unbounded(r) else f"{value * 1e3:.3g} ms"
         for k, (low, high) in enumerate(windows(r)):
-            ax.plot([i, i], [low, high * 1.02], color="black", lw=3, solid_capstyle="butt",
-                    label="stable window above the boundary" if i == 0 and k == 0 else None)
+            ax.plot([i + 0.3, i + 0.3], [low, high * 1.02], color="black", lw=3, solid_capstyle="butt",
+                    label=window_label)
+            window_label = None
         if windows(r):
             text += f"\n+{len(windows(r))} stable window(s)"
         if number(r.get("check_dt", "0") or "0") > 0:
@@ -292,8 +294,8 @@ def plot_stability(path, out):
     ax.set_ylim(min(positive) / 3, max(positive) * 30)
     ax.set_ylabel("largest stable time step (s)")
     first = rows[0]
-    ax.set_title(f"{tag}: every step tried below is stable for {first['steps']} steps (scan, then bisection, "
-                 f"rel. tol. {first['tolerance']})", fontsize=9)
+    ax.set_title(f"{tag}: every step tried below it ran {first['steps']} steps\n(scan, then bisection to "
+                 f"a relative {first['tolerance']})", fontsize=9)
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(True, axis="y", which="both", alpha=0.3)
     fig.tight_layout()
