@@ -7,7 +7,8 @@ Reads, from DIR, every file the tool writes and draws:
   cost_<tag>.csv                      -> cost.png (one panel per file; per-step cost and basis build)
   accuracy_<tag>_snapshots.csv        -> snapshots_<tag>.png (each modal method over `full`)
   accuracy_<tag>_error.csv            -> error_<tag>.png (largest and RMS distance to `full`)
-  stability_<tag>.csv                 -> stability_<tag>.png (largest stable time step per method)
+  stability_<tag>.csv                 -> stability_<tag>.png (largest step below which every step tried
+      is stable, per method, with the stable windows found above it)
   accuracy_combinations_<config>_dt<N>ms_error.csv (runs with --reference-time-step, one per time
       step) -> combinations.png (error against the converged reference and wall time per simulated
       second, against the time step, for every method x linearization x integrator)
@@ -57,7 +58,21 @@ def read_csv(path, kind):
 
 
 def number(text):
+    """A CSV number; modal_compare leaves a field empty when it is not finite (the `diverged` flag or
+    the column says why), so an empty field reads as NaN."""
     return float(text) if text not in ("", "nan", "-nan") else math.nan
+
+
+def unbounded(row):
+    """A stability row with no divergence up to --max-time-step: unstable_dt is empty (or "inf" in
+    files written before non-finite numbers became empty fields)."""
+    return row["unstable_dt"] in ("", "inf")
+
+
+def windows(row):
+    """The stable windows above the boundary, [(from, to)] in s, from "from:to;from:to"."""
+    text = row.get("stable_windows", "")
+    return [tuple(float(v) for v in w.split(":")) for w in text.split(";") if w]
 
 
 def tag_of(path, prefix, suffix):
@@ -251,11 +266,17 @@ def plot_stability(path, out):
     per_bar = 1.45 if all(r["variant"] == "base" for r in rows) else 1.9
     fig, ax = plt.subplots(figsize=(max(5.5, per_bar * len(rows)), 4.2 + 0.25 * max(l.count("\n") for l in labels)))
     bars = ax.bar(range(len(rows)), values, color=[METHOD_COLORS.get(r["method"], "0.5") for r in rows])
-    for bar, value, r in zip(bars, values, rows):
-        unbounded = math.isinf(number(r["unstable_dt"]))
-        if unbounded:
+    window_label = "stable windows above the boundary"
+    for i, (bar, value, r) in enumerate(zip(bars, values, rows)):
+        if unbounded(r):
             bar.set_hatch("//")
-        text = f">= {value:.3g} s\n(no divergence found)" if unbounded else f"{value * 1e3:.3g} ms"
+        text = f">= {value:.3g} s\n(no divergence found)" if unbounded(r) else f"{value * 1e3:.3g} ms"
+        for k, (low, high) in enumerate(windows(r)):
+            ax.plot([i + 0.3, i + 0.3], [low, high * 1.02], color="black", lw=3, solid_capstyle="butt",
+                    label=window_label)
+            window_label = None
+        if windows(r):
+            text += f"\n+{len(windows(r))} stable window(s)"
         if number(r.get("check_dt", "0") or "0") > 0:
             text += f"\n{'stable' if r.get('check_stable') == '1' else 'DIVERGES'} at\n{number(r['check_dt']):.3g} s (10x)"
         ax.annotate(text, (bar.get_x() + bar.get_width() / 2, value), ha="center", va="bottom", fontsize=7)
@@ -268,12 +289,13 @@ def plot_stability(path, out):
     ax.set_xticks(range(len(rows)))
     ax.set_xticklabels(labels, fontsize=7)
     ax.set_yscale("log")
-    positive = [v for v in values + modal + full if v > 0 and math.isfinite(v)]
+    positive = [v for v in values + modal + full + [w for r in rows for pair in windows(r) for w in pair]
+                if v > 0 and math.isfinite(v)]
     ax.set_ylim(min(positive) / 3, max(positive) * 30)
     ax.set_ylabel("largest stable time step (s)")
     first = rows[0]
-    ax.set_title(f"{tag}: no divergence within {first['steps']} steps (bisection, rel. tol. {first['tolerance']})",
-                 fontsize=9)
+    ax.set_title(f"{tag}: every step tried below it ran {first['steps']} steps\n(scan, then bisection to "
+                 f"a relative {first['tolerance']})", fontsize=9)
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(True, axis="y", which="both", alpha=0.3)
     fig.tight_layout()
@@ -446,13 +468,17 @@ def write_tables(data, target):
                          ["variant", "method", "mean largest", "mean RMS"] + [f"RMS @ {s}" for s in snapshot_steps if s > 0], body))
     for path in sorted(data.glob("stability_*.csv")):
         rows = read_csv(path, "stability")
-        body = [[r["variant"], r["method"], fmt(1e3 * number(r["stable_dt"]), 5), fmt(1e3 * number(r["unstable_dt"]), 5),
-                 fmt(1e3 * number(r["modal_bound"]), 5), fmt(1e3 * number(r["full_bound"]), 5)] for r in rows]
+        body = [[r["variant"], r["method"], fmt(1e3 * number(r["stable_dt"]), 5),
+                 "none found" if unbounded(r) else fmt(1e3 * number(r["unstable_dt"]), 5),
+                 fmt(1e3 * number(r["modal_bound"]), 5), fmt(1e3 * number(r["full_bound"]), 5),
+                 ", ".join(f"{1e3 * a:.4g}" if a == b else f"{1e3 * a:.4g}-{1e3 * b:.4g}" for a, b in windows(r)) or "none"]
+                for r in rows]
         if any(number(r.get("check_dt", "0") or "0") > 0 for r in rows):
             for b, r in zip(body, rows):
                 b.append(f"{'stable' if r['check_stable'] == '1' else 'DIVERGED'} at {fmt(1e3 * number(r['check_dt']), 4)}"
                          if number(r.get("check_dt", "0") or "0") > 0 else "-")
-        header = ["variant", "method", "stable", "diverges", "2/omega highest mode", "2/omega K(x0)"]
+        header = ["variant", "method", "stable", "diverges", "2/omega highest mode", "2/omega K(x0)",
+                  "stable windows above"]
         if len(body[0]) > len(header):
             header.append("10 x the explicit method's stable step (ms)")
         parts.append(f"## {path.name}: largest stable time step (ms), {rows[0]['steps']} steps, relative tolerance "

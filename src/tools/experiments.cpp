@@ -2,6 +2,7 @@
 #include "experiments.h"
 
 #include "modal_mass_spring/spring_forces.h"
+#include "modal_mass_spring/validation.h"
 
 #include <Eigen/Eigenvalues>
 
@@ -10,6 +11,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <sstream>
 #include <stdexcept>
 
 namespace modal_mass_spring
@@ -71,7 +73,83 @@ double maxDisplacement(const Grid& grid, const Eigen::Matrix3Xd& points)
 
 }  // namespace
 
+// ---------------------------------------------------------------- setups
+
+const ExperimentSetup* explicitTwin(const ExperimentSetup& setup, const std::vector<ExperimentSetup>& setups)
+{
+  auto othersEqual = [](const ExperimentSetup& a, const ExperimentSetup& b) {
+    if (a.settings.size() != b.settings.size())
+      return false;
+    for (size_t k = 0; k < a.settings.size(); ++k)
+      if (a.settings[k].first != b.settings[k].first ||
+          (a.settings[k].first != "integrator" && a.settings[k].second != b.settings[k].second))
+        return false;
+    return true;
+  };
+  for (const ExperimentSetup& other : setups)
+    if (&other != &setup && other.sim.integrator == IntegratorKind::Explicit && othersEqual(setup, other))
+      return &other;
+  return nullptr;
+}
+
 // ---------------------------------------------------------------- cost
+
+namespace
+{
+
+// The median time to build the modal basis, and the last Simulation built.
+std::unique_ptr<Simulation> buildTimed(const GridParams& grid, const SimulationParams& params, int repeats,
+                                       double& build_seconds)
+{
+  std::vector<double> builds;
+  std::unique_ptr<Simulation> sim;
+  for (int b = 0; b < std::max(1, repeats); ++b)
+  {
+    sim = std::make_unique<Simulation>(grid, params);
+    builds.push_back(sim->basis().build_seconds);
+  }
+  build_seconds = median(builds);
+  return sim;
+}
+
+// Steps per timed run so that one run lasts about min_repeat_seconds.
+int stepsPerRepeat(Simulation& sim, double min_repeat_seconds)
+{
+  int calibration = 10;
+  double elapsed = 0.0;
+  while (true)
+  {
+    sim.reset();
+    const auto start = Clock::now();
+    sim.step(calibration);
+    elapsed = seconds(start);
+    if (elapsed > 0.2 * min_repeat_seconds || calibration >= 1000000)
+      break;
+    calibration *= 4;
+  }
+  return std::max(10, static_cast<int>(std::min(1e7, calibration * min_repeat_seconds / std::max(elapsed, 1e-9))));
+}
+
+// Seconds per step of one timed run of `steps` steps. A method may diverge (the linear one drifts
+// without bound along zero modes): it starts over and goes on, so every run has the same steps.
+double timedRun(Simulation& sim, int steps, bool& diverged)
+{
+  sim.reset();
+  const auto start = Clock::now();
+  for (int taken = 0; taken < steps;)
+  {
+    const StepResult result = sim.step(steps - taken);
+    taken += std::max(1, result.steps_taken);  // a first step that diverges still counts
+    if (result.diverged)
+    {
+      diverged = true;
+      sim.reset();
+    }
+  }
+  return seconds(start) / steps;
+}
+
+}  // namespace
 
 std::vector<CostRow> runCost(const ExperimentSetup& setup, const CostOptions& options, const ProgressFn& progress)
 {
@@ -79,73 +157,34 @@ std::vector<CostRow> runCost(const ExperimentSetup& setup, const CostOptions& op
   const double total = static_cast<double>(options.sizes.size());
   for (size_t s = 0; s < options.sizes.size(); ++s)
   {
-    const int size = options.sizes[s];
     GridParams grid = setup.grid;
-    grid.rows = grid.cols = size;
+    grid.rows = grid.cols = options.sizes[s];
     grid.fixed.clear();  // a fixed list names particles of the configured size only: use the top row
-    const std::string label = "cost " + std::to_string(size) + "x" + std::to_string(size);
+    const std::string label = "cost " + std::to_string(grid.rows) + "x" + std::to_string(grid.cols);
     report(progress, label, s / total);
-
-    std::vector<double> builds;
-    std::unique_ptr<Simulation> sim;
-    for (int b = 0; b < std::max(1, options.build_repeats); ++b)
-    {
-      sim = std::make_unique<Simulation>(grid, setup.sim);
-      builds.push_back(sim->basis().build_seconds);
-    }
-    const double build_seconds = median(builds);
+    double build_seconds = 0.0;
+    const std::unique_ptr<Simulation> sim = buildTimed(grid, setup.sim, options.build_repeats, build_seconds);
 
     for (size_t m = 0; m < options.methods.size(); ++m)
     {
-      const Method method = options.methods[m];
-      sim->setMethod(method);
-      sim->reset();
-      // Calibrate the steps per timed run so that one run is long enough for the clock.
-      int calibration = 10;
-      double elapsed = 0.0;
-      while (true)
-      {
-        sim->reset();
-        const auto start = Clock::now();
-        sim->step(calibration);
-        elapsed = seconds(start);
-        if (elapsed > 0.2 * options.min_repeat_seconds || calibration >= 1000000)
-          break;
-        calibration *= 4;
-      }
-      const int steps = std::max(
-          10, static_cast<int>(std::min(1e7, calibration * options.min_repeat_seconds / std::max(elapsed, 1e-9))));
-
       CostRow row;
       row.variant = setup.variant;
-      row.method = toString(method);
+      row.method = toString(options.methods[m]);
       row.dimension = grid.dimension;
-      row.rows = row.cols = size;
+      row.rows = grid.rows;
+      row.cols = grid.cols;
       row.particles = sim->grid().numParticles();
       row.free_dofs = sim->grid().numFreeDofs();
       row.springs = static_cast<int>(sim->grid().springs().size());
       row.num_modes = setup.sim.num_modes;
       row.build_seconds = build_seconds;
       row.repeats = options.repeats;
-      row.steps_per_repeat = steps;
+      sim->setMethod(options.methods[m]);
+      row.steps_per_repeat = stepsPerRepeat(*sim, options.min_repeat_seconds);
       std::vector<double> per_step;
       for (int r = 0; r < options.repeats; ++r)
       {
-        sim->reset();
-        // A method may diverge (the linear one drifts without bound along zero modes): start over and
-        // go on, so every timed run has the same number of steps.
-        const auto start = Clock::now();
-        for (int taken = 0; taken < steps;)
-        {
-          const StepResult result = sim->step(steps - taken);
-          taken += std::max(1, result.steps_taken);  // a first step that diverges still counts
-          if (result.diverged)
-          {
-            row.diverged = true;
-            sim->reset();
-          }
-        }
-        per_step.push_back(seconds(start) / steps);
+        per_step.push_back(timedRun(*sim, row.steps_per_repeat, row.diverged));
         report(progress, label + " " + row.method,
                (s + (m + (r + 1.0) / options.repeats) / options.methods.size()) / total);
       }
@@ -164,11 +203,103 @@ int referenceSubsteps(double time_step, double reference_time_step)
 {
   const double ratio = time_step / reference_time_step;
   const double whole = std::round(ratio);
-  if (!(reference_time_step > 0.0) || whole < 1.0 || std::abs(ratio - whole) > 1e-6 * ratio)
-    throw std::invalid_argument("reference time step " + std::to_string(reference_time_step) +
-                                " s must divide time_step " + std::to_string(time_step) + " s a whole number of times");
+  // Checked before the conversion: a ratio beyond int is undefined behaviour to convert.
+  if (!(reference_time_step > 0.0) || !std::isfinite(ratio) || whole < 1.0 || whole > kMaxReferenceSubsteps ||
+      std::abs(ratio - whole) > 1e-6 * ratio)
+  {
+    std::ostringstream allowed;
+    allowed << "must divide time_step = " << time_step << " s a whole number of times, at most "
+            << kMaxReferenceSubsteps;
+    rejectParameter("--reference-time-step", reference_time_step, allowed.str());
+  }
   return static_cast<int>(whole);
 }
+
+namespace
+{
+
+// One simulation of the accuracy experiment, stepped `steps_per_sample` steps between samples.
+struct AccuracyRun
+{
+  std::string name;
+  std::unique_ptr<Simulation> sim;
+  int steps_per_sample = 0;
+  bool timed = false;  // its wall time per step is reported
+  bool diverged = false;
+  double step_seconds = 0.0;
+
+  void advance(const std::string& variant, std::vector<std::string>& messages)
+  {
+    if (diverged)
+      return;
+    const auto start = Clock::now();
+    const StepResult r = sim->step(steps_per_sample);
+    step_seconds = seconds(start) / steps_per_sample;
+    if (r.diverged)
+    {
+      diverged = true;
+      messages.push_back(variant + ": " + name + ": " + r.message);
+    }
+  }
+};
+
+// The reference (runs[0]: `full` at the setup's step, or the converged `full` at the reference
+// step) and every compared method; the check at half the reference step goes into `check`.
+std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const AccuracyOptions& options, int divisor,
+                                      std::unique_ptr<AccuracyRun>& check)
+{
+  auto referenceParams = [&](int divide) {
+    SimulationParams p = withMethod(setup.sim, Method::Full);
+    p.integrator = IntegratorKind::Explicit;
+    p.linearization = Linearization::Rest;
+    p.time_step = setup.sim.time_step / divide;
+    return p;
+  };
+  std::vector<AccuracyRun> runs;
+  if (divisor == 0)
+    runs.push_back({"full", std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, Method::Full)),
+                    options.sample, true});
+  else
+  {
+    runs.push_back({"reference", std::make_unique<Simulation>(setup.grid, referenceParams(divisor)),
+                    options.sample * divisor, false});
+    check.reset(new AccuracyRun{"reference at half its step",
+                                std::make_unique<Simulation>(setup.grid, referenceParams(2 * divisor)),
+                                2 * options.sample * divisor, false});
+  }
+  std::vector<Method> compared;
+  for (Method m : options.methods)
+    if ((divisor > 0 || m != Method::Full) && std::find(compared.begin(), compared.end(), m) == compared.end())
+      compared.push_back(m);
+  for (Method m : compared)
+    runs.push_back({toString(m), std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, m)), options.sample,
+                    true});
+  return runs;
+}
+
+// One run at one step against the reference's points; no distances once either has diverged.
+ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, const AccuracyRun& run, const std::string& method,
+                   long step, const Eigen::Matrix3Xd& reference, bool reference_diverged)
+{
+  ErrorSample e;
+  e.variant = setup.variant;
+  e.method = method;
+  e.step = step;
+  e.time = step * setup.sim.time_step;
+  e.diverged = run.diverged || reference_diverged;
+  e.step_seconds = run.timed && step > 0 ? run.step_seconds : 0.0;
+  if (e.diverged)
+  {
+    e.max_distance = e.rms_distance = e.max_displacement = e.energy = std::numeric_limits<double>::quiet_NaN();
+    return e;
+  }
+  distances(grid, run.sim->points(), reference, e.max_distance, e.rms_distance);
+  e.max_displacement = maxDisplacement(grid, run.sim->points());
+  e.energy = run.sim->totalEnergy();
+  return e;
+}
+
+}  // namespace
 
 AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& options, const ProgressFn& progress)
 {
@@ -178,42 +309,8 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
     throw std::invalid_argument("accuracy: reference_time_step must be >= 0");
   const int divisor =
       options.reference_time_step > 0.0 ? referenceSubsteps(setup.sim.time_step, options.reference_time_step) : 0;
-
-  // runs[0] is the reference every other run is measured against.
-  struct Run
-  {
-    std::string name;
-    std::unique_ptr<Simulation> sim;
-    int steps_per_sample = 0;
-    bool timed = false;
-    bool diverged = false;
-    double step_seconds = 0.0;
-  };
-  std::vector<Run> runs;
-  auto referenceParams = [&](int divide) {
-    SimulationParams p = withMethod(setup.sim, Method::Full);
-    p.integrator = IntegratorKind::Explicit;
-    p.linearization = Linearization::Rest;
-    p.time_step = setup.sim.time_step / divide;
-    return p;
-  };
-  if (divisor == 0)
-    runs.push_back({"full", std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, Method::Full)),
-                    options.sample, true});
-  else
-    runs.push_back({"reference", std::make_unique<Simulation>(setup.grid, referenceParams(divisor)),
-                    options.sample * divisor, false});
-  std::vector<Method> compared;
-  for (Method m : options.methods)
-    if ((divisor > 0 || m != Method::Full) && std::find(compared.begin(), compared.end(), m) == compared.end())
-      compared.push_back(m);
-  for (Method m : compared)
-    runs.push_back({toString(m), std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, m)), options.sample,
-                    true});
-  std::unique_ptr<Simulation> check;  // the reference at half its step
-  bool check_diverged = false;
-  if (divisor > 0)
-    check = std::make_unique<Simulation>(setup.grid, referenceParams(2 * divisor));
+  std::unique_ptr<AccuracyRun> check;
+  std::vector<AccuracyRun> runs = accuracyRuns(setup, options, divisor, check);
   const Grid& grid = runs[0].sim->grid();
 
   AccuracyResult result;
@@ -224,82 +321,34 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
   auto record = [&](long step) {
     const Eigen::Matrix3Xd reference = runs[0].sim->points();
     const bool snapshot = options.snapshots && (step % options.interval == 0 || step == options.steps);
-    for (const Run& run : runs)
+    for (const AccuracyRun& run : runs)
     {
-      ErrorSample e;
-      e.variant = setup.variant;
-      e.method = run.name;
-      e.step = step;
-      e.time = step * setup.sim.time_step;
-      e.diverged = run.diverged || runs[0].diverged;
-      e.step_seconds = run.timed && step > 0 ? run.step_seconds : 0.0;
-      if (e.diverged)
-      {
-        e.max_distance = e.rms_distance = e.max_displacement = e.energy = std::numeric_limits<double>::quiet_NaN();
-      }
-      else
-      {
-        const Eigen::Matrix3Xd points = run.sim->points();
-        distances(grid, points, reference, e.max_distance, e.rms_distance);
-        e.max_displacement = maxDisplacement(grid, points);
-        e.energy = run.sim->totalEnergy();
-        if (snapshot)
-          result.snapshots.push_back({setup.variant, e.method, step, e.time, points});
-      }
-      result.errors.push_back(e);
+      result.errors.push_back(sample(setup, grid, run, run.name, step, reference, runs[0].diverged));
+      if (snapshot && !result.errors.back().diverged)
+        result.snapshots.push_back({setup.variant, run.name, step, result.errors.back().time, run.sim->points()});
     }
-    if (check)
+    if (!check)
+      return;
+    const ErrorSample e = sample(setup, grid, *check, "reference_half_step", step, reference, runs[0].diverged);
+    if (!e.diverged)
     {
-      ErrorSample e;
-      e.variant = setup.variant;
-      e.method = "reference_half_step";
-      e.step = step;
-      e.time = step * setup.sim.time_step;
-      e.diverged = check_diverged || runs[0].diverged;
-      if (e.diverged)
-        e.max_distance = e.rms_distance = e.max_displacement = e.energy = std::numeric_limits<double>::quiet_NaN();
-      else
-      {
-        const Eigen::Matrix3Xd points = check->points();
-        distances(grid, points, reference, e.max_distance, e.rms_distance);
-        e.max_displacement = maxDisplacement(grid, points);
-        e.energy = check->totalEnergy();
-        result.reference_check_max_rms = std::max(result.reference_check_max_rms, e.rms_distance);
-        result.reference_check_max_distance = std::max(result.reference_check_max_distance, e.max_distance);
-      }
-      result.reference_check.push_back(e);
+      result.reference_check_max_rms = std::max(result.reference_check_max_rms, e.rms_distance);
+      result.reference_check_max_distance = std::max(result.reference_check_max_distance, e.max_distance);
     }
+    result.reference_check.push_back(e);
   };
 
   record(0);
   for (long step = options.sample; step <= options.steps; step += options.sample)
   {
-    for (Run& run : runs)
-    {
-      if (run.diverged)
-        continue;
-      const auto start = Clock::now();
-      const StepResult r = run.sim->step(run.steps_per_sample);
-      run.step_seconds = seconds(start) / run.steps_per_sample;
-      if (r.diverged)
-      {
-        run.diverged = true;
-        result.messages.push_back(setup.variant + ": " + run.name + ": " + r.message);
-      }
-    }
-    if (check && !check_diverged)
-    {
-      const StepResult r = check->step(2 * options.sample * divisor);
-      if (r.diverged)
-      {
-        check_diverged = true;
-        result.messages.push_back(setup.variant + ": reference at half its step: " + r.message);
-      }
-    }
+    for (AccuracyRun& run : runs)
+      run.advance(setup.variant, result.messages);
+    if (check)
+      check->advance(setup.variant, result.messages);
     record(step);
     report(progress, "accuracy " + setup.variant, static_cast<double>(step) / options.steps);
   }
-  if (check && check_diverged)
+  if (check && check->diverged)
     result.reference_check_max_rms = result.reference_check_max_distance = std::numeric_limits<double>::infinity();
   return result;
 }
@@ -377,12 +426,154 @@ bool checkStableAt(const ExperimentSetup& setup, Method method, double dt, int s
   return !sim.step(steps).diverged;
 }
 
+namespace
+{
+
+// The search for one method: every trial is kept in the row, so "every step tried below stable_dt
+// was stable" can be checked from the outside.
+class StabilitySearch
+{
+public:
+  StabilitySearch(Simulation& sim, const StabilityOptions& options, StabilityRow& row)
+    : sim_(sim), options_(options), row_(row)
+  {
+  }
+
+  // From `start`: the bracket by doubling or halving, the upward scan through it, then bisection.
+  void boundary(double start)
+  {
+    double lo = start, hi = start;
+    if (stable(start))
+    {
+      for (hi = 2.0 * lo; hi <= options_.max_time_step && stable(hi); hi *= 2.0)
+        lo = hi;
+      if (hi > options_.max_time_step)
+      {
+        row_.stable_dt = lo;
+        row_.unstable_dt = std::numeric_limits<double>::infinity();
+        return;
+      }
+    }
+    else
+    {
+      for (lo = 0.5 * hi; lo >= options_.min_time_step && !stable(lo); lo *= 0.5)
+        hi = lo;
+      if (lo < options_.min_time_step)
+      {
+        row_.stable_dt = 0.0;
+        row_.unstable_dt = hi;
+        return;
+      }
+    }
+    // Through the bracket upward: the first divergence may lie below the one the doubling found.
+    for (double dt = lo * options_.scan_ratio; dt < hi; dt *= options_.scan_ratio)
+    {
+      if (!stable(dt))
+      {
+        hi = dt;
+        break;
+      }
+      lo = dt;
+    }
+    // Bisection keeps every tried step below lo stable: a divergence only ever lowers hi. It stops
+    // at the tolerance or when the midpoint is no longer a new number.
+    while (hi - lo > options_.tolerance * lo)
+    {
+      const double mid = 0.5 * (lo + hi);
+      if (!(mid > lo && mid < hi))
+        break;
+      (stable(mid) ? lo : hi) = mid;
+    }
+    pocketsBelow(lo, hi);
+    row_.stable_dt = lo;
+    row_.unstable_dt = hi;
+  }
+
+  // Pockets of divergence narrower than a scan step hide between scan steps (paper_2d's `full`
+  // diverges at 35.96-36.00 ms and runs at 36.04-36.36 ms). Downward from lo over one scan step, at
+  // the tolerance's resolution but at most 20 trials a scan step: a divergence found moves hi there
+  // and lo to the next stable step below it, and the look continues one scan step below that.
+  void pocketsBelow(double& lo, double& hi)
+  {
+    const double ratio = 1.0 + std::max(options_.tolerance, (options_.scan_ratio - 1.0) / 20.0);
+    if (ratio >= options_.scan_ratio)
+      return;
+    double floor = lo / options_.scan_ratio;
+    for (double dt = lo / ratio; dt > floor; dt /= ratio)
+    {
+      if (stable(dt))
+        continue;
+      for (hi = dt; !stable(dt /= ratio); hi = dt)
+        if (dt < options_.min_time_step)
+        {
+          lo = 0.0;
+          return;
+        }
+      lo = dt;
+      floor = lo / options_.scan_ratio;
+    }
+  }
+
+  // Runs of stable scan steps above the boundary, up to window_factor times it.
+  void windows()
+  {
+    if (!(row_.stable_dt > 0.0) || !std::isfinite(row_.unstable_dt))
+      return;
+    const double end = std::min(options_.window_factor * row_.unstable_dt, options_.max_time_step);
+    bool open = false;
+    for (double dt = row_.unstable_dt * options_.scan_ratio; dt <= end; dt *= options_.scan_ratio)
+    {
+      const bool ok = stable(dt);
+      if (ok && open)
+        row_.windows.back().to = dt;
+      else if (ok)
+        row_.windows.push_back({dt, dt});
+      open = ok;
+    }
+  }
+
+private:
+  bool stable(double dt)
+  {
+    sim_.setTimeStep(dt);
+    sim_.reset();
+    const bool ok = !sim_.step(options_.steps).diverged;
+    row_.tried.push_back({dt, ok});
+    ++row_.trials;
+    return ok;
+  }
+
+  Simulation& sim_;
+  const StabilityOptions& options_;
+  StabilityRow& row_;
+};
+
+}  // namespace
+
+void checkStabilityOptions(const StabilityOptions& options)
+{
+  if (options.steps < 1)
+    rejectParameter("--stability-steps", options.steps, "must be an integer >= 1");
+  if (!(options.tolerance >= kMinTolerance && options.tolerance <= 0.5))
+    rejectParameter("--tolerance", options.tolerance,
+                    "must be a relative tolerance in [" + std::to_string(kMinTolerance) +
+                        ", 0.5]: below that the bisection cannot resolve the step in double precision");
+  if (!(options.min_time_step > 0.0 && options.max_time_step > options.min_time_step &&
+        std::isfinite(options.max_time_step)))
+    rejectParameter("--max-time-step", options.max_time_step,
+                    "must be a finite number of seconds above " + std::to_string(options.min_time_step));
+  if (!(options.scan_ratio >= 1.001 && options.scan_ratio <= 2.0))
+    rejectParameter("--scan-ratio", options.scan_ratio, "must be in [1.001, 2]");
+  if (!(options.window_factor >= 1.0 && options.window_factor <= 100.0))
+    rejectParameter("--window-factor", options.window_factor, "must be in [1, 100]");
+}
+
 std::vector<StabilityRow> runStability(const ExperimentSetup& setup, const StabilityOptions& options, const ProgressFn& progress)
 {
-  if (options.steps < 1 || !(options.tolerance > 0.0) || !(options.min_time_step > 0.0) ||
-      !(options.max_time_step > options.min_time_step))
-    throw std::invalid_argument("stability: steps >= 1, tolerance > 0 and 0 < min_time_step < max_time_step");
-
+  checkStabilityOptions(options);
+  if (!(setup.sim.time_step < options.max_time_step))
+    rejectParameter("--max-time-step", options.max_time_step,
+                    "must be above time_step = " + std::to_string(setup.sim.time_step) + " s, where the search starts");
   std::vector<StabilityRow> rows;
   for (size_t m = 0; m < options.methods.size(); ++m)
   {
@@ -396,54 +587,11 @@ std::vector<StabilityRow> runStability(const ExperimentSetup& setup, const Stabi
     row.modal_bound = 2.0 / sim.basis().frequencies.maxCoeff();
     row.full_bound = 2.0 / highestFrequencyAtRest(sim.grid());
     const std::string label = "stability " + row.method;
-
-    auto stable = [&](double dt) {
-      sim.setTimeStep(dt);
-      sim.reset();
-      ++row.trials;
-      return !sim.step(options.steps).diverged;
-    };
-
-    // Bracket the boundary from the configured step by doubling or halving, then bisect.
-    double lo = setup.sim.time_step, hi = lo;
-    if (stable(lo))
-    {
-      hi = 2.0 * lo;
-      while (hi <= options.max_time_step && stable(hi))
-      {
-        lo = hi;
-        hi *= 2.0;
-      }
-      if (hi > options.max_time_step)
-        hi = std::numeric_limits<double>::infinity();
-    }
-    else
-    {
-      lo = 0.5 * hi;
-      while (lo >= options.min_time_step && !stable(lo))
-      {
-        hi = lo;
-        lo *= 0.5;
-      }
-      if (lo < options.min_time_step)
-        lo = 0.0;
-    }
-    report(progress, label, (m + 0.2) / options.methods.size());
-    if (lo > 0.0 && std::isfinite(hi))
-    {
-      const double width0 = std::log((hi - lo) / (options.tolerance * lo));
-      while (hi - lo > options.tolerance * lo)
-      {
-        const double mid = 0.5 * (lo + hi);
-        (stable(mid) ? lo : hi) = mid;
-        const double done = 1.0 - std::log(std::max(1.0, (hi - lo) / (options.tolerance * lo))) / width0;
-        report(progress, label, (m + 0.2 + 0.7 * done) / options.methods.size());
-      }
-      for (double fraction : {0.25, 0.5, 0.75})
-        row.below_stable = stable(fraction * lo) && row.below_stable;
-    }
-    row.stable_dt = lo;
-    row.unstable_dt = hi;
+    report(progress, label, static_cast<double>(m) / options.methods.size());
+    StabilitySearch search(sim, options, row);
+    search.boundary(setup.sim.time_step);
+    report(progress, label, (m + 0.6) / options.methods.size());
+    search.windows();
     rows.push_back(row);
     report(progress, label, (m + 1.0) / options.methods.size());
   }
@@ -464,6 +612,34 @@ std::ostream& precise(std::ostream& out)
 
 }  // namespace
 
+namespace
+{
+
+// A number as a CSV field: empty when not finite.
+struct Field
+{
+  double value;
+};
+
+std::ostream& operator<<(std::ostream& out, Field f)
+{
+  if (std::isfinite(f.value))
+    out << f.value;
+  return out;
+}
+
+// "from:to" per window, windows separated by ';' (the field stays one CSV field).
+std::string windowsField(const std::vector<StableWindow>& windows)
+{
+  std::ostringstream text;
+  text.precision(6);
+  for (size_t k = 0; k < windows.size(); ++k)
+    text << (k ? ";" : "") << windows[k].from << ':' << windows[k].to;
+  return text.str();
+}
+
+}  // namespace
+
 void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows)
 {
   precise(out) << "variant,method,dimension,rows,cols,particles,free_dofs,springs,num_modes,"
@@ -471,17 +647,17 @@ void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows)
   for (const CostRow& r : rows)
     out << r.variant << ',' << r.method << ',' << r.dimension << ',' << r.rows << ',' << r.cols << ','
         << r.particles << ',' << r.free_dofs << ',' << r.springs << ',' << r.num_modes << ','
-        << r.build_seconds << ',' << r.step_seconds << ',' << r.step_seconds_min << ',' << r.repeats << ','
-        << r.steps_per_repeat << ',' << (r.diverged ? 1 : 0) << '\n';
+        << Field{r.build_seconds} << ',' << Field{r.step_seconds} << ',' << Field{r.step_seconds_min} << ','
+        << r.repeats << ',' << r.steps_per_repeat << ',' << (r.diverged ? 1 : 0) << '\n';
 }
 
 void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows)
 {
   precise(out) << "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds\n";
   for (const ErrorSample& e : rows)
-    out << e.variant << ',' << e.method << ',' << e.step << ',' << e.time << ',' << e.max_distance << ','
-        << e.rms_distance << ',' << e.max_displacement << ',' << e.energy << ',' << (e.diverged ? 1 : 0) << ','
-        << e.step_seconds << '\n';
+    out << e.variant << ',' << e.method << ',' << e.step << ',' << Field{e.time} << ',' << Field{e.max_distance}
+        << ',' << Field{e.rms_distance} << ',' << Field{e.max_displacement} << ',' << Field{e.energy} << ','
+        << (e.diverged ? 1 : 0) << ',' << Field{e.step_seconds} << '\n';
 }
 
 void writeSnapshotCsv(std::ostream& out, const Grid& grid, const std::vector<Snapshot>& snapshots)
@@ -490,20 +666,20 @@ void writeSnapshotCsv(std::ostream& out, const Grid& grid, const std::vector<Sna
   const int cols = grid.params().cols;
   for (const Snapshot& s : snapshots)
     for (int p = 0; p < grid.numParticles(); ++p)
-      out << s.variant << ',' << s.method << ',' << s.step << ',' << s.time << ',' << p << ',' << p / cols << ','
-          << p % cols << ',' << (grid.isFixed(p) ? 1 : 0) << ',' << s.points(0, p) << ',' << s.points(1, p) << ','
-          << s.points(2, p) << '\n';
+      out << s.variant << ',' << s.method << ',' << s.step << ',' << Field{s.time} << ',' << p << ',' << p / cols
+          << ',' << p % cols << ',' << (grid.isFixed(p) ? 1 : 0) << ',' << Field{s.points(0, p)} << ','
+          << Field{s.points(1, p)} << ',' << Field{s.points(2, p)} << '\n';
 }
 
 void writeStabilityCsv(std::ostream& out, const std::vector<StabilityRow>& rows)
 {
-  precise(out) << "variant,method,stable_dt,unstable_dt,trials,steps,tolerance,modal_bound,full_bound,below_stable,"
-                  "check_dt,check_stable\n";
+  precise(out) << "variant,method,stable_dt,unstable_dt,trials,steps,tolerance,modal_bound,full_bound,"
+                  "stable_windows,check_dt,check_stable\n";
   for (const StabilityRow& r : rows)
-    out << r.variant << ',' << r.method << ',' << r.stable_dt << ',' << r.unstable_dt << ',' << r.trials << ','
-        << r.steps << ',' << r.tolerance << ',' << r.modal_bound << ',' << r.full_bound << ','
-        << (r.below_stable ? 1 : 0) << ',' << r.check_dt << ',' << (r.check_dt > 0.0 ? (r.check_stable ? 1 : 0) : -1)
-        << '\n';
+    out << r.variant << ',' << r.method << ',' << Field{r.stable_dt} << ',' << Field{r.unstable_dt} << ','
+        << r.trials << ',' << r.steps << ',' << Field{r.tolerance} << ',' << Field{r.modal_bound} << ','
+        << Field{r.full_bound} << ',' << windowsField(r.windows) << ',' << Field{r.check_dt} << ','
+        << (r.check_dt > 0.0 ? (r.check_stable ? 1 : 0) : -1) << '\n';
 }
 
 }  // namespace modal_mass_spring

@@ -8,6 +8,7 @@
 #include <functional>
 #include <ostream>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace modal_mass_spring
@@ -20,7 +21,13 @@ struct ExperimentSetup
   std::string variant = "base";
   GridParams grid;
   SimulationParams sim;
+  // The varied keys and their values (YAML text), in --vary order; empty for "base".
+  std::vector<std::pair<std::string, std::string>> settings;
 };
+
+// The setup among `setups` that differs from `setup` only in running the explicit integrator: every
+// other varied setting equal, `integrator` explicit. Nullptr when there is none.
+const ExperimentSetup* explicitTwin(const ExperimentSetup& setup, const std::vector<ExperimentSetup>& setups);
 
 // Reports how far a long run is (label, fraction done in [0, 1]); may be empty.
 using ProgressFn = std::function<void(const std::string&, double)>;
@@ -107,38 +114,73 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
 
 // ---------------------------------------------------------------- 3. stability
 
+// Stability is not monotone in the time step (a grid can diverge at one step and run at a larger
+// one), so the search never assumes one boundary: it scans upward and reports the largest step
+// below which every step it tried was stable, then the stable windows it found above that.
 struct StabilityOptions
 {
   std::vector<Method> methods{Method::Full, Method::Linear, Method::Physical};
   int steps = 10000;        // S: a time step is stable when S steps from the setup's initial state do not diverge
-  double tolerance = 1e-3;  // bisection stops when (unstable - stable) <= tolerance * stable
+  double tolerance = 1e-3;  // the last bracket is bisected until (unstable - stable) <= tolerance * stable
   double max_time_step = 10.0;  // s; no divergence up to here counts as unbounded
   double min_time_step = 1e-9;  // s; divergence down to here counts as no stable step
+  // The scan: doubling (or halving) from the setup's time_step to the first divergence, then upward
+  // in steps of this ratio through the last octave, then bisection of the first divergence found,
+  // then a look for pockets of divergence over the scan step below it, at the tolerance's
+  // resolution (at most 20 trials a scan step).
+  double scan_ratio = 1.02;
+  // Stable windows are looked for by the same scan from the boundary up to this multiple of it (and
+  // at most max_time_step).
+  double window_factor = 2.0;
+};
+
+// The smallest and largest step of a run of consecutive stable scan steps above the boundary.
+struct StableWindow
+{
+  double from = 0.0, to = 0.0;
+};
+
+struct StabilityTrial
+{
+  double dt = 0.0;
+  bool stable = false;
 };
 
 struct StabilityRow
 {
   std::string variant, method;
-  double stable_dt = 0.0;    // largest time step found stable (0: none above min_time_step)
-  double unstable_dt = 0.0;  // smallest found to diverge (infinity: none up to max_time_step)
+  // The largest step below which every step tried was stable (0: none above min_time_step), and the
+  // smallest step found to diverge (infinity: none up to max_time_step).
+  double stable_dt = 0.0;
+  double unstable_dt = 0.0;
   int trials = 0;
   int steps = 0;
   double tolerance = 0.0;
   // Closed forms of the explicit scheme, 2 / omega: for the highest mode of the basis and for the
-  // highest frequency of K(x0) over all free dofs (NaN when the grid is too large for a dense solve).
+  // highest frequency of K(x0) over all free dofs (NaN when the grid is too large for a dense solve;
+  // infinity when every mode of the basis is a zero mode).
   double modal_bound = 0.0;
   double full_bound = 0.0;
-  // Whether 1/4, 1/2 and 3/4 of stable_dt are stable too: bisection assumes one boundary.
-  bool below_stable = true;
+  // Stable windows above unstable_dt, in increasing order.
+  std::vector<StableWindow> windows;
+  // Every step tried, in the order tried.
+  std::vector<StabilityTrial> tried;
   // A direct check at one time step (see checkStableAt): the step (0: not checked) and the outcome.
   double check_dt = 0.0;
   bool check_stable = false;
 };
 
+// Throws std::invalid_argument (rejectParameter, with the tool's option names) for options with which
+// the search could not end: a tolerance below what doubles resolve, a scan ratio too close to 1, ...
+constexpr double kMinTolerance = 1e-12;
+void checkStabilityOptions(const StabilityOptions& options);
+
 std::vector<StabilityRow> runStability(const ExperimentSetup& setup, const StabilityOptions& options,
                                        const ProgressFn& progress = {});
 
-// time_step / reference_time_step when it is a whole number >= 1; throws std::invalid_argument otherwise.
+// time_step / reference_time_step when it is a whole number in [1, kMaxReferenceSubsteps]; throws
+// std::invalid_argument (naming --reference-time-step) otherwise.
+constexpr int kMaxReferenceSubsteps = 100000;
 int referenceSubsteps(double time_step, double reference_time_step);
 
 // Whether `method` on the setup runs `steps` steps at time step `dt` without diverging.
@@ -148,6 +190,8 @@ bool checkStableAt(const ExperimentSetup& setup, Method method, double dt, int s
 double highestFrequencyAtRest(const Grid& grid, int max_dofs = 3000);
 
 // ---------------------------------------------------------------- CSV files the plotting script reads
+// A number that is not finite (a diverged sample, the bound of a basis of zero modes, no divergence
+// found) is written as an empty field: the `diverged` flag or the column's meaning says why.
 
 void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows);
 void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows);

@@ -3,18 +3,24 @@
 #include "yaml_parameter_source.h"
 
 #include "modal_mass_spring/parameters.h"
+#include "modal_mass_spring/validation.h"
 
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iomanip>
 #include <iostream>
+#include <limits>
 #include <map>
+#include <new>
+#include <set>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -29,37 +35,51 @@ namespace
 const char* const kUsage = R"(usage: modal_compare --config FILE [options]
 
 Runs the paper's experiments on the grid of a YAML config (the node's parameter names) and writes
-CSV files to the output folder plus a summary table on stdout.
+CSV files to the output folder plus a summary table on stdout. Every option and every setup is
+checked before anything runs; bad input ends with exit code 2 and a message naming it.
 
   --config FILE         YAML map of parameters (rows, cols, dimension, mass, ..., num_modes, alpha,
-                        beta, time_step); keys the core does not know are ignored
+                        beta, time_step); the node's own keys are ignored, other unknown keys warned about
   --experiment LIST     comma-separated: cost, accuracy, stability, or all (default: all)
   --output DIR          folder for the CSV files (default: .)
-  --tag NAME            file name tag, <experiment>_<tag>.csv (default: the config file's stem)
+  --tag NAME            file name tag, <experiment>_<tag>.csv (default: the config file's stem); no '/'
   --methods LIST        comma-separated of full, linear, physical (default: all three; accuracy
                         always runs full as the reference)
-  --set KEY=VALUE       override one parameter of the config (VALUE is YAML); repeatable
+  --set KEY=VALUE       override one parameter of the config (VALUE is YAML); repeatable, once per key
   --vary KEY=V1,V2,...  run every experiment for each value; several --vary give every combination,
                         e.g. --vary integrator=explicit,implicit --vary linearization=rest,equilibrium
   --quiet               no progress line on stderr
 
-  accuracy:   --steps N (5000)  --interval N (1000, snapshots)  --sample N (10, error samples)
+  accuracy:   --steps N (5000)  --interval N (1000, snapshots)  --sample N (10, error samples; divides
+                --interval, at most --steps)
               --reference-time-step DT (s; default: the reference is `full` at the same step, as in the
                 paper; with DT: `full`, explicit, at DT, checked against DT / 2, and every method,
-                `full` too, measured against it, with its wall time per step; DT must divide time_step)
+                `full` too, measured against it, with its wall time per step; DT must divide time_step,
+                at most 100000 times)
               --no-snapshots (no particle positions file)
-  stability:  --stability-steps S (10000)  --tolerance T (1e-3, relative)
-              --max-time-step DT (10 s; no divergence up to DT counts as unbounded)
-              --check-factor F (0: off; with --vary integrator=explicit,implicit, each implicit
+  stability:  --stability-steps S (10000)  --tolerance T (1e-3, relative, in [1e-12, 0.5])
+              --max-time-step DT (10 s; above time_step; no divergence up to DT counts as unbounded)
+              --scan-ratio R (1.02, in [1.001, 2]: the upward scan's step ratio)
+              --window-factor F (2, in [1, 100]: stable windows are looked for up to F times the boundary)
+              --check-factor F (0: off; needs --vary integrator=explicit,implicit: each implicit
                 method is also run at F times the largest stable step of the same method under
                 the explicit integrator, and the summary says whether it stayed stable)
   cost:       --sizes LIST (5,10,20,40; square grids)  --repeats R (7)  --min-repeat-seconds T (0.02)
 )";
 
-struct UsageError : std::invalid_argument
+std::string fmt(double value, int precision = 3)
 {
-  using std::invalid_argument::invalid_argument;
-};
+  std::ostringstream s;
+  if (std::isnan(value))
+    s << "-";
+  else if (std::isinf(value))
+    s << "inf";
+  else
+    s << std::setprecision(precision) << value;
+  return s.str();
+}
+
+const std::vector<std::string> kExperiments{"cost", "accuracy", "stability"};
 
 // Splits on commas outside brackets, so "fixed=[0,4],[1,3]" keeps its lists.
 std::vector<std::string> splitList(const std::string& text)
@@ -85,48 +105,70 @@ std::vector<std::string> splitList(const std::string& text)
   return items;
 }
 
-int parseInt(const std::string& option, const std::string& text, int min)
+// The items of a comma-separated option value: none empty, none twice.
+std::vector<std::string> parseList(const std::string& option, const std::string& text)
+{
+  const std::vector<std::string> items = splitList(text);
+  for (size_t k = 0; k < items.size(); ++k)
+  {
+    if (items[k].empty())
+      rejectParameter(option, "'" + text + "'", "must be a comma-separated list without empty items");
+    if (std::find(items.begin(), items.begin() + k, items[k]) != items.begin() + k)
+      rejectParameter(option, "'" + text + "'", "lists '" + items[k] + "' twice");
+  }
+  return items;
+}
+
+int parseInt(const std::string& option, const std::string& text, long min, long max)
 {
   try
   {
     size_t used = 0;
-    const int value = std::stoi(text, &used);
-    if (used == text.size() && value >= min)
-      return value;
+    const long value = std::stol(text, &used);
+    if (used == text.size() && value >= min && value <= max)
+      return static_cast<int>(value);
   }
   catch (const std::exception&)
   {
   }
-  throw UsageError("invalid value '" + text + "' for " + option + ": must be an integer >= " + std::to_string(min));
+  rejectParameter(option, "'" + text + "'",
+                  "must be an integer in [" + std::to_string(min) + ", " + std::to_string(max) + "]");
 }
 
-double parsePositive(const std::string& option, const std::string& text)
+// A finite number in (low, high] (open_low) or [low, high].
+double parseNumber(const std::string& option, const std::string& text, double low, double high, bool open_low)
 {
   try
   {
     size_t used = 0;
     const double value = std::stod(text, &used);
-    if (used == text.size() && std::isfinite(value) && value > 0.0)
+    if (used == text.size() && std::isfinite(value) && (open_low ? value > low : value >= low) && value <= high)
       return value;
   }
   catch (const std::exception&)
   {
   }
-  throw UsageError("invalid value '" + text + "' for " + option + ": must be a number > 0");
+  std::ostringstream range;
+  range << "must be a number in " << (open_low ? "(" : "[") << low << ", " << high << "]";
+  rejectParameter(option, "'" + text + "'", range.str());
 }
 
 std::pair<std::string, std::string> splitKeyValue(const std::string& option, const std::string& text)
 {
   const size_t eq = text.find('=');
   if (eq == std::string::npos || eq == 0 || eq + 1 == text.size())
-    throw UsageError("invalid value '" + text + "' for " + option + ": must be KEY=VALUE");
-  return {text.substr(0, eq), text.substr(eq + 1)};
+    rejectParameter(option, "'" + text + "'", "must be KEY=VALUE");
+  const std::string key = text.substr(0, eq);
+  for (char c : key)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_'))
+      rejectParameter(option, "'" + text + "'", "KEY must be a parameter name (letters, digits, '_')");
+  return {key, text.substr(eq + 1)};
 }
 
 struct Options
 {
   std::string config;
-  std::vector<std::string> experiments{"cost", "accuracy", "stability"};
+  std::vector<std::string> experiments = kExperiments;
   std::string output = ".";
   std::string tag;
   std::vector<Method> methods{Method::Full, Method::Linear, Method::Physical};
@@ -137,16 +179,153 @@ struct Options
   AccuracyOptions accuracy;
   StabilityOptions stability;
   CostOptions cost;
+
+  bool runs(const std::string& experiment) const
+  {
+    return std::find(experiments.begin(), experiments.end(), experiment) != experiments.end();
+  }
 };
+
+void setExperiments(Options& o, const std::string& text)
+{
+  o.experiments.clear();
+  for (const std::string& name : parseList("--experiment", text))
+  {
+    if (name == "all")
+      o.experiments = kExperiments;
+    else if (std::find(kExperiments.begin(), kExperiments.end(), name) != kExperiments.end())
+    {
+      if (!o.runs(name))
+        o.experiments.push_back(name);
+    }
+    else
+      rejectParameter("--experiment", "'" + name + "'", "unknown experiment: must be cost, accuracy, stability or all");
+  }
+}
+
+void setMethods(Options& o, const std::string& text)
+{
+  o.methods.clear();
+  for (const std::string& name : parseList("--methods", text))
+  {
+    try
+    {
+      o.methods.push_back(parseMethod(name));
+    }
+    catch (const std::invalid_argument&)
+    {
+      rejectParameter("--methods", "'" + name + "'", "unknown method: must be full, linear or physical");
+    }
+  }
+}
+
+void setTag(Options& o, const std::string& text)
+{
+  for (char c : text)
+    if (c == '/' || std::iscntrl(static_cast<unsigned char>(c)))
+      rejectParameter("--tag", "'" + text + "'", "a file name part: no '/' and no control characters");
+  if (text.empty() || text == "." || text == "..")
+    rejectParameter("--tag", "'" + text + "'", "must be a non-empty file name part");
+  o.tag = text;
+}
+
+void addSet(Options& o, const std::string& text)
+{
+  const auto kv = splitKeyValue("--set", text);
+  for (const auto& [key, value] : o.sets)
+    if (key == kv.first)
+      rejectParameter("--set", "'" + text + "'", "sets '" + key + "' twice (already '" + value + "')");
+  o.sets.push_back(kv);
+}
+
+void addVary(Options& o, const std::string& text)
+{
+  const auto [key, values] = splitKeyValue("--vary", text);
+  if (key == "method")
+    rejectParameter("--vary", "'" + text + "'", "use --methods to choose methods");
+  for (const auto& vary : o.varies)
+    if (vary.first == key)
+      rejectParameter("--vary", "'" + text + "'", "varies '" + key + "' twice");
+  o.varies.push_back({key, parseList("--vary " + key, values)});
+}
+
+using Setter = std::function<void(Options&, const std::string&)>;
+
+// Every option that takes a value; each may be given once, but --set and --vary.
+const std::map<std::string, Setter>& valueOptions()
+{
+  static const std::map<std::string, Setter> options{
+      {"--config", [](Options& o, const std::string& v) { o.config = v; }},
+      {"--experiment", setExperiments},
+      {"--output", [](Options& o, const std::string& v) { o.output = v; }},
+      {"--tag", setTag},
+      {"--methods", setMethods},
+      {"--set", addSet},
+      {"--vary", addVary},
+      {"--steps", [](Options& o, const std::string& v) { o.accuracy.steps = parseInt("--steps", v, 1, 100000000); }},
+      {"--interval",
+       [](Options& o, const std::string& v) { o.accuracy.interval = parseInt("--interval", v, 1, 100000000); }},
+      {"--sample", [](Options& o, const std::string& v) { o.accuracy.sample = parseInt("--sample", v, 1, 100000000); }},
+      {"--reference-time-step",
+       [](Options& o, const std::string& v) {
+         o.accuracy.reference_time_step = parseNumber("--reference-time-step", v, 0.0, 1e6, true);
+       }},
+      {"--max-time-step",
+       [](Options& o, const std::string& v) {
+         o.stability.max_time_step = parseNumber("--max-time-step", v, o.stability.min_time_step, 1e6, true);
+       }},
+      {"--check-factor",
+       [](Options& o, const std::string& v) { o.check_factor = parseNumber("--check-factor", v, 0.0, 1e4, true); }},
+      {"--stability-steps",
+       [](Options& o, const std::string& v) { o.stability.steps = parseInt("--stability-steps", v, 1, 100000000); }},
+      {"--tolerance",
+       [](Options& o, const std::string& v) { o.stability.tolerance = parseNumber("--tolerance", v, kMinTolerance, 0.5, false); }},
+      {"--scan-ratio",
+       [](Options& o, const std::string& v) { o.stability.scan_ratio = parseNumber("--scan-ratio", v, 1.001, 2.0, false); }},
+      {"--window-factor",
+       [](Options& o, const std::string& v) {
+         o.stability.window_factor = parseNumber("--window-factor", v, 1.0, 100.0, false);
+       }},
+      {"--sizes",
+       [](Options& o, const std::string& v) {
+         o.cost.sizes.clear();
+         for (const std::string& size : parseList("--sizes", v))
+           o.cost.sizes.push_back(parseInt("--sizes", size, 2, 1000000));
+       }},
+      {"--repeats", [](Options& o, const std::string& v) { o.cost.repeats = parseInt("--repeats", v, 1, 1000); }},
+      {"--min-repeat-seconds",
+       [](Options& o, const std::string& v) {
+         o.cost.min_repeat_seconds = parseNumber("--min-repeat-seconds", v, 0.0, 60.0, true);
+       }},
+  };
+  return options;
+}
+
+// What can be checked from the options alone; the setups are checked by validate().
+void finishOptions(Options& o)
+{
+  if (o.config.empty())
+    rejectParameter("--config", "''", "a YAML file is required (see --help)");
+  if (o.output.empty())
+    rejectParameter("--output", "''", "must name a folder");
+  if (o.accuracy.interval % o.accuracy.sample != 0)
+    rejectParameter("--sample", o.accuracy.sample, "must divide --interval " + std::to_string(o.accuracy.interval));
+  if (o.accuracy.sample > o.accuracy.steps)
+    rejectParameter("--sample", o.accuracy.sample, "must be at most --steps " + std::to_string(o.accuracy.steps));
+  if (o.check_factor > 0.0 && !o.runs("stability"))
+    rejectParameter("--check-factor", o.check_factor, "needs the stability experiment");
+  checkStabilityOptions(o.stability);
+  o.accuracy.methods = o.methods;
+  o.stability.methods = o.methods;
+  o.cost.methods = o.methods;
+  if (o.tag.empty())
+    setTag(o, fs::path(o.config).stem().string());
+}
 
 Options parseArguments(int argc, char** argv)
 {
   Options o;
-  auto value = [&](int& i) -> std::string {
-    if (i + 1 >= argc)
-      throw UsageError(std::string("option ") + argv[i] + " needs a value");
-    return argv[++i];
-  };
+  std::set<std::string> given;
   for (int i = 1; i < argc; ++i)
   {
     const std::string arg = argv[i];
@@ -155,126 +334,65 @@ Options parseArguments(int argc, char** argv)
       std::cout << kUsage;
       std::exit(0);
     }
-    else if (arg == "--config")
-      o.config = value(i);
-    else if (arg == "--experiment")
-    {
-      const std::string text = value(i);
-      o.experiments.clear();
-      for (const std::string& name : splitList(text))
-      {
-        if (name == "all")
-          o.experiments = {"cost", "accuracy", "stability"};
-        else if (name == "cost" || name == "accuracy" || name == "stability")
-          o.experiments.push_back(name);
-        else
-          throw UsageError("unknown experiment '" + name + "': must be cost, accuracy, stability or all");
-      }
-    }
-    else if (arg == "--output")
-      o.output = value(i);
-    else if (arg == "--tag")
-      o.tag = value(i);
-    else if (arg == "--methods")
-    {
-      o.methods.clear();
-      for (const std::string& name : splitList(value(i)))
-      {
-        try
-        {
-          o.methods.push_back(parseMethod(name));
-        }
-        catch (const std::invalid_argument&)
-        {
-          throw UsageError("unknown method '" + name + "' in --methods: must be full, linear or physical");
-        }
-      }
-    }
-    else if (arg == "--set")
-      o.sets.push_back(splitKeyValue(arg, value(i)));
-    else if (arg == "--vary")
-    {
-      const auto [key, values] = splitKeyValue(arg, value(i));
-      if (key == "method")
-        throw UsageError("--vary method: use --methods to choose methods");
-      o.varies.push_back({key, splitList(values)});
-    }
-    else if (arg == "--quiet")
+    if (arg != "--set" && arg != "--vary" && !given.insert(arg).second)
+      rejectParameter(arg, "(given twice)", "each option may be given once, but --set and --vary");
+    if (arg == "--quiet")
       o.quiet = true;
-    else if (arg == "--steps")
-      o.accuracy.steps = parseInt(arg, value(i), 1);
-    else if (arg == "--interval")
-      o.accuracy.interval = parseInt(arg, value(i), 1);
-    else if (arg == "--sample")
-      o.accuracy.sample = parseInt(arg, value(i), 1);
-    else if (arg == "--reference-time-step")
-      o.accuracy.reference_time_step = parsePositive(arg, value(i));
     else if (arg == "--no-snapshots")
       o.accuracy.snapshots = false;
-    else if (arg == "--max-time-step")
-      o.stability.max_time_step = parsePositive(arg, value(i));
-    else if (arg == "--check-factor")
-      o.check_factor = parsePositive(arg, value(i));
-    else if (arg == "--stability-steps")
-      o.stability.steps = parseInt(arg, value(i), 1);
-    else if (arg == "--tolerance")
+    else if (const auto option = valueOptions().find(arg); option != valueOptions().end())
     {
-      o.stability.tolerance = parsePositive(arg, value(i));
-      if (o.stability.tolerance >= 1.0)
-        throw UsageError("invalid value for --tolerance: must be a relative tolerance in (0, 1)");
+      if (i + 1 >= argc)
+        rejectParameter(arg, "(missing)", "needs a value");
+      option->second(o, argv[++i]);
     }
-    else if (arg == "--sizes")
-    {
-      o.cost.sizes.clear();
-      for (const std::string& s : splitList(value(i)))
-        o.cost.sizes.push_back(parseInt("--sizes", s, 2));
-    }
-    else if (arg == "--repeats")
-      o.cost.repeats = parseInt(arg, value(i), 1);
-    else if (arg == "--min-repeat-seconds")
-      o.cost.min_repeat_seconds = parsePositive(arg, value(i));
     else
-      throw UsageError("unknown option '" + arg + "' (see --help)");
+      rejectParameter("option", "'" + arg + "'", "not an option of modal_compare (see --help)");
   }
-  if (o.config.empty())
-    throw UsageError("--config FILE is required (see --help)");
-  if (o.accuracy.interval % o.accuracy.sample != 0)
-    throw UsageError("--sample " + std::to_string(o.accuracy.sample) + " must divide --interval " +
-                     std::to_string(o.accuracy.interval));
-  o.accuracy.methods = o.methods;
-  o.stability.methods = o.methods;
-  o.cost.methods = o.methods;
-  if (o.tag.empty())
-    o.tag = fs::path(o.config).stem().string();
+  finishOptions(o);
   return o;
 }
 
-// Every combination of the --vary values, each loaded and validated from its own copy of the config.
-std::vector<ExperimentSetup> buildSetups(const Options& o)
+// Every combination of the --vary values.
+std::vector<std::vector<std::pair<std::string, std::string>>> combinations(const Options& o)
 {
-  YamlParameterSource base = YamlParameterSource::fromFile(o.config);
-  for (const auto& [key, text] : o.sets)
-    base.set(key, text);
-
-  std::vector<std::vector<std::pair<std::string, std::string>>> combinations{{}};
+  std::vector<std::vector<std::pair<std::string, std::string>>> all{{}};
   for (const auto& [key, values] : o.varies)
   {
     std::vector<std::vector<std::pair<std::string, std::string>>> next;
-    for (const auto& combination : combinations)
+    for (const auto& combination : all)
       for (const std::string& v : values)
       {
         auto extended = combination;
         extended.push_back({key, v});
         next.push_back(extended);
       }
-    combinations = next;
+    all = next;
   }
+  return all;
+}
+
+// Config keys that neither the core nor the node reads: most likely misspelled.
+void warnAboutUnknownKeys(const YamlParameterSource& source)
+{
+  for (const std::string& key : source.unknownKeys())
+    std::cerr << "modal_compare: warning: config '" << source.origin() << "': unknown parameter '" << key
+                << "' ignored (neither the core nor the node reads it)\n";
+}
+
+// Every combination of the --vary values, each loaded from its own copy of the config.
+std::vector<ExperimentSetup> buildSetups(const Options& o)
+{
+  YamlParameterSource base = YamlParameterSource::fromFile(o.config);
+  for (const auto& [key, text] : o.sets)
+    base.set(key, text);
 
   std::vector<ExperimentSetup> setups;
-  for (const auto& combination : combinations)
+  for (const auto& combination : combinations(o))
   {
     YamlParameterSource source = base.clone();
     ExperimentSetup setup;
+    setup.settings = combination;
     std::string label;
     for (const auto& [key, v] : combination)
     {
@@ -302,52 +420,83 @@ std::vector<ExperimentSetup> buildSetups(const Options& o)
       overridden.push_back(kv.first);
     for (const std::string& key : overridden)
       if (!source.queried().count(key))
-        throw UsageError("unknown parameter '" + key + "' in --set/--vary: the core reads no parameter of that name");
+        rejectParameter(key, "(in --set/--vary)", "unknown parameter: the core reads no parameter of that name");
+    if (setups.empty())
+      warnAboutUnknownKeys(source);
     setups.push_back(setup);
   }
   return setups;
 }
 
-// Fails before any experiment runs: builds each setup once (ranges are checked there) and checks
-// that the cost sizes leave room for the modes.
+// The core's checks of one setup (validateParameters: ranges, sizes, the memory estimate), which
+// build nothing, named by config and variant.
+void validateSetup(const Options& o, const ExperimentSetup& setup, const GridParams& grid, const std::string& what)
+{
+  try
+  {
+    validateParameters(grid, setup.sim);
+  }
+  catch (const std::invalid_argument& e)
+  {
+    throw std::invalid_argument("config '" + o.config + "' (" + setup.variant + what + "): " + e.what());
+  }
+}
+
+void validateStabilitySetups(const Options& o, const std::vector<ExperimentSetup>& setups)
+{
+  for (const ExperimentSetup& setup : setups)
+    if (!(setup.sim.time_step < o.stability.max_time_step))
+      rejectParameter("--max-time-step", o.stability.max_time_step,
+                      "must be above time_step = " + fmt(setup.sim.time_step) + " s (" + setup.variant +
+                          "), where the search starts");
+  if (o.check_factor <= 0.0)
+    return;
+  bool paired = false;
+  for (const ExperimentSetup& setup : setups)
+    paired = paired || (setup.sim.integrator == IntegratorKind::Implicit && explicitTwin(setup, setups));
+  if (!paired)
+    rejectParameter("--check-factor", o.check_factor,
+                    "needs an implicit setup and its explicit twin: --vary integrator=explicit,implicit");
+}
+
+// Fails before any experiment runs.
 void validate(const Options& o, const std::vector<ExperimentSetup>& setups)
 {
   for (const ExperimentSetup& setup : setups)
   {
-    try
+    validateSetup(o, setup, setup.grid, "");
+    if (o.runs("accuracy") && o.accuracy.reference_time_step > 0.0)
     {
-      Simulation check(setup.grid, setup.sim);
+      const int substeps = referenceSubsteps(setup.sim.time_step, o.accuracy.reference_time_step);
+      if (2LL * o.accuracy.sample * substeps > std::numeric_limits<int>::max())
+        rejectParameter("--reference-time-step", o.accuracy.reference_time_step,
+                        "with --sample " + std::to_string(o.accuracy.sample) + " too many reference steps per sample");
     }
-    catch (const std::invalid_argument& e)
-    {
-      throw std::invalid_argument("config '" + o.config + "' (" + setup.variant + "): " + e.what());
-    }
-    if (o.accuracy.reference_time_step > 0.0 &&
-        std::find(o.experiments.begin(), o.experiments.end(), "accuracy") != o.experiments.end())
-    {
-      try
-      {
-        referenceSubsteps(setup.sim.time_step, o.accuracy.reference_time_step);
-      }
-      catch (const std::invalid_argument& e)
-      {
-        throw UsageError(std::string("--reference-time-step: ") + e.what());
-      }
-    }
-    const bool cost = std::find(o.experiments.begin(), o.experiments.end(), "cost") != o.experiments.end();
-    if (cost)
+    if (o.runs("cost"))
       for (int size : o.cost.sizes)
       {
         GridParams g = setup.grid;
         g.rows = g.cols = size;
         g.fixed.clear();
-        const int free_dofs = Grid(g).numFreeDofs();
-        if (setup.sim.num_modes > free_dofs)
-          throw UsageError("--sizes " + std::to_string(size) + ": a " + std::to_string(size) + "x" +
-                           std::to_string(size) + " grid has " + std::to_string(free_dofs) +
-                           " free degrees of freedom, fewer than num_modes = " + std::to_string(setup.sim.num_modes));
+        validateSetup(o, setup, g, ", --sizes " + std::to_string(size));
       }
   }
+  if (o.runs("stability"))
+    validateStabilitySetups(o, setups);
+}
+
+// Creates the output folder and makes sure a file can be written there, before any work.
+void prepareOutput(const Options& o)
+{
+  std::error_code ec;
+  fs::create_directories(o.output, ec);
+  if (ec || !fs::is_directory(o.output))
+    rejectParameter("--output", "'" + o.output + "'", "cannot create the folder" + (ec ? ": " + ec.message() : ""));
+  const fs::path probe = fs::path(o.output) / (".modal_compare_write_test_" + std::to_string(getpid()));
+  const bool writable = static_cast<bool>(std::ofstream(probe));
+  fs::remove(probe, ec);
+  if (!writable)
+    rejectParameter("--output", "'" + o.output + "'", "the folder is not writable");
 }
 
 // One line on stderr, rewritten in place on a terminal, a few lines a minute otherwise.
@@ -385,18 +534,6 @@ std::ofstream openCsv(const Options& o, const std::string& name)
     throw std::runtime_error("cannot write '" + path.string() + "'");
   std::cout << "wrote " << path.string() << "\n";
   return out;
-}
-
-std::string fmt(double value, int precision = 3)
-{
-  std::ostringstream s;
-  if (std::isnan(value))
-    s << "-";
-  else if (std::isinf(value))
-    s << "inf";
-  else
-    s << std::setprecision(precision) << value;
-  return s.str();
 }
 
 // Prints a table with columns padded to their widest cell.
@@ -445,10 +582,37 @@ void runCostExperiment(const Options& o, const std::vector<ExperimentSetup>& set
   printTable("cost (" + o.tag + "): median of " + std::to_string(o.cost.repeats) + " timed runs", table);
 }
 
+// The basis and, with a converged reference, how well it agrees with itself at half its step.
+void printAccuracyHeader(const Options& o, const ExperimentSetup& setup, const AccuracyResult& result)
+{
+  std::ostringstream freq;
+  for (int k = 0; k < result.frequencies.size(); ++k)
+    freq << (k ? " " : "") << fmt(result.frequencies[k]);
+  std::cout << "basis (" << setup.variant << "): " << result.frequencies.size() << " modes, "
+            << result.num_zero_modes << " zero, omega [rad/s] = " << freq.str() << "\n";
+  if (o.accuracy.reference_time_step > 0.0)
+    std::cout << "reference (" << setup.variant << "): full, explicit, dt = " << fmt(o.accuracy.reference_time_step)
+              << " s; against dt / 2: largest RMS distance " << fmt(result.reference_check_max_rms)
+              << " m, largest particle distance " << fmt(result.reference_check_max_distance) << " m\n";
+}
+
+void printAccuracySummary(const Options& o, const std::string& reference, const std::vector<ErrorSample>& errors)
+{
+  std::vector<std::vector<std::string>> summary{{"variant", "method", "mean RMS m", "largest RMS m", "mean largest m",
+                                                 "RMS at the end m", "step us (median)", "step us (mean)"}};
+  for (const AccuracySummary& s : summarizeAccuracy(errors))
+    if (s.method != reference && s.method != "reference_half_step")
+      summary.push_back({s.variant, s.method, fmt(s.mean_rms), fmt(s.max_rms), fmt(s.mean_max),
+                         s.diverged ? "diverged" : fmt(s.final_rms), fmt(1e6 * s.step_seconds_median),
+                         fmt(1e6 * s.step_seconds_mean)});
+  printTable("accuracy (" + o.tag + "): over every sample after step 0, against " + reference +
+                 "; wall time per step while running",
+             summary);
+}
+
 void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>& setups, Progress& progress)
 {
-  const bool with_reference = o.accuracy.reference_time_step > 0.0;
-  const std::string reference = with_reference ? "reference" : "full";
+  const std::string reference = o.accuracy.reference_time_step > 0.0 ? "reference" : "full";
   std::vector<ErrorSample> errors;
   std::vector<Snapshot> snapshots;
   std::vector<std::string> messages;
@@ -461,24 +625,18 @@ void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>&
     errors.insert(errors.end(), result.reference_check.begin(), result.reference_check.end());
     snapshots.insert(snapshots.end(), result.snapshots.begin(), result.snapshots.end());
     messages.insert(messages.end(), result.messages.begin(), result.messages.end());
-    std::ostringstream freq;
-    for (int k = 0; k < result.frequencies.size(); ++k)
-      freq << (k ? " " : "") << fmt(result.frequencies[k]);
-    std::cout << "basis (" << setup.variant << "): " << result.frequencies.size() << " modes, "
-              << result.num_zero_modes << " zero, omega [rad/s] = " << freq.str() << "\n";
-    if (with_reference)
-      std::cout << "reference (" << setup.variant << "): full, explicit, dt = "
-                << fmt(o.accuracy.reference_time_step) << " s; against dt / 2: largest RMS distance "
-                << fmt(result.reference_check_max_rms) << " m, largest particle distance "
-                << fmt(result.reference_check_max_distance) << " m\n";
+    printAccuracyHeader(o, setup, result);
     for (const ErrorSample& e : result.errors)
-      if ((e.step % o.accuracy.interval == 0 || e.step == o.accuracy.steps) && e.method != reference)
+    {
+      if (e.step % o.accuracy.interval != 0 && e.step != o.accuracy.steps)
+        continue;
+      if (e.method == reference)
+        std::cout << reference << " (" << setup.variant << ") at step " << e.step << ": max displacement "
+                  << fmt(e.max_displacement) << " m\n";
+      else
         table.push_back({e.variant, e.method, std::to_string(e.step), fmt(e.time), fmt(e.max_distance),
                          fmt(e.rms_distance), fmt(e.max_displacement)});
-    for (const ErrorSample& e : result.errors)
-      if ((e.step % o.accuracy.interval == 0 || e.step == o.accuracy.steps) && e.method == reference)
-        std::cout << reference << " (" << setup.variant << ") at step " << e.step
-                  << ": max displacement " << fmt(e.max_displacement) << " m\n";
+    }
   }
   std::ofstream out = openCsv(o, "accuracy_" + o.tag + "_error.csv");
   writeErrorCsv(out, errors);
@@ -490,68 +648,72 @@ void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>&
   printTable("accuracy (" + o.tag + "): distance to " + reference + " every " + std::to_string(o.accuracy.interval) +
                  " steps",
              table);
-  std::vector<std::vector<std::string>> summary{{"variant", "method", "mean RMS m", "largest RMS m", "mean largest m",
-                                                 "RMS at the end m", "step us (median)", "step us (mean)"}};
-  for (const AccuracySummary& s : summarizeAccuracy(errors))
-    if (s.method != reference && s.method != "reference_half_step")
-      summary.push_back({s.variant, s.method, fmt(s.mean_rms), fmt(s.max_rms), fmt(s.mean_max),
-                         s.diverged ? "diverged" : fmt(s.final_rms), fmt(1e6 * s.step_seconds_median),
-                         fmt(1e6 * s.step_seconds_mean)});
-  printTable("accuracy (" + o.tag + "): over every sample after step 0, against " + reference +
-                 "; wall time per step while running",
-             summary);
+  printAccuracySummary(o, reference, errors);
   for (const std::string& m : messages)
     std::cout << "note: " << m << "\n";
 }
 
+// Each implicit method at check_factor times the largest stable step of the same method in the
+// setup's explicit twin (same settings, integrator explicit); one line per check.
+std::vector<std::string> checkImplicitAtFactor(const Options& o, const std::vector<ExperimentSetup>& setups,
+                                               std::vector<std::vector<StabilityRow>>& rows)
+{
+  std::vector<std::string> checks;
+  for (size_t s = 0; s < setups.size(); ++s)
+  {
+    const ExperimentSetup* twin = explicitTwin(setups[s], setups);
+    if (setups[s].sim.integrator != IntegratorKind::Implicit || !twin)
+      continue;
+    const std::vector<StabilityRow>& explicit_rows = rows[twin - setups.data()];
+    for (StabilityRow& row : rows[s])
+    {
+      const auto explicit_row = std::find_if(explicit_rows.begin(), explicit_rows.end(),
+                                             [&](const StabilityRow& r) { return r.method == row.method; });
+      if (explicit_row == explicit_rows.end() || !(explicit_row->stable_dt > 0.0))
+        continue;
+      row.check_dt = o.check_factor * explicit_row->stable_dt;
+      row.check_stable = checkStableAt(setups[s], parseMethod(row.method), row.check_dt, o.stability.steps);
+      checks.push_back(row.variant + ", " + row.method + " at " + fmt(o.check_factor) + " x the explicit " +
+                       row.method + "'s largest stable step (" + fmt(1e3 * row.check_dt, 4) + " ms, " +
+                       twin->variant + "): " + (row.check_stable ? "stable" : "DIVERGED") + " over " +
+                       std::to_string(o.stability.steps) + " steps");
+    }
+  }
+  return checks;
+}
+
+std::string windowsText(const std::vector<StableWindow>& windows)
+{
+  std::string text;
+  for (const StableWindow& w : windows)
+    text += (text.empty() ? "" : ", ") + (w.from == w.to ? fmt(w.from, 4) : fmt(w.from, 4) + "-" + fmt(w.to, 4));
+  return text.empty() ? "none" : text;
+}
+
 void runStabilityExperiment(const Options& o, const std::vector<ExperimentSetup>& setups, Progress& progress)
 {
-  std::vector<StabilityRow> rows;
+  std::vector<std::vector<StabilityRow>> per_setup;
   for (const ExperimentSetup& setup : setups)
-  {
-    const auto part = runStability(setup, o.stability, std::ref(progress));
+    per_setup.push_back(runStability(setup, o.stability, std::ref(progress)));
+  const std::vector<std::string> checks =
+      o.check_factor > 0.0 ? checkImplicitAtFactor(o, setups, per_setup) : std::vector<std::string>{};
+  std::vector<StabilityRow> rows;
+  for (const auto& part : per_setup)
     rows.insert(rows.end(), part.begin(), part.end());
-  }
-  // Each implicit method at check_factor times the largest stable step of its explicit twin (the
-  // setup whose variant differs only in integrator=explicit).
-  std::vector<std::string> checks;
-  if (o.check_factor > 0.0)
-    for (const ExperimentSetup& setup : setups)
-    {
-      if (setup.sim.integrator != IntegratorKind::Implicit)
-        continue;
-      std::string twin = setup.variant;
-      const size_t at = twin.find("integrator=implicit");
-      if (at == std::string::npos)
-        continue;
-      twin.replace(at, std::string("integrator=implicit").size(), "integrator=explicit");
-      for (StabilityRow& row : rows)
-      {
-        if (row.variant != setup.variant)
-          continue;
-        const auto explicit_row = std::find_if(rows.begin(), rows.end(), [&](const StabilityRow& r) {
-          return r.variant == twin && r.method == row.method;
-        });
-        if (explicit_row == rows.end() || !(explicit_row->stable_dt > 0.0))
-          continue;
-        row.check_dt = o.check_factor * explicit_row->stable_dt;
-        row.check_stable = checkStableAt(setup, parseMethod(row.method), row.check_dt, o.stability.steps);
-        checks.push_back(row.variant + ", " + row.method + " at " + fmt(o.check_factor) + " x the explicit " +
-                         row.method + "'s largest stable step (" + fmt(1e3 * row.check_dt, 4) + " ms): " +
-                         (row.check_stable ? "stable" : "DIVERGED") + " over " + std::to_string(o.stability.steps) +
-                         " steps");
-      }
-    }
   std::ofstream out = openCsv(o, "stability_" + o.tag + ".csv");
   writeStabilityCsv(out, rows);
   std::vector<std::vector<std::string>> table{{"variant", "method", "largest stable dt s", "diverges at s", "trials",
-                                               "2/omega (highest mode)", "2/omega (K(x0), all dofs)", "below stable"}};
+                                               "2/omega (highest mode)", "2/omega (K(x0), all dofs)",
+                                               "stable windows above s"}};
   for (const StabilityRow& r : rows)
     table.push_back({r.variant, r.method, fmt(r.stable_dt, 6), fmt(r.unstable_dt, 6), std::to_string(r.trials),
-                     fmt(r.modal_bound, 6), fmt(r.full_bound, 6), r.below_stable ? "yes" : "NO"});
-  printTable("stability (" + o.tag + "): " + std::to_string(o.stability.steps) + " steps without divergence, " +
-                 "bisection to a relative " + fmt(o.stability.tolerance),
-             table);
+                     fmt(r.modal_bound, 6), fmt(r.full_bound, 6), windowsText(r.windows)});
+  std::ostringstream title;
+  title << "stability (" << o.tag << "): " << o.stability.steps << " steps without divergence; every step tried "
+        << "below the largest stable one was stable (scan ratio " << o.stability.scan_ratio
+        << ", bisection to a relative " << fmt(o.stability.tolerance) << "); windows up to "
+        << fmt(o.stability.window_factor) << " x the boundary";
+  printTable(title.str(), table);
   for (const std::string& c : checks)
     std::cout << "check: " << c << "\n";
 }
@@ -567,10 +729,12 @@ int main(int argc, char** argv)
     options = parseArguments(argc, argv);
     setups = buildSetups(options);
     validate(options, setups);
-    std::error_code ec;
-    fs::create_directories(options.output, ec);
-    if (ec || !fs::is_directory(options.output))
-      throw std::invalid_argument("cannot create output folder '" + options.output + "'");
+    prepareOutput(options);
+  }
+  catch (const std::bad_alloc&)
+  {
+    std::cerr << "modal_compare: error: out of memory while checking the input\n";
+    return 2;
   }
   catch (const std::exception& e)
   {
@@ -591,6 +755,13 @@ int main(int argc, char** argv)
       else
         runStabilityExperiment(options, setups, progress);
     }
+  }
+  catch (const std::bad_alloc&)
+  {
+    // The memory estimate (memory_limit_gb) passed, but the machine had less than that to give.
+    std::cerr << "modal_compare: failed: out of memory (std::bad_alloc): the machine could not provide what this "
+                 "grid needs; use a smaller grid or fewer modes, or lower memory_limit_gb to what is free\n";
+    return 1;
   }
   catch (const std::exception& e)
   {

@@ -1,11 +1,19 @@
 // Reads parameters from YAML with yaml-cpp; wrong types are reported with the core's wording.
 #include "yaml_parameter_source.h"
 
+#include "modal_mass_spring/validation.h"
+
+#include <filesystem>
 #include <fstream>
+#include <map>
 #include <stdexcept>
 
 namespace modal_mass_spring
 {
+
+const std::set<std::string> kNodeParameters{
+    "real_time_factor", "publish_rate",    "fixed_frame",  "grid_frame",        "tf_particles",      "offset",
+    "color_by_strain",  "strain_scale",    "particle_diameter", "spring_width", "status_log_period", "diagnostic_period"};
 
 YamlParameterSource::YamlParameterSource(YAML::Node root, std::string origin)
   : root_(std::move(root)), origin_(std::move(origin))
@@ -15,6 +23,8 @@ YamlParameterSource::YamlParameterSource(YAML::Node root, std::string origin)
 YamlParameterSource YamlParameterSource::fromFile(const std::string& path)
 {
   std::ifstream file(path);
+  if (std::filesystem::is_directory(path))
+    throw std::invalid_argument("cannot read config '" + path + "': is a folder, not a YAML file");
   if (!file)
     throw std::invalid_argument("cannot read config '" + path + "': no such file or not readable");
   YAML::Node root;
@@ -26,11 +36,11 @@ YamlParameterSource YamlParameterSource::fromFile(const std::string& path)
   {
     throw std::invalid_argument("cannot read config '" + path + "': not valid YAML: " + e.what());
   }
-  if (root.IsNull())
-    root = YAML::Node(YAML::NodeType::Map);  // an empty file: every parameter at its default
-  if (!root.IsMap())
-    throw std::invalid_argument("cannot read config '" + path + "': must be a map of parameter names to values");
-  return YamlParameterSource(root, path);
+  catch (const std::exception& e)  // a folder, a read error
+  {
+    throw std::invalid_argument("cannot read config '" + path + "': " + e.what());
+  }
+  return YamlParameterSource(checkedRoot(root, "config '" + path + "'"), path);
 }
 
 YamlParameterSource YamlParameterSource::fromString(const std::string& text, const std::string& origin)
@@ -44,11 +54,44 @@ YamlParameterSource YamlParameterSource::fromString(const std::string& text, con
   {
     throw std::invalid_argument("cannot read " + origin + ": not valid YAML: " + e.what());
   }
+  return YamlParameterSource(checkedRoot(root, origin), origin);
+}
+
+YAML::Node YamlParameterSource::checkedRoot(YAML::Node root, const std::string& origin)
+{
   if (root.IsNull())
-    root = YAML::Node(YAML::NodeType::Map);
+    return YAML::Node(YAML::NodeType::Map);  // an empty text: every parameter at its default
   if (!root.IsMap())
     throw std::invalid_argument("cannot read " + origin + ": must be a map of parameter names to values");
-  return YamlParameterSource(root, origin);
+  std::map<std::string, int> lines;  // key -> line (1-based) where it first appears
+  for (const auto& entry : root)
+  {
+    const std::string key = entry.first.Scalar();
+    const int line = entry.first.Mark().line + 1;
+    const auto [first, inserted] = lines.insert({key, line});
+    if (!inserted)
+      rejectParameter(key, "(given twice)",
+                      "in " + origin + " on lines " + std::to_string(first->second) + " and " + std::to_string(line) +
+                          "; each parameter must be given once");
+  }
+  return root;
+}
+
+std::vector<std::string> YamlParameterSource::keys() const
+{
+  std::vector<std::string> names;
+  for (const auto& entry : root_)
+    names.push_back(entry.first.Scalar());
+  return names;
+}
+
+std::vector<std::string> YamlParameterSource::unknownKeys() const
+{
+  std::vector<std::string> unknown;
+  for (const std::string& key : keys())
+    if (!queried_.count(key) && !kNodeParameters.count(key))
+      unknown.push_back(key);
+  return unknown;
 }
 
 YamlParameterSource YamlParameterSource::clone() const

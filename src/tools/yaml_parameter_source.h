@@ -7,16 +7,23 @@
 
 #include <set>
 #include <string>
+#include <vector>
 
 namespace modal_mass_spring
 {
 
+// The node's own parameters (README, "Parameters"): a config shared with the node holds them, and
+// the tools ignore them without a warning.
+extern const std::set<std::string> kNodeParameters;
+
 // Keys the core does not ask for (the node's publish_rate, frame names, ...) are ignored, so one file
-// serves the node and the tools.
+// serves the node and the tools; keys() and queried() tell which those were. A key given twice is
+// refused (yaml-cpp would let the first one win silently).
 class YamlParameterSource : public ParameterSource
 {
 public:
-  // Throws std::invalid_argument naming the file when it cannot be read, is not YAML or is not a map.
+  // Throws std::invalid_argument naming the file when it cannot be read, is not YAML, is not a map or
+  // gives a key twice.
   static YamlParameterSource fromFile(const std::string& path);
   // `origin` names the text in messages.
   static YamlParameterSource fromString(const std::string& text, const std::string& origin = "<string>");
@@ -29,6 +36,13 @@ public:
   void set(const std::string& key, const std::string& value);
 
   const std::string& origin() const { return origin_; }
+
+  // The top-level keys, in file order.
+  std::vector<std::string> keys() const;
+
+  // The keys that neither the core asked for (queried(), so after loadGridParams and
+  // loadSimulationParams) nor the node reads (kNodeParameters): most likely misspelled.
+  std::vector<std::string> unknownKeys() const;
 
   std::optional<int> getInt(const std::string& key) const override;
   std::optional<double> getDouble(const std::string& key) const override;
@@ -43,6 +57,8 @@ public:
 
 private:
   YamlParameterSource(YAML::Node root, std::string origin);
+  // The root of a loaded text: a map (an empty text is an empty map) without a key given twice.
+  static YAML::Node checkedRoot(YAML::Node root, const std::string& origin);
   // The node of a present key, or an undefined node; records the query.
   YAML::Node lookup(const std::string& key) const;
   template <typename T>

@@ -102,7 +102,7 @@ TEST_F(ModalCompareTool, SmallRunEndToEndToPngs)
   EXPECT_EQ(firstLine(data / "accuracy_paper_2d_error.csv"),
             "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds");
   EXPECT_EQ(firstLine(data / "stability_integrators.csv"),
-            "variant,method,stable_dt,unstable_dt,trials,steps,tolerance,modal_bound,full_bound,below_stable,"
+            "variant,method,stable_dt,unstable_dt,trials,steps,tolerance,modal_bound,full_bound,stable_windows,"
             "check_dt,check_stable");
   EXPECT_FALSE(fs::exists(data / "accuracy_combinations_paper_2d_dt1ms_snapshots.csv")) << "--no-snapshots";
 
@@ -117,6 +117,69 @@ TEST_F(ModalCompareTool, SmallRunEndToEndToPngs)
     ASSERT_TRUE(fs::exists(figures / name)) << name << "\n" << plot.output;
     EXPECT_GT(fs::file_size(figures / name), 5000u) << name;
   }
+}
+
+// Item 9: a diverged sample and the bound of a basis of zero modes are empty fields, which the
+// plotting script reads.
+TEST_F(ModalCompareTool, CsvFilesHoldNoNanOrInfAndThePlotsReadThem)
+{
+  // paper_2d at 50 ms: above every explicit method's stable step, so every sample after a few diverges.
+  const CommandResult diverging = run(tool("--config " + config("paper_2d.yaml") +
+                                           " --tag diverging --experiment accuracy --set time_step=0.05"
+                                           " --steps 200 --interval 100 --sample 10"));
+  ASSERT_EQ(diverging.status, 0) << diverging.output;
+  // A flat 3 x 3 sheet at rest: its 4 lowest modes are all zero modes, so 2 / omega is infinite.
+  const CommandResult zero = run(tool("--config " + config("paper_3d.yaml") +
+                                      " --tag zero_modes --experiment stability --methods linear --set rows=3"
+                                      " --set cols=3 --set num_modes=4 --set rotation_deg=0 --stability-steps 100"
+                                      " --max-time-step 0.01"));
+  ASSERT_EQ(zero.status, 0) << zero.output;
+  std::ifstream errors(dir_ / "data" / "accuracy_diverging_error.csv");
+  std::string line;
+  int diverged = 0;
+  while (std::getline(errors, line))
+  {
+    EXPECT_EQ(line.find("nan"), std::string::npos) << line;
+    EXPECT_EQ(line.find("inf"), std::string::npos) << line;
+    if (line.find(",,,,1,") != std::string::npos)
+      ++diverged;
+  }
+  EXPECT_GT(diverged, 0) << "no diverged sample: the run did not test the empty fields";
+  std::ifstream stability(dir_ / "data" / "stability_zero_modes.csv");
+  std::getline(stability, line);
+  std::getline(stability, line);
+  EXPECT_EQ(line.find("inf"), std::string::npos) << line;
+  EXPECT_NE(line.find(",,"), std::string::npos) << "modal_bound must be empty: " << line;
+  const CommandResult plot = run("/usr/bin/python3 " + std::string(MODAL_SOURCE_DIR) + "/scripts/plot_comparison.py --data " +
+                                 (dir_ / "data").string() + " --out " + (dir_ / "figures").string());
+  EXPECT_EQ(plot.status, 0) << plot.output;
+  EXPECT_TRUE(fs::exists(dir_ / "figures" / "error_diverging.png")) << plot.output;
+  EXPECT_TRUE(fs::exists(dir_ / "figures" / "stability_zero_modes.png")) << plot.output;
+}
+
+// Item 10: a key that neither the core nor the node reads is warned about; the node's keys are not.
+TEST_F(ModalCompareTool, UnknownConfigKeysAreWarnedAbout)
+{
+  fs::create_directories(dir_);
+  std::ofstream(dir_ / "typo.yaml") << "rows: 4\ncols: 4\nstifness: 30\npublish_rate: 30\n";
+  const CommandResult r = run(tool("--config " + (dir_ / "typo.yaml").string() +
+                                   " --experiment accuracy --steps 20 --interval 10 --sample 10 --no-snapshots"));
+  EXPECT_EQ(r.status, 0) << r.output;
+  EXPECT_NE(r.output.find("warning: config '" + (dir_ / "typo.yaml").string() + "': unknown parameter 'stifness'"),
+            std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("publish_rate"), std::string::npos) << r.output;
+}
+
+// Item 1: when the memory estimate passes but the machine cannot give the memory, the tool says so.
+TEST_F(ModalCompareTool, OutOfMemoryIsAClearMessageNotACrash)
+{
+  // 300 MB of address space against a 1000 x 1000 grid that needs several GB.
+  const CommandResult r = run("ulimit -v 300000; " + tool("--config " + config("paper_2d.yaml") +
+                                                           " --set rows=1000 --set cols=1000 --set memory_limit_gb=100"
+                                                           " --experiment accuracy --steps 10 --interval 10 --sample 10"));
+  EXPECT_EQ(r.status, 1) << r.output;  // run() maps a signal to -1
+  EXPECT_NE(r.output.find("out of memory"), std::string::npos) << r.output;
 }
 
 TEST_F(ModalCompareTool, PlottingScriptRefusesACsvWithoutItsColumns)

@@ -1,0 +1,203 @@
+#!/usr/bin/env python3
+"""modal_compare on bad inputs: every one must end with exit code 2 and a message naming it, before
+any work and without writing a file (see bad_input_runner.py for what is checked).
+
+Usage: modal_compare_bad_inputs.py --tool PATH/modal_compare --configs DIR [--xunit FILE]
+DIR is config/compare of the package (paper_2d.yaml: 5 x 5 in 2D, 40 free dofs, time_step 0.001).
+"""
+import argparse
+import pathlib
+import sys
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from bad_input_runner import Case, run_cases  # noqa: E402
+
+OUT = "{work}/out"
+
+
+def cases(configs):
+    paper = str(pathlib.Path(configs).resolve() / "paper_2d.yaml")
+
+    def tool(name, named, *args, **kw):
+        """A case on paper_2d.yaml with the output in {work}/out."""
+        return Case(name, ["--quiet", "--config", paper, "--output", OUT] + list(args), named, **kw)
+
+    def setting(key, value, named=None, *more):
+        """A case overriding one core parameter with --set."""
+        name = "".join(c if c.isalnum() or c in "_.-" else "_" for c in f"set_{key}_{value}")
+        return tool(name, named or key, "--set", f"{key}={value}", *more)
+
+    def config(name, text, named, *args):
+        """A case on a config file of its own."""
+        return Case(name, ["--quiet", "--config", "{work}/bad.yaml", "--output", OUT] + list(args), named,
+                    files={"bad.yaml": text})
+
+    table = [
+        # ------------------------------------------------ the command line
+        Case("no_config", ["--quiet", "--output", OUT, "--experiment", "accuracy"], "--config"),
+        Case("config_missing_value", ["--output", OUT, "--config"], "--config"),
+        Case("config_not_found", ["--config", "{work}/nonexistent.yaml", "--output", OUT], "nonexistent.yaml"),
+        Case("config_is_a_folder", ["--config", "{work}", "--output", OUT], "config"),
+        tool("unknown_option", "--frobnicate", "--frobnicate"),
+        tool("single_dash_option", "-x", "-x"),
+        tool("positional_argument", "stray", "stray"),
+        tool("option_twice", "--steps", "--steps", "5", "--steps", "6"),
+        tool("experiment_unknown", "speed", "--experiment", "speed"),
+        tool("experiment_empty", "--experiment", "--experiment", ""),
+        tool("experiment_empty_item", "--experiment", "--experiment", "accuracy,,cost"),
+        tool("experiment_twice_in_list", "--experiment", "--experiment", "accuracy,accuracy"),
+        tool("methods_unknown", "quadratic", "--methods", "linear,quadratic"),
+        tool("methods_empty", "--methods", "--methods", ""),
+        tool("methods_twice_in_list", "--methods", "--methods", "linear,linear"),
+        tool("steps_zero", "--steps", "--steps", "0"),
+        tool("steps_negative", "--steps", "--steps", "-5"),
+        tool("steps_not_a_number", "--steps", "--steps", "many"),
+        tool("steps_not_an_integer", "--steps", "--steps", "1e3"),
+        tool("steps_beyond_int", "--steps", "--steps", "99999999999"),
+        tool("interval_zero", "--interval", "--interval", "0"),
+        tool("sample_zero", "--sample", "--sample", "0"),
+        tool("sample_not_dividing_interval", "--sample", "--sample", "300"),
+        tool("sample_above_steps", "--sample", "--steps", "500", "--interval", "1000", "--sample", "1000"),
+        tool("reference_time_step_tiny", "--reference-time-step", "--experiment", "accuracy",
+             "--reference-time-step", "1e-300"),
+        tool("reference_time_step_not_dividing", "--reference-time-step", "--experiment", "accuracy",
+             "--reference-time-step", "0.0003"),
+        tool("reference_time_step_above_time_step", "--reference-time-step", "--experiment", "accuracy",
+             "--reference-time-step", "0.002"),
+        tool("reference_time_step_negative", "--reference-time-step", "--reference-time-step", "-1"),
+        tool("reference_time_step_nan", "--reference-time-step", "--reference-time-step", "nan"),
+        tool("max_time_step_tiny", "--max-time-step", "--max-time-step", "1e-10"),
+        tool("max_time_step_zero", "--max-time-step", "--max-time-step", "0"),
+        tool("max_time_step_inf", "--max-time-step", "--max-time-step", "inf"),
+        tool("max_time_step_below_time_step", "--max-time-step", "--experiment", "stability",
+             "--max-time-step", "0.0005"),
+        tool("tolerance_below_an_ulp", "--tolerance", "--experiment", "stability", "--tolerance", "1e-16"),
+        tool("tolerance_zero", "--tolerance", "--tolerance", "0"),
+        tool("tolerance_one", "--tolerance", "--tolerance", "1"),
+        tool("tolerance_nan", "--tolerance", "--tolerance", "nan"),
+        tool("stability_steps_zero", "--stability-steps", "--stability-steps", "0"),
+        tool("scan_ratio_one", "--scan-ratio", "--scan-ratio", "1"),
+        tool("scan_ratio_large", "--scan-ratio", "--scan-ratio", "3"),
+        tool("window_factor_below_one", "--window-factor", "--window-factor", "0.5"),
+        tool("check_factor_not_a_number", "--check-factor", "--check-factor", "zero"),
+        tool("check_factor_negative", "--check-factor", "--check-factor", "-1"),
+        tool("check_factor_without_integrators", "--check-factor", "--experiment", "stability", "--check-factor", "10"),
+        tool("check_factor_without_stability", "--check-factor", "--experiment", "accuracy", "--check-factor", "10",
+             "--vary", "integrator=explicit,implicit"),
+        tool("sizes_too_small", "--sizes", "--experiment", "cost", "--sizes", "1,5"),
+        tool("sizes_empty_item", "--sizes", "--experiment", "cost", "--sizes", "5,,10"),
+        tool("sizes_not_numbers", "--sizes", "--experiment", "cost", "--sizes", "five"),
+        tool("sizes_fewer_dofs_than_modes", "--sizes 3", "--set", "num_modes=30", "--experiment", "cost",
+             "--sizes", "5,3"),
+        tool("sizes_huge", "--sizes 100000", "--experiment", "cost", "--sizes", "5,100000"),
+        tool("repeats_zero", "--repeats", "--repeats", "0"),
+        tool("min_repeat_seconds_zero", "--min-repeat-seconds", "--min-repeat-seconds", "0"),
+        tool("min_repeat_seconds_huge", "--min-repeat-seconds", "--min-repeat-seconds", "1e9"),
+        tool("tag_with_slash", "--tag", "--tag", "a/b"),
+        tool("tag_empty", "--tag", "--tag", ""),
+        tool("tag_dot_dot", "--tag", "--tag", ".."),
+        Case("output_under_a_file", ["--quiet", "--config", paper, "--output", "{work}/file/out"], "--output",
+             files={"file": "a regular file, not a folder\n"}),
+        Case("output_in_proc", ["--quiet", "--config", paper, "--output", "/proc/modal_compare_out"], "--output"),
+        tool("set_without_equals", "--set", "--set", "rows"),
+        tool("set_without_key", "--set", "--set", "=5"),
+        tool("set_without_value", "--set", "--set", "rows="),
+        tool("set_bad_key", "--set", "--set", "bad-key=3"),
+        tool("set_twice", "rows", "--set", "rows=5", "--set", "rows=6"),
+        tool("set_unknown_key", "stifness", "--set", "stifness=3"),
+        tool("set_node_key", "publish_rate", "--set", "publish_rate=30"),
+        tool("set_invalid_yaml", "rows", "--set", "rows=[1, 2"),
+        tool("vary_unknown_value", "sideways", "--vary", "integrator=explicit,sideways"),
+        tool("vary_method", "--vary", "--vary", "method=full,linear"),
+        tool("vary_empty_value", "--vary", "--vary", "integrator=explicit,,implicit"),
+        tool("vary_value_twice", "--vary", "--vary", "integrator=explicit,explicit"),
+        tool("vary_key_twice", "--vary", "--vary", "integrator=explicit", "--vary", "integrator=implicit"),
+        tool("vary_unknown_key", "unknown_key", "--vary", "unknown_key=1,2"),
+        tool("vary_without_equals", "--vary", "--vary", "integrator"),
+        tool("vary_out_of_range", "num_modes", "--vary", "num_modes=4,41"),
+        # ------------------------------------------------ every core parameter out of range
+        setting("rows", "0"),
+        setting("cols", "-3"),
+        tool("set_one_particle", "rows", "--set", "rows=1", "--set", "cols=1"),
+        setting("spacing", "0"),
+        setting("spacing", "-1"),
+        setting("spacing", ".nan"),
+        setting("dimension", "4"),
+        setting("mass", "0"),
+        setting("mass", ".inf"),
+        setting("structural_stiffness", "-1"),
+        setting("shear_stiffness", "0"),
+        tool("set_bending_stiffness_zero", "bending_stiffness", "--set", "bending=true", "--set",
+             "bending_stiffness=0"),
+        setting("fixed", "[25]"),
+        setting("fixed", "[-1]"),
+        setting("fixed", "[0, 0]"),
+        setting("fixed", "[" + ", ".join(str(i) for i in range(25)) + "]"),
+        setting("gravity", "[0, 0]"),
+        setting("gravity", "[0, 0, .nan]"),
+        setting("gravity", "[0, 1, -9.81]"),
+        setting("rotation_deg", ".inf"),
+        setting("rotation_deg", "30"),
+        setting("method", "quadratic"),
+        setting("num_modes", "0"),
+        setting("num_modes", "41"),
+        setting("alpha", "-1"),
+        setting("beta", "-0.1"),
+        setting("time_step", "0"),
+        setting("time_step", "-1"),
+        setting("time_step", ".inf"),
+        setting("divergence_limit", "-1"),
+        setting("linearization", "sideways"),
+        setting("integrator", "sideways"),
+        setting("initial_state", "sideways"),
+        setting("newton_max_iterations", "0"),
+        setting("memory_limit_gb", "0"),
+        setting("memory_limit_gb", "-1"),
+        # ------------------------------------------------ wrong types
+        setting("mass", "heavy"),
+        setting("rows", "5.5"),
+        setting("rows", "2147483648"),
+        setting("bending", "3"),
+        setting("fixed", "0"),
+        setting("gravity", "{z: -9.81}"),
+        setting("method", "[full]"),
+        setting("num_modes", "[4]"),
+        setting("time_step", "true"),
+        setting("integrator", "{a: 1}"),
+        # ------------------------------------------------ grids too large to build
+        tool("grid_overflowing_int", "rows", "--set", "rows=65538", "--set", "cols=65536", "--experiment",
+             "accuracy", "--steps", "200"),
+        tool("grid_two_rows_overflowing_int", "cols", "--set", "rows=2", "--set", "cols=536870912",
+             "--experiment", "accuracy", "--steps", "200"),
+        tool("grid_beyond_memory", "memory_limit_gb", "--set", "rows=3000", "--set", "cols=3000",
+             "--experiment", "accuracy", "--steps", "200"),
+        tool("grid_too_many_modes_for_memory", "memory_limit_gb", "--set", "rows=300", "--set", "cols=300",
+             "--set", "num_modes=20000", "--set", "memory_limit_gb=1"),
+        # ------------------------------------------------ config files
+        config("config_duplicate_key", "rows: 5\ncols: 5\nrows: 6\n", "rows"),
+        config("config_duplicate_node_key", "rows: 5\npublish_rate: 30\npublish_rate: 60\n", "publish_rate"),
+        config("config_not_yaml", "rows: [1, 2\n", "bad.yaml"),
+        config("config_a_list", "- 1\n- 2\n", "map"),
+        config("config_a_scalar", "hello\n", "map"),
+        config("config_wrong_type", "mass: heavy\n", "mass"),
+        config("config_out_of_range", "num_modes: 0\n", "num_modes"),
+        config("config_fixed_out_of_range", "rows: 3\ncols: 3\nfixed: [9]\n", "fixed"),
+        config("config_gravity_short", "gravity: [0, -9.81]\n", "gravity"),
+    ]
+    return table
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--tool", required=True, help="the modal_compare executable")
+    parser.add_argument("--configs", required=True, help="config/compare of the package")
+    parser.add_argument("--xunit", help="JUnit XML file to write")
+    parser.add_argument("--timeout", type=float, default=30.0, help="seconds per case")
+    args = parser.parse_args(argv)
+    table = cases(args.configs)
+    failed = run_cases(args.tool, table, "bad_inputs.modal_compare", args.xunit, args.timeout)
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
