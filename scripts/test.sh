@@ -21,8 +21,9 @@ if (cd "$SANITIZE_WS" && catkin_make -j2 -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSAN
       -DWARNINGS_AS_ERRORS=OFF test_core test_compare); then
   for test in test_core test_compare; do
     xml="$results/sanitized-$test.xml"
-    # The tool's end-to-end tests run from the source folder, as catkin runs them.
-    (cd "$REPO_DIR" && ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1 \
+    # The sanitized core library comes first: the sourced workspace would otherwise lend its own.
+    (cd "$REPO_DIR" && LD_LIBRARY_PATH="$SANITIZE_WS/devel/lib:${LD_LIBRARY_PATH:-}" \
+        ASAN_OPTIONS=detect_leaks=1:abort_on_error=0 UBSAN_OPTIONS=print_stacktrace=1 \
         "$SANITIZE_WS/devel/lib/modal_mass_spring/$test" --gtest_output="xml:$xml")
     status=$?
     if [ $status -ne 0 ] && ! grep -q "<failure" "$xml" 2>/dev/null; then
