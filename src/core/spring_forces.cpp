@@ -1,6 +1,8 @@
 // Per-spring force and Hessian, written once for 2D and 3D through a fixed-size template.
 #include "modal_mass_spring/spring_forces.h"
 
+#include <algorithm>
+#include <limits>
 #include <vector>
 
 namespace modal_mass_spring
@@ -132,6 +134,16 @@ void springForces(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f
     springForcesDim<2>(grid, x, f, energy);
   else
     springForcesDim<3>(grid, x, f, energy);
+}
+
+double springForceRoundoff(const Grid& grid, const Eigen::VectorXd& x)
+{
+  const GridParams& p = grid.params();
+  double stiffest = std::max(p.structural_stiffness, p.shear_stiffness);
+  if (p.bending)
+    stiffest = std::max(stiffest, p.bending_stiffness);
+  const double extent = std::max(x.cwiseAbs().maxCoeff(), p.spacing * std::max(p.rows, p.cols));
+  return 12.0 * stiffest * extent * std::numeric_limits<double>::epsilon();
 }
 
 double springEnergy(const Grid& grid, const Eigen::VectorXd& x)
