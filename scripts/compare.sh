@@ -72,7 +72,7 @@ timed() { [ "$only" != stability ]; }
     "$tool" --config "$configs/$config.yaml" --tag "${config}_integrators" --experiment stability "${extra[@]}" \
       --vary integrator=explicit,implicit --tolerance 0.05 --check-factor 10 --output "$data" "$@"
   done
-  # Stability that is not monotone in the time step (the robustness issue, item 12): each method
+  # Stability that is not monotone in the time step: each method
   # under the explicit scheme, and implicit full and physical, 5000 steps a trial; the search
   # reports the largest step below which every step tried is stable and the stable windows above it.
   "$tool" --config "$configs/nonmonotone_2d.yaml" --experiment stability --stability-steps 5000 --output "$data" "$@"

@@ -88,7 +88,7 @@ TEST(Stability, ModalMethodsAllowLargerStepsThanFullOnThePaper2dSetup)
   EXPECT_LE(linear.unstable_dt - linear.stable_dt, options.tolerance * linear.stable_dt);
 }
 
-// The grid of the robustness issue (item 12): 5 x 5 in 2D, 1 m, 1 kg, 50 N/m, alpha 0.1, 4 modes.
+// A grid whose stability is not monotone in the time step: 5 x 5 in 2D, 1 m, 1 kg, 50 N/m, alpha 0.1, 4 modes.
 // Explicit `physical` diverges at 0.3165 s and 0.32 s but runs 5000 steps at 0.317, 0.33 and 0.34 s:
 // stability is not monotone in the time step. Bisection from a doubling bracket [0.256, 0.512] can
 // land in a stable pocket above a divergence; the search must report a step below which every step
