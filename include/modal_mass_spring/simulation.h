@@ -98,8 +98,15 @@ public:
   void setMethod(Method method);
   // Rebuilds the integrators for a new time step (validated as at construction); keeps the state.
   void setTimeStep(double dt);
-  // Back to the initial positions, at rest, time 0.
+  // Back to the initial positions, at rest, time 0. The external force stays.
   void reset();
+  // Sets the external force on every particle (N, a vector of dimension values per particle, as
+  // positions()), replacing the previous one; zero clears it. It acts on every method in physical
+  // coordinates (the modal methods project the touched particles' rows of Phi) and stays through
+  // method switches and resets until changed. Forces on fixed particles do nothing. Throws
+  // std::invalid_argument for a vector of the wrong size or with a non-finite entry, changing nothing.
+  void setExternalForce(const Eigen::VectorXd& force);
+  const Eigen::VectorXd& externalForce() const { return external_force_; }
   // Sets the state from free-dof displacements (from the linearization point) and velocities, with no
   // frozen offset. A
   // modal method takes their M-orthogonal projection; projectionError() then says how far (m, the
@@ -171,6 +178,7 @@ private:
   double energy_scale_ = 0.0;       // the base plus the start's spring and kinetic energy
   double start_energy_ = 0.0;  // the method's energy at the start of the run, carried over switches
   double projection_error_ = 0.0;
+  Eigen::VectorXd external_force_;  // on every dof; zero: none
 };
 
 }  // namespace modal_mass_spring

@@ -178,6 +178,7 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
   }
 
   u_start_ = grid_.gatherFree(x_start_ - x_ref_);
+  external_force_ = Eigen::VectorXd::Zero(x_ref_.size());
   double stretched = 0.0;
   for (const Spring& spring : grid_.springs())
     stretched += 0.5 * spring.stiffness * std::pow(0.01 * spring.rest_length, 2);
@@ -196,6 +197,7 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
   const LinearizedGrid linearized{grid_, basis_, x_ref_, stiffness_, mass_};
   model_ = makeMethod(method, linearized, integratorSettings());
   params_.method = method;
+  model_->setExternalForce(grid_.gatherFree(external_force_));
   projection_error_ = model_->assign(u, v, remainder);
   model_->setAnchor(u_start_);
   diverged_ = false;
@@ -225,6 +227,24 @@ void Simulation::setTimeStep(double dt)
   validateParameters(grid_.params(), changed);
   params_.time_step = dt;
   model_->configure(integratorSettings());
+}
+
+void Simulation::setExternalForce(const Eigen::VectorXd& force)
+{
+  if (force.size() != external_force_.size())
+    rejectParameter("external force", std::to_string(force.size()) + " values",
+                    "must have " + std::to_string(external_force_.size()) + " values, " +
+                        std::to_string(grid_.dimension()) + " per particle");
+  for (int k = 0; k < force.size(); ++k)
+    if (!std::isfinite(force[k]))
+      rejectParameter("external force", "a non-finite value on particle " + std::to_string(k / grid_.dimension()),
+                      "must be finite");
+  // A constant force is conservative: its potential joins the method's energy, and the rise since
+  // the start carries over the change, as over a method switch.
+  const double rise = methodEnergy() - start_energy_;
+  external_force_ = force;
+  model_->setExternalForce(grid_.gatherFree(external_force_));
+  start_energy_ = methodEnergy() - rise;
 }
 
 void Simulation::reset()
