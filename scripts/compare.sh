@@ -32,20 +32,22 @@ fi
 # full, on the paper's 3D sheet at its equilibrium and on a 50 x 50 cloth; and the largest explicit
 # step of each. Writes docs/data/derivatives/ and docs/derivatives_*.png.
 derivatives() {
-  local out="$data/derivatives" config setup r d steps
+  local out="$data/derivatives" config setup r d steps name
   mkdir -p "$out"
   rm -f "$out"/*.csv
-  for setup in "paper_3d 10 20 5000" "cloth_50 10 10 10000"; do
+  # config, linear modes R, derivative directions D, steps (5 s each)
+  for setup in "paper_3d 10 20 5000" "cloth_50 10 10 10000" "cloth_50 5 15 10000"; do
     read -r config r d steps <<<"$setup"
+    name="${config}_r${r}_d${d}"
     local common=(--config "$configs/$config.yaml" --set linearization=equilibrium --steps "$steps" --interval "$steps"
       --sample 20 --no-snapshots --output "$out")
-    "$tool" "${common[@]}" --tag "derivatives_${config}_linear_modes" --experiment accuracy \
+    "$tool" "${common[@]}" --tag "derivatives_${name}_linear_modes" --experiment accuracy \
       --set num_modes=$((r + d)) --methods linear,physical "$@"
-    "$tool" "${common[@]}" --tag "derivatives_${config}_modal_derivatives" --experiment accuracy \
+    "$tool" "${common[@]}" --tag "derivatives_${name}_modal_derivatives" --experiment accuracy \
       --set num_modes="$r" --set basis=modal_derivatives --set num_derivative_modes="$d" --methods physical "$@"
-    "$tool" "${common[@]}" --tag "derivatives_${config}_linear_modes" --experiment stability \
+    "$tool" "${common[@]}" --tag "derivatives_${name}_linear_modes" --experiment stability \
       --set num_modes=$((r + d)) --methods linear,physical --stability-steps 2000 --tolerance 0.02 "$@"
-    "$tool" "${common[@]}" --tag "derivatives_${config}_modal_derivatives" --experiment stability \
+    "$tool" "${common[@]}" --tag "derivatives_${name}_modal_derivatives" --experiment stability \
       --set num_modes="$r" --set basis=modal_derivatives --set num_derivative_modes="$d" --methods physical \
       --stability-steps 2000 --tolerance 0.02 "$@"
   done

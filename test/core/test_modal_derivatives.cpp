@@ -156,6 +156,28 @@ TEST(ModalDerivatives, BasisSpanningEveryDofMakesPhysicalEqualFull)
   EXPECT_GT(largest_motion, 0.01);  // gravity really moved it
 }
 
+TEST(ModalDerivatives, BasisSpanningEveryDofMakesImplicitPhysicalEqualImplicitFull)
+{
+  // The implicit integrator solves with the dense reduced tangent and damping, nothing else changed.
+  GridParams g = sheet(2, 4, 3, false);
+  SimulationParams s = withDerivatives(Method::Full, 6, 12, Linearization::Rest);
+  s.integrator = IntegratorKind::Implicit;
+  s.time_step = 5e-3;
+  s.alpha = 0.2;
+  s.beta = 1e-3;
+  Simulation full(g, s);
+  s.method = Method::Physical;
+  Simulation physical(g, s);
+  for (int k = 0; k < 500; ++k)
+  {
+    ASSERT_FALSE(full.step().diverged);
+    ASSERT_FALSE(physical.step().diverged);
+  }
+  EXPECT_GT(physical.lastNewtonIterations(), 1);
+  EXPECT_LT((full.positions() - physical.positions()).cwiseAbs().maxCoeff(), 1e-7);
+  EXPECT_GT((full.positions() - full.grid().initialPositions()).cwiseAbs().maxCoeff(), 1e-2);
+}
+
 TEST(ModalDerivatives, SwingOfAHangingSheetIsFollowedBetterThanWithAsManyLinearModes)
 {
   // A narrow 3D sheet with bending springs at its hanging equilibrium, turned rigidly about its top
@@ -202,6 +224,25 @@ TEST(ModalDerivatives, SwingOfAHangingSheetIsFollowedBetterThanWithAsManyLinearM
   // Measured: 0.013 m with derivatives, 0.21 m with six linear modes (which lock: their swing is
   // stiffer and faster than full's). The threshold is the goal "at most half", 8 times above the run.
   EXPECT_LT(enriched_error, 0.5 * linear_modes_error);
+}
+
+TEST(ModalDerivatives, SwitchingBetweenTheTwoBasesKeepsEveryParticle)
+{
+  // `linear` runs in the eigenbasis, `physical` in the enriched one: a switch projects through the
+  // physical displacement and keeps the rest as the frozen offset, so no particle moves.
+  const GridParams g = sheet(3, 6, 4, true);
+  SimulationParams s = withDerivatives(Method::Physical, 4, 4, Linearization::Equilibrium);
+  s.beta = 1e-3;
+  Simulation sim(g, s);
+  ASSERT_FALSE(sim.step(300).diverged);
+  for (Method next : {Method::Linear, Method::Physical, Method::Full, Method::Physical})
+  {
+    const Eigen::VectorXd before = sim.positions();
+    sim.setMethod(next);
+    EXPECT_LT((sim.positions() - before).cwiseAbs().maxCoeff(), 1e-12) << toString(next);
+    ASSERT_FALSE(sim.step(100).diverged) << toString(next);
+  }
+  EXPECT_EQ(sim.state().q.size(), 8);  // physical: 4 modes + 4 derivative directions
 }
 
 TEST(ModalDerivatives, BadParametersAreNamed)
