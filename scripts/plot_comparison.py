@@ -24,6 +24,7 @@ import argparse
 import csv
 import math
 import pathlib
+import re
 import sys
 
 import matplotlib
@@ -462,18 +463,28 @@ def swing_period(series):
     return 2 * (crossings[-1] - crossings[0]) / (len(crossings) - 1)
 
 
-def derivative_runs(pair):
+def derivative_labels(config):
+    """Labels of the four runs; with R and D from a name ending in _r<R>_d<D>, their basis sizes."""
+    match = re.search(r"_r(\d+)_d(\d+)$", config)
+    if not match:
+        return ["full", "linear", "physical, linear modes", "physical, modal derivatives"]
+    r, d = int(match.group(1)), int(match.group(2))
+    return ["full", f"linear, {r + d} modes", f"physical, {r + d} linear modes",
+            f"physical, {r} modes + {d} derivative directions"]
+
+
+def derivative_runs(config, pair):
     """[(label, method rows)] of full, linear, physical with linear modes, physical with derivatives."""
     linear_rows, derivative_rows = (read_csv(p, "error") for p in pair)
-    modes = {"linear_modes": linear_rows, "modal_derivatives": derivative_rows}
-    runs = [("full", [r for r in linear_rows if r["method"] == "full"]),
-            ("linear", [r for r in linear_rows if r["method"] == "linear"]),
-            ("physical, linear modes", [r for r in linear_rows if r["method"] == "physical"]),
-            ("physical, modal derivatives", [r for r in modes["modal_derivatives"] if r["method"] == "physical"])]
+    labels = derivative_labels(config)
+    runs = [(labels[0], [r for r in linear_rows if r["method"] == "full"]),
+            (labels[1], [r for r in linear_rows if r["method"] == "linear"]),
+            (labels[2], [r for r in linear_rows if r["method"] == "physical"]),
+            (labels[3], [r for r in derivative_rows if r["method"] == "physical"])]
     return [(label, rows) for label, rows in runs if rows]
 
 
-def derivative_summary(rows, full_rows):
+def derivative_summary(rows):
     valid = [r for r in rows if r["diverged"] == "0" and int(r["step"]) > 0]
     mean_rms = sum(number(r["rms_distance"]) for r in valid) / max(1, len(valid))
     swing = [(number(r["time"]), number(r["center_y"])) for r in rows if r["diverged"] == "0"]
@@ -481,21 +492,21 @@ def derivative_summary(rows, full_rows):
     return mean_rms, swing_period(swing), diverged
 
 
-DERIVATIVE_COLORS = {"full": "0.35", "linear": "tab:red", "physical, linear modes": "tab:blue",
-                     "physical, modal derivatives": "tab:green"}
+DERIVATIVE_COLORS = ["0.35", "tab:red", "tab:blue", "tab:green"]  # in the order of derivative_labels
 
 
 def plot_derivatives(found, out):
     written = []
     for config, pair in found.items():
-        runs = derivative_runs(pair)
+        runs = derivative_runs(config, pair)
+        colors = dict(zip(derivative_labels(config), DERIVATIVE_COLORS))
         fig, axes = plt.subplots(1, 2, figsize=(11, 4))
         for label, rows in runs:
             ok = [r for r in rows if r["diverged"] == "0"]
             t = [number(r["time"]) for r in ok]
             if label != "full":
-                axes[0].plot(t, [number(r["rms_distance"]) for r in ok], color=DERIVATIVE_COLORS[label], label=label, lw=1)
-            axes[1].plot(t, [number(r["center_y"]) for r in ok], color=DERIVATIVE_COLORS[label], label=label, lw=1)
+                axes[0].plot(t, [number(r["rms_distance"]) for r in ok], color=colors[label], label=label, lw=1)
+            axes[1].plot(t, [number(r["center_y"]) for r in ok], color=colors[label], label=label, lw=1)
         axes[0].set_title("RMS particle distance to full", fontsize=10)
         axes[0].set_ylabel("m")
         axes[1].set_title("the swing: mean y of the particles", fontsize=10)
@@ -516,16 +527,17 @@ def plot_derivatives(found, out):
 def derivative_tables(found):
     parts = []
     for config, pair in found.items():
-        runs = derivative_runs(pair)
-        full_rows = runs[0][1]
+        runs = derivative_runs(config, pair)
+        full_period = derivative_summary(runs[0][1])[1]
         body = []
         for label, rows in runs:
-            mean_rms, period, diverged = derivative_summary(rows, full_rows)
+            mean_rms, period, diverged = derivative_summary(rows)
             body.append([label, "-" if label == "full" else fmt(mean_rms) + (" (diverged)" if diverged else ""),
-                         fmt(period)])
+                         fmt(period), fmt(period / full_period)])
         parts.append(f"## {pair[0].name}, {pair[1].name}: modal derivatives\n\nMean RMS distance to full over "
-                     "every sample after step 0; the swing period from the zero crossings of the particles' mean y."
-                     "\n\n" + markdown(["method", "mean RMS distance (m)", "swing period (s)"], body))
+                     "every sample after step 0; the swing period from the zero crossings of the particles' mean y, "
+                     "and its ratio to full's.\n\n"
+                     + markdown(["method", "mean RMS distance (m)", "swing period (s)", "period / full's"], body))
     return parts
 
 
@@ -609,7 +621,8 @@ def main(argv=None):
             if path not in skip:
                 written += plot_error(path, out)
         for path in sorted(data.glob("stability_*.csv")):
-            written += plot_stability(path, out)
+            if not path.name.startswith("stability_derivatives_"):  # tabulated only, in tables.md
+                written += plot_stability(path, out)
         combinations = combination_files(data)
         if combinations:
             written += plot_combinations(combinations, out)
