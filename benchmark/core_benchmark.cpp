@@ -1,10 +1,13 @@
-// Google Benchmark of the core: basis construction, one step of each method, position
+// Google Benchmark of the core: basis construction (with and without modal derivatives), one step of each method, position
 // reconstruction and one evaluation of all spring forces.
+#include "modal_mass_spring/equilibrium.h"
+#include "modal_mass_spring/modal_derivatives.h"
 #include "modal_mass_spring/simulation.h"
 #include "modal_mass_spring/spring_forces.h"
 
 #include <benchmark/benchmark.h>
 
+#include <map>
 #include <memory>
 
 using namespace modal_mass_spring;
@@ -52,6 +55,58 @@ void BM_Basis2D(benchmark::State& state)
   state.counters["free_dofs"] = grid.numFreeDofs();
 }
 BENCHMARK(BM_Basis2D)->ArgsProduct({kSizes, {4, 30}})->Unit(benchmark::kMillisecond);
+
+// A 3D sheet hanging at its equilibrium under gravity, with K there: solved once per size (the
+// equilibrium is not what these benchmarks time).
+struct HangingSheet
+{
+  explicit HangingSheet(int size)
+    : grid(square(size, 3)), x_eq(solveEquilibrium(grid, grid.initialPositions()).positions),
+      stiffness(tangentStiffness(grid, x_eq, CompressedSprings::Drop)),
+      mass(Eigen::VectorXd::Constant(grid.numFreeDofs(), grid.particleMass()))
+  {
+  }
+  Grid grid;
+  Eigen::VectorXd x_eq;
+  SparseMatrix stiffness;
+  Eigen::VectorXd mass;
+};
+
+const HangingSheet& hangingSheet(int size)
+{
+  static std::map<int, std::unique_ptr<HangingSheet>> sheets;
+  auto& sheet = sheets[size];
+  if (!sheet)
+    sheet = std::make_unique<HangingSheet>(size);
+  return *sheet;
+}
+
+const std::vector<int64_t> kDerivativeSizes{20, 50, 100};
+
+// The r lowest modes of a hanging 3D sheet, and the same plus r directions from their modal
+// derivatives (r (r + 1) / 2 solves with one factorisation of K, and the mass-PCA): the difference is
+// what the derivatives add to a start-up.
+void BM_BasisHanging3D(benchmark::State& state)
+{
+  const HangingSheet& sheet = hangingSheet(static_cast<int>(state.range(0)));
+  for (auto _ : state)
+    benchmark::DoNotOptimize(computeModalBasis(sheet.stiffness, sheet.mass, static_cast<int>(state.range(1))));
+  state.counters["free_dofs"] = sheet.grid.numFreeDofs();
+}
+BENCHMARK(BM_BasisHanging3D)->ArgsProduct({kDerivativeSizes, {10, 20}})->Unit(benchmark::kMillisecond);
+
+void BM_BasisWithDerivativesHanging3D(benchmark::State& state)
+{
+  const HangingSheet& sheet = hangingSheet(static_cast<int>(state.range(0)));
+  const int r = static_cast<int>(state.range(1));
+  for (auto _ : state)
+  {
+    const ModalBasis modes = computeModalBasis(sheet.stiffness, sheet.mass, r);
+    benchmark::DoNotOptimize(buildDerivativeBasis(sheet.grid, sheet.x_eq, sheet.stiffness, sheet.mass, modes, r));
+  }
+  state.counters["free_dofs"] = sheet.grid.numFreeDofs();
+}
+BENCHMARK(BM_BasisWithDerivativesHanging3D)->ArgsProduct({kDerivativeSizes, {10, 20}})->Unit(benchmark::kMillisecond);
 
 void stepBenchmark(benchmark::State& state, Method method)
 {

@@ -34,6 +34,14 @@ enum class InitialState
   Equilibrium,  // the static equilibrium, at rest
 };
 
+// The basis of the modal methods that compute spring forces (`physical`); `linear` always keeps
+// the eigenbasis, which its F = -Lambda X needs.
+enum class BasisKind
+{
+  LinearModes,       // the r lowest modes (the paper)
+  ModalDerivatives,  // the modes plus directions from their modal derivatives (Barbic & James)
+};
+
 // "full", "linear", "physical"
 std::string toString(Method method);
 // Throws std::invalid_argument naming the valid methods.
@@ -47,5 +55,8 @@ std::string toString(IntegratorKind integrator);
 IntegratorKind parseIntegrator(const std::string& name);
 std::string toString(InitialState initial_state);
 InitialState parseInitialState(const std::string& name);
+// "linear_modes", "modal_derivatives"
+std::string toString(BasisKind basis);
+BasisKind parseBasis(const std::string& name);
 
 }  // namespace modal_mass_spring

@@ -31,7 +31,7 @@ public:
 //   rows, cols, spacing, dimension, mass, structural_stiffness, shear_stiffness, bending,
 //   bending_stiffness, fixed, gravity, rotation_deg, method, num_modes, alpha, beta, time_step,
 //   divergence_limit, linearization, integrator, initial_state, newton_max_iterations, hht_alpha, energy_tolerance,
-//   memory_limit_gb
+//   memory_limit_gb, basis, num_derivative_modes
 GridParams loadGridParams(const ParameterSource& source);
 SimulationParams loadSimulationParams(const ParameterSource& source);
 

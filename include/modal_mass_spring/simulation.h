@@ -4,6 +4,7 @@
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/method_model.h"
 #include "modal_mass_spring/modal_basis.h"
+#include "modal_mass_spring/modal_derivatives.h"
 #include "modal_mass_spring/options.h"
 
 #include <memory>
@@ -37,6 +38,10 @@ struct SimulationParams
   // Refuse a problem whose build would need more memory than this (GB, estimated before anything is
   // allocated): the default leaves room on a 24 GB machine.
   double memory_limit_gb = 12.0;
+  // The basis of `physical`: the num_modes lowest modes, or those plus num_derivative_modes
+  // directions from their modal derivatives (0 unless basis is modal_derivatives).
+  BasisKind basis = BasisKind::LinearModes;
+  int num_derivative_modes = 0;
 };
 
 // Throws std::invalid_argument (rejectParameter) for the first invalid parameter of either set,
@@ -75,7 +80,7 @@ class Simulation
 public:
   // Validates both parameter sets (validateParameters) before building anything, then builds the
   // linearization point and the basis, telling on_stage as each stage starts ("equilibrium",
-  // "stiffness", "factorisation", "eigensolver"). Throws std::invalid_argument naming the offending
+  // "stiffness", "factorisation", "eigensolver", "modal derivatives"). Throws std::invalid_argument naming the offending
   // parameter, std::runtime_error when a stage fails.
   Simulation(const GridParams& grid_params, const SimulationParams& params, const StageFn& on_stage = {});
 
@@ -87,7 +92,13 @@ public:
   Simulation& operator=(Simulation&&) = delete;
 
   const Grid& grid() const { return grid_; }
+  // The eigenbasis: the num_modes lowest modes, `linear`'s basis.
   const ModalBasis& basis() const { return basis_; }
+  // The basis of every modal method that computes spring forces (all but `linear`): the eigenbasis
+  // itself, or with basis: modal_derivatives the modes plus their derivative directions.
+  const ModalBasis& physicalBasis() const { return physical_basis_; }
+  // What building the derivative directions did (all zero with basis: linear_modes).
+  const DerivativeBasisInfo& derivativeInfo() const { return derivative_info_; }
   const SimulationParams& params() const { return params_; }
   Method method() const { return model_->method(); }
 
@@ -165,7 +176,9 @@ private:
   Eigen::VectorXd x_ref_;    // linearization point: u measures displacement from here
   Eigen::VectorXd x_start_;  // where reset() puts the grid
   Eigen::VectorXd u_start_;  // the same as a free-dof displacement from x_ref_
-  ModalBasis basis_;
+  ModalBasis basis_;            // the eigenbasis (`linear`)
+  ModalBasis physical_basis_;   // the basis of the modal methods other than `linear`
+  DerivativeBasisInfo derivative_info_;
   SparseMatrix stiffness_;  // K at x_ref on the free dofs
   Eigen::VectorXd mass_;    // diagonal of M on the free dofs
   double total_mass_ = 0.0;  // weighs the divergence check into an RMS displacement in metres

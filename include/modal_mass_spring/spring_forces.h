@@ -37,6 +37,11 @@ SparseMatrix tangentStiffness(const Grid& grid, const Eigen::VectorXd& x,
                               CompressedSprings compressed = CompressedSprings::Keep,
                               int* num_dropped = nullptr);
 
+// dK/dx[direction]: the directional derivative of the exact tangent K(x) (CompressedSprings::Keep)
+// along a free-dof displacement, the third derivative of the spring energy contracted with it. Free-dof
+// numbering; (dK/dx[Phi_j]) Phi_i is the right-hand side of the modal derivative Psi_ij.
+SparseMatrix tangentStiffnessDerivative(const Grid& grid, const Eigen::VectorXd& x, const Eigen::VectorXd& direction);
+
 // (K(x) Phi)^T from Phi^T (r x free dofs) without assembling K: a spring adds its 2 x 2 block
 // pattern to the rows of its two particles. The reduced tangent Phi^T K Phi then costs O(springs r
 // + n r^2) instead of an assembly of K per Newton iteration.

@@ -101,6 +101,13 @@ ModalMethod::ModalMethod(Method method, const LinearizedGrid& linearized, const 
 
 MassDamping ModalMethod::massDamping(double alpha, double beta) const
 {
+  const Eigen::Index r = lin_.basis.phi.cols();
+  if (lin_.basis.reduced_stiffness.size() > 0)
+  {
+    // Not an eigenbasis (modal derivatives): Phi^T C Phi = alpha I + beta Phi^T K Phi is dense.
+    const Eigen::MatrixXd damping = alpha * Eigen::MatrixXd::Identity(r, r) + beta * lin_.basis.reduced_stiffness;
+    return MassDamping{Eigen::VectorXd::Ones(r), damping.sparseView()};
+  }
   // Phi^T M Phi = I and Phi^T K Phi = Lambda: Rayleigh damping is diagonal, alpha + beta lambda^2.
   const Eigen::VectorXd damping = (alpha + beta * lin_.basis.eigenvalues.array()).matrix();
   return MassDamping{Eigen::VectorXd::Ones(damping.size()), diagonalMatrix(damping)};

@@ -23,6 +23,7 @@ int parseName(const std::string& parameter, const std::string& name, const std::
 const std::vector<std::string> kLinearizations{"rest", "equilibrium"};
 const std::vector<std::string> kIntegrators{"explicit", "implicit"};
 const std::vector<std::string> kInitialStates{"initial", "equilibrium"};
+const std::vector<std::string> kBases{"linear_modes", "modal_derivatives"};
 
 }  // namespace
 
@@ -49,5 +50,8 @@ InitialState parseInitialState(const std::string& name)
 {
   return static_cast<InitialState>(parseName("initial_state", name, kInitialStates));
 }
+
+std::string toString(BasisKind value) { return kBases[static_cast<int>(value)]; }
+BasisKind parseBasis(const std::string& name) { return static_cast<BasisKind>(parseName("basis", name, kBases)); }
 
 }  // namespace modal_mass_spring

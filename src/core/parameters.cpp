@@ -55,6 +55,9 @@ SimulationParams loadSimulationParams(const ParameterSource& s)
   p.hht_alpha = s.getDouble("hht_alpha").value_or(p.hht_alpha);
   p.energy_tolerance = s.getDouble("energy_tolerance").value_or(p.energy_tolerance);
   p.memory_limit_gb = s.getDouble("memory_limit_gb").value_or(p.memory_limit_gb);
+  if (const auto name = s.getString("basis"))
+    p.basis = parseBasis(*name);
+  p.num_derivative_modes = s.getInt("num_derivative_modes").value_or(p.num_derivative_modes);
   return p;
 }
 

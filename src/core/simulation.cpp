@@ -67,6 +67,35 @@ void validateScales(const GridParams& g)
   }
 }
 
+// basis and num_derivative_modes: checks that need no build (the derivatives' own span is checked
+// when they are computed).
+void validateBasis(const GridParams& grid, const SimulationParams& p, long long n)
+{
+  const long long d = p.num_derivative_modes;
+  if (d < 0)
+    rejectParameter("num_derivative_modes", d, "must be an integer >= 0");
+  if (p.basis == BasisKind::LinearModes)
+  {
+    if (d != 0)
+      rejectParameter("num_derivative_modes", d,
+                      "must be 0 with basis: linear_modes (derivative directions are added only with basis: "
+                      "modal_derivatives)");
+    return;
+  }
+  if (grid.dimension == 3 && p.linearization == Linearization::Rest)
+    rejectParameter("basis", "modal_derivatives",
+                    "needs a stiffness without zero modes, and a 3D sheet at rest has none out of its plane; use "
+                    "linearization: equilibrium, or basis: linear_modes");
+  const long long r = p.num_modes;
+  const long long pairs = r * (r + 1) / 2;
+  if (d < 1 || d > pairs || r + d > n)
+    rejectParameter("num_derivative_modes", d,
+                    "must be in [1, " + std::to_string(std::min(pairs, n - r)) + "] with basis: modal_derivatives: at most the " +
+                        std::to_string(pairs) + " pairs of the num_modes = " + std::to_string(r) +
+                        " linear modes, and num_modes + num_derivative_modes at most the " + std::to_string(n) +
+                        " free degrees of freedom");
+}
+
 }  // namespace
 
 void validateParameters(const GridParams& grid, const SimulationParams& p)
@@ -77,6 +106,7 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
   if (p.num_modes < 1 || p.num_modes > n)
     rejectParameter("num_modes", p.num_modes,
                     "must be in [1, " + std::to_string(n) + "], the number of free degrees of freedom");
+  validateBasis(grid, p, n);
   requireNonNegative("alpha", p.alpha);
   requireNonNegative("beta", p.beta);
   validateTimeStep(p.time_step);
@@ -121,6 +151,12 @@ double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
   // The basis: Phi, the physical model's Phi^T and (K Phi)^T, the Lanczos vectors and the Ritz
   // vectors of deflated passes; a dense eigensolver when r is close to n.
   bytes += 8.0 * n * (3.0 * r + std::max(2.0 * r + 1.0, r + 20.0) + 2.0 * r);
+  // The physical basis (a copy, or the modes and their derivative directions, three times for the
+  // force model), and while it is built the derivatives of every pair with their right-hand sides.
+  const double d = p.basis == BasisKind::ModalDerivatives ? p.num_derivative_modes : 0.0;
+  bytes += 8.0 * n * 3.0 * (r + d);
+  if (p.basis == BasisKind::ModalDerivatives)
+    bytes += 8.0 * n * 3.0 * r * (r + 1.0) / 2.0;
   if (r + 1.0 >= n)
     bytes += 3.0 * 8.0 * n * n;
   // Positions, forces, states and scratch vectors over all dofs, and the springs.
@@ -176,6 +212,18 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
                     "give a modal basis that is not finite; keep stiffness / mass and spacing in a range where "
                     "frequencies and lengths are representable");
   }
+  if (params_.basis == BasisKind::ModalDerivatives)
+  {
+    stage("modal derivatives");
+    physical_basis_ = buildDerivativeBasis(grid_, x_ref_, stiffness_, mass_, basis_, params_.num_derivative_modes,
+                                           &derivative_info_);
+    if (!physical_basis_.phi.allFinite() || !physical_basis_.reduced_stiffness.allFinite())
+      throw std::runtime_error("modal derivatives: the basis is not finite");
+  }
+  else
+  {
+    physical_basis_ = basis_;
+  }
 
   u_start_ = grid_.gatherFree(x_start_ - x_ref_);
   external_force_ = Eigen::VectorXd::Zero(x_ref_.size());
@@ -194,7 +242,9 @@ IntegratorSettings Simulation::integratorSettings() const
 
 void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder)
 {
-  const LinearizedGrid linearized{grid_, basis_, x_ref_, stiffness_, mass_};
+  // `linear` needs the eigenbasis (F = -Lambda X); every other modal method uses the physical basis.
+  const ModalBasis& basis = method == Method::Linear ? basis_ : physical_basis_;
+  const LinearizedGrid linearized{grid_, basis, x_ref_, stiffness_, mass_};
   model_ = makeMethod(method, linearized, integratorSettings());
   params_.method = method;
   model_->setExternalForce(grid_.gatherFree(external_force_));

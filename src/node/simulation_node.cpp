@@ -211,7 +211,9 @@ void SimulationNode::buildSimulation()
            grid.params().rows, grid.params().cols, grid.dimension(), grid.numParticles(), grid.springs().size(),
            grid.fixedParticles().size(), toString(simulation_->method()).c_str(),
            describeModes(simulation_->basis().frequencies, simulation_->basis().num_zero_modes).c_str(),
-           describeStartupTimes(simulation_->linearization(), simulation_->basis(), total_seconds).c_str(),
+           describeStartupTimes(simulation_->linearization(), simulation_->basis(), total_seconds,
+                                simulation_->derivativeInfo())
+               .c_str(),
            sim_params.time_step, steps_per_tick_, params_.publish_rate, params_.real_time_factor);
   const LinearizationInfo& lin = simulation_->linearization();
   ROS_INFO("linearization %s, integrator %s, initial_state %s%s", toString(sim_params.linearization).c_str(),
@@ -223,6 +225,7 @@ void SimulationNode::buildSimulation()
                   std::to_string(simulation_->projectionError()) + " m")
                      .c_str()
                : "");
+  ROS_INFO("%s", describeBasis(sim_params, simulation_->derivativeInfo(), simulation_->physicalBasis()).c_str());
 }
 
 void SimulationNode::publishStaticFrame()
@@ -323,6 +326,12 @@ void SimulationNode::onTick(const ros::TimerEvent&)
     status.total_energy = last_energy_;
     status.state = state();
     status.message = simulation_->diverged() ? divergence_message_ : "";
+    const DerivativeBasisInfo& derivatives = simulation_->derivativeInfo();
+    status.basis = toString(simulation_->params().basis);
+    status.linear_modes = simulation_->basis().phi.cols();
+    status.derivative_directions = derivatives.derivative_directions;
+    status.basis_seconds = simulation_->basis().build_seconds + derivatives.seconds;
+    status.largest_dropped_singular_value = derivatives.largest_dropped_singular_value;
 
     if (params_.status_log_period > 0.0 && (ros::WallTime::now() - last_status_log_).toSec() >= params_.status_log_period)
     {

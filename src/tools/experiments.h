@@ -86,6 +86,8 @@ struct ErrorSample
   bool diverged = false;          // the method diverged at or before this step: no distances
   // Wall time per step over the `sample` steps that led here (0 at step 0 and for the reference).
   double step_seconds = 0.0;
+  // The particles' mean y (m): a swing of a 3D sheet about its top edge (along x) moves it; 0 in 2D.
+  double center_y = 0.0;
 };
 
 struct Snapshot
@@ -105,9 +107,13 @@ struct AccuracyResult
   // (method "reference_half_step"), and the largest RMS and largest particle distance between them.
   std::vector<ErrorSample> reference_check;
   double reference_check_max_rms = 0.0, reference_check_max_distance = 0.0;
-  // The basis of the setup (the same for every method).
+  // The eigenbasis of the setup (`linear`'s), and the basis of `physical`: with modal derivatives,
+  // what building them did and the Ritz frequencies of the whole basis.
   Eigen::VectorXd frequencies;
   int num_zero_modes = 0;
+  BasisKind basis = BasisKind::LinearModes;
+  DerivativeBasisInfo derivatives;
+  Eigen::VectorXd physical_frequencies;
 };
 
 AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& options, const ProgressFn& progress = {});

@@ -590,6 +590,16 @@ void printAccuracyHeader(const Options& o, const ExperimentSetup& setup, const A
     freq << (k ? " " : "") << fmt(result.frequencies[k]);
   std::cout << "basis (" << setup.variant << "): " << result.frequencies.size() << " modes, "
             << result.num_zero_modes << " zero, omega [rad/s] = " << freq.str() << "\n";
+  if (result.basis == BasisKind::ModalDerivatives)
+  {
+    const DerivativeBasisInfo& d = result.derivatives;
+    std::cout << "physical basis (" << setup.variant << "): modal_derivatives, " << d.linear_modes
+              << " linear modes kept, " << d.derivative_directions << " derivative directions added (from "
+              << d.derivatives_computed << " derivatives) in " << fmt(1e3 * d.seconds) << " ms, omega up to "
+              << fmt(result.physical_frequencies.maxCoeff()) << " rad/s; singular values relative to the largest: "
+              << "smallest kept " << fmt(d.smallest_kept_singular_value) << ", largest dropped "
+              << fmt(d.largest_dropped_singular_value) << "\n";
+  }
   if (o.accuracy.reference_time_step > 0.0)
     std::cout << "reference (" << setup.variant << "): full, explicit, dt = " << fmt(o.accuracy.reference_time_step)
               << " s; against dt / 2: largest RMS distance " << fmt(result.reference_check_max_rms)

@@ -153,6 +153,16 @@ def cases(configs):
         setting("newton_max_iterations", "0"),
         setting("memory_limit_gb", "0"),
         setting("memory_limit_gb", "-1"),
+        setting("basis", "derivatives"),
+        setting("num_derivative_modes", "2"),  # with basis: linear_modes
+        tool("num_derivative_modes_negative", "num_derivative_modes", "--set", "basis=modal_derivatives",
+             "--set", "num_derivative_modes=-1"),
+        tool("num_derivative_modes_beyond_pairs", "num_derivative_modes", "--set", "basis=modal_derivatives",
+             "--set", "num_derivative_modes=11"),
+        tool("num_derivative_modes_beyond_free_dofs", "num_derivative_modes", "--set", "basis=modal_derivatives",
+             "--set", "num_modes=38", "--set", "num_derivative_modes=3"),
+        tool("modal_derivatives_of_a_3d_sheet_at_rest", "basis", "--set", "basis=modal_derivatives",
+             "--set", "num_derivative_modes=2", "--set", "dimension=3"),
         # ------------------------------------------------ wrong types
         setting("mass", "heavy"),
         setting("rows", "5.5"),
@@ -162,6 +172,7 @@ def cases(configs):
         setting("gravity", "{z: -9.81}"),
         setting("method", "[full]"),
         setting("num_modes", "[4]"),
+        setting("num_derivative_modes", "two"),
         setting("time_step", "true"),
         setting("integrator", "{a: 1}"),
         # ------------------------------------------------ grids too large to build

@@ -61,6 +61,13 @@ CASES = [
     ({"initial_state": "bogus"}, [], ["initial_state"]),
     ({"newton_max_iterations": 0}, [], ["newton_max_iterations"]),
     ({"memory_limit_gb": 0.0}, [], ["memory_limit_gb"]),
+    ({"basis": "derivatives"}, [], ["basis"]),
+    ({"num_derivative_modes": 2}, [], ["num_derivative_modes"]),  # with basis: linear_modes
+    ({"basis": "modal_derivatives", "num_derivative_modes": -1}, [], ["num_derivative_modes"]),
+    ({"basis": "modal_derivatives", "num_derivative_modes": 11}, [], ["num_derivative_modes"]),
+    ({"basis": "modal_derivatives", "num_modes": 38, "num_derivative_modes": 3}, [], ["num_derivative_modes"]),
+    ({"basis": "modal_derivatives", "num_derivative_modes": 2, "dimension": 3}, [], ["basis"]),
+    ({"num_derivative_modes": "two"}, [], ["num_derivative_modes"]),
     ({"memory_limit_gb": -1.0}, [], ["memory_limit_gb"]),
     ({"rows": 3000, "cols": 3000, "dimension": 3, "num_modes": 30}, [], ["rows"]),  # names memory_limit_gb too
     ({"real_time_factor": 0.0}, [], ["real_time_factor"]),

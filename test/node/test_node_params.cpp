@@ -211,6 +211,7 @@ TEST(NodeParams, UnknownKeysAreReportedAndKnownOnesAreNot)
                            {"time_step", 0.001}, {"divergence_limit", 0.0}, {"linearization", std::string("rest")},
                            {"integrator", std::string("explicit")}, {"initial_state", std::string("initial")},
                            {"newton_max_iterations", 50}, {"memory_limit_gb", 12.0}, {"real_time_factor", 1.0},
+                           {"basis", std::string("linear_modes")}, {"num_derivative_modes", 0},
                            {"publish_rate", 30.0}, {"fixed_frame", std::string("world")},
                            {"grid_frame", std::string("grid")}, {"tf_particles", std::vector<int>{20, 24}},
                            {"offset", std::vector<double>{0.0, 0.0, 0.0}}, {"color_by_strain", true},

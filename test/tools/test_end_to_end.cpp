@@ -100,7 +100,7 @@ TEST_F(ModalCompareTool, SmallRunEndToEndToPngs)
                            "stability_paper_2d.csv", "cost_small_3d.csv", "accuracy_small_3d_snapshots.csv"})
     ASSERT_TRUE(fs::exists(data / name)) << name;
   EXPECT_EQ(firstLine(data / "accuracy_paper_2d_error.csv"),
-            "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds");
+            "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds,center_y");
   EXPECT_EQ(firstLine(data / "stability_integrators.csv"),
             "variant,method,stable_dt,unstable_dt,trials,steps,tolerance,modal_bound,full_bound,stable_windows,"
             "check_dt,check_stable");
