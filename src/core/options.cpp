@@ -28,7 +28,7 @@ const std::vector<std::string> kInitialStates{"initial", "equilibrium"};
 
 const std::vector<std::string>& methodNames()
 {
-  static const std::vector<std::string> names{"full", "linear", "physical"};
+  static const std::vector<std::string> names{"full", "linear", "physical", "cubature"};
   return names;
 }
 std::string toString(Method method) { return methodNames()[static_cast<int>(method)]; }
