@@ -8,6 +8,7 @@
 
 #include <Eigen/Core>
 
+#include <string>
 #include <vector>
 
 namespace modal_mass_spring
@@ -39,6 +40,9 @@ struct Cubature
   double training_seconds = 0.0;
   int training_poses = 0;
 };
+
+// "cubature: 174 of 342 springs, training error 1.97% on 100 poses, held-out 2.4%, trained in 0.29 s"
+std::string describeCubature(const Cubature& cubature, int num_springs);
 
 // The max_springs that applies on a grid with `num_springs` springs.
 int effectiveMaxSprings(const CubatureParams& params, int num_springs);

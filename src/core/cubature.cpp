@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
 #include <cmath>
 #include <random>
 #include <utility>
@@ -139,6 +140,16 @@ private:
 };
 
 }  // namespace
+
+std::string describeCubature(const Cubature& c, int num_springs)
+{
+  char text[256];
+  std::snprintf(text, sizeof text,
+                "cubature: %zu of %d springs, training error %.3g%% on %d poses, held-out %.3g%%, trained in %.3g s",
+                c.springs.size(), num_springs, 100.0 * c.training_error, c.training_poses, 100.0 * c.heldout_error,
+                c.training_seconds);
+  return text;
+}
 
 int effectiveMaxSprings(const CubatureParams& params, int num_springs)
 {

@@ -211,7 +211,8 @@ void SimulationNode::buildSimulation()
            grid.params().rows, grid.params().cols, grid.dimension(), grid.numParticles(), grid.springs().size(),
            grid.fixedParticles().size(), toString(simulation_->method()).c_str(),
            describeModes(simulation_->basis().frequencies, simulation_->basis().num_zero_modes).c_str(),
-           describeStartupTimes(simulation_->linearization(), simulation_->basis(), total_seconds).c_str(),
+           describeStartupTimes(simulation_->linearization(), simulation_->basis(), total_seconds, simulation_->cubature())
+               .c_str(),
            sim_params.time_step, steps_per_tick_, params_.publish_rate, params_.real_time_factor);
   const LinearizationInfo& lin = simulation_->linearization();
   ROS_INFO("linearization %s, integrator %s, initial_state %s%s", toString(sim_params.linearization).c_str(),
@@ -223,6 +224,8 @@ void SimulationNode::buildSimulation()
                   std::to_string(simulation_->projectionError()) + " m")
                      .c_str()
                : "");
+  if (const Cubature* cubature = simulation_->cubature())
+    ROS_INFO("%s", describeCubature(*cubature, static_cast<int>(grid.springs().size())).c_str());
 }
 
 void SimulationNode::publishStaticFrame()
@@ -323,6 +326,13 @@ void SimulationNode::onTick(const ros::TimerEvent&)
     status.total_energy = last_energy_;
     status.state = state();
     status.message = simulation_->diverged() ? divergence_message_ : "";
+    if (const Cubature* cubature = simulation_->cubature())
+    {
+      status.cubature_springs = static_cast<uint32_t>(cubature->springs.size());
+      status.cubature_training_error = cubature->training_error;
+      status.cubature_heldout_error = cubature->heldout_error;
+      status.cubature_training_seconds = cubature->training_seconds;
+    }
 
     if (params_.status_log_period > 0.0 && (ros::WallTime::now() - last_status_log_).toSec() >= params_.status_log_period)
     {
@@ -424,7 +434,10 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   }
   const std::string previous = toString(simulation_->method());
   const bool was_diverged = simulation_->diverged();
+  const bool trains = method == Method::Cubature && !simulation_->cubature();
   simulation_->setMethod(method);
+  if (trains)
+    ROS_INFO("%s", describeCubature(*simulation_->cubature(), static_cast<int>(simulation_->grid().springs().size())).c_str());
   divergence_message_.clear();
   ++state_changes_;
   response.success = true;

@@ -52,7 +52,8 @@ std::string describeModes(const Eigen::VectorXd& frequencies, int num_zero_modes
   return out.str();
 }
 
-std::string describeStartupTimes(const LinearizationInfo& linearization, const ModalBasis& basis, double total_seconds)
+std::string describeStartupTimes(const LinearizationInfo& linearization, const ModalBasis& basis, double total_seconds,
+                                 const Cubature* cubature)
 {
   std::ostringstream out;
   out << "start-up " << seconds(total_seconds) << ": ";
@@ -62,6 +63,8 @@ std::string describeStartupTimes(const LinearizationInfo& linearization, const M
   if (basis.factorization_seconds > 0.0)
     out << ", factorisation " << seconds(basis.factorization_seconds);
   out << ", eigensolver " << seconds(std::max(0.0, basis.build_seconds - basis.factorization_seconds));
+  if (cubature)
+    out << ", cubature " << seconds(cubature->training_seconds);
   return out.str();
 }
 
@@ -75,6 +78,8 @@ std::string describeStage(const std::string& stage)
     return "factorising the shifted stiffness matrix (factorisation)";
   if (stage == "eigensolver")
     return "computing the modes (eigensolver)";
+  if (stage == "cubature")
+    return "training the cubature's springs and weights (cubature)";
   return stage;
 }
 

@@ -20,7 +20,9 @@ std::string describeModes(const Eigen::VectorXd& frequencies, int num_zero_modes
 
 // "start-up 3.1 s: equilibrium 3.02 s, stiffness 2.1 ms, factorisation 4.9 ms, eigensolver 28.9 ms"
 // (equilibrium only when it was solved); `total_seconds` is the whole Simulation construction.
-std::string describeStartupTimes(const LinearizationInfo& linearization, const ModalBasis& basis, double total_seconds);
+// With a cubature trained at start-up, its training time follows ("..., cubature 0.29 s").
+std::string describeStartupTimes(const LinearizationInfo& linearization, const ModalBasis& basis, double total_seconds,
+                                 const Cubature* cubature = nullptr);
 
 // "solving the static equilibrium under gravity" for "equilibrium", and so on for the core's stages.
 std::string describeStage(const std::string& stage);
