@@ -123,6 +123,12 @@ BENCHMARK(BM_StepFull)->ArgsProduct({kSizes, {30}})->Unit(benchmark::kMicrosecon
 BENCHMARK(BM_StepLinear)->ArgsProduct({kSizes, {4, 30}})->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_StepPhysical)->ArgsProduct({kSizes, {4, 30}})->Unit(benchmark::kMicrosecond);
 
+// Cubature beside physical on the larger sheets: its step should not grow with the grid.
+const std::vector<int64_t> kCubatureSizes{20, 50, 100, 200};
+void BM_StepCubature(benchmark::State& state) { stepBenchmark(state, Method::Cubature); }
+BENCHMARK(BM_StepPhysical)->Args({200, 30})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_StepCubature)->ArgsProduct({kCubatureSizes, {4, 30}})->Unit(benchmark::kMicrosecond);
+
 // Implicit Newmark: Newton iterations with the sparse (full) or r x r (physical) tangent.
 void implicitBenchmark(benchmark::State& state, Method method)
 {
@@ -139,7 +145,24 @@ void BM_ImplicitLinear(benchmark::State& state) { implicitBenchmark(state, Metho
 void BM_ImplicitPhysical(benchmark::State& state) { implicitBenchmark(state, Method::Physical); }
 BENCHMARK(BM_ImplicitFull)->ArgsProduct({{5, 20, 50}, {30}})->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_ImplicitLinear)->ArgsProduct({{5, 20, 100}, {30}})->Unit(benchmark::kMicrosecond);
-BENCHMARK(BM_ImplicitPhysical)->ArgsProduct({{5, 20, 50, 100}, {30}})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_ImplicitPhysical)->ArgsProduct({{5, 20, 50, 100, 200}, {30}})->Unit(benchmark::kMicrosecond);
+void BM_ImplicitCubature(benchmark::State& state) { implicitBenchmark(state, Method::Cubature); }
+BENCHMARK(BM_ImplicitCubature)->ArgsProduct({kCubatureSizes, {30}})->Unit(benchmark::kMicrosecond);
+
+// The cubature's training alone, on the basis of a sheet (built once, outside the timing), with the
+// size of T and the errors it reached as counters.
+void BM_TrainCubature(benchmark::State& state)
+{
+  const auto sim = disturbedSheet(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)), Method::Linear);
+  const CubatureParams params = cubatureParams(sim->params());
+  Cubature cubature;
+  for (auto _ : state)
+    cubature = trainCubature(sim->grid(), sim->basis(), sim->linearizationPositions(), params);
+  state.counters["springs"] = static_cast<double>(cubature.springs.size());
+  state.counters["training_error"] = cubature.training_error;
+  state.counters["heldout_error"] = cubature.heldout_error;
+}
+BENCHMARK(BM_TrainCubature)->ArgsProduct({{20, 50, 100}, {30}})->Unit(benchmark::kMillisecond)->Iterations(1);
 
 // x = x0 + Phi X for every particle: what a modal method pays only when positions are wanted.
 void BM_Reconstruct(benchmark::State& state)

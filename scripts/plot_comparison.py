@@ -40,7 +40,7 @@ COLUMNS = {
     "stability": ["variant", "method", "stable_dt", "unstable_dt", "steps", "tolerance", "modal_bound",
                   "full_bound"],
 }
-METHOD_COLORS = {"full": "0.35", "linear": "tab:red", "physical": "tab:blue", "reference": "0.35",
+METHOD_COLORS = {"full": "0.35", "linear": "tab:red", "physical": "tab:blue", "cubature": "tab:green", "reference": "0.35",
                  "reference_half_step": "black"}
 REFERENCES = ("reference", "reference_half_step")
 VARIANT_STYLES = ["-", "--", ":", "-."]

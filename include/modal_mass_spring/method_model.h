@@ -3,6 +3,7 @@
 // for the modal methods.
 #pragma once
 
+#include "modal_mass_spring/cubature.h"
 #include "modal_mass_spring/force_model.h"
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/integrator.h"
@@ -25,6 +26,7 @@ struct LinearizedGrid
   const Eigen::VectorXd& x_ref;   // linearization point: q = 0 stands for it
   const SparseMatrix& stiffness;  // K(x_ref) on the free dofs
   const Eigen::VectorXd& mass;    // the diagonal of M on the free dofs
+  const Cubature* cubature = nullptr;  // the trained springs and weights, for `cubature`
 };
 
 // A method's force model plus a constant external load G in the same coordinates: F(q) + G, with
@@ -144,7 +146,7 @@ private:
   Eigen::VectorXd anchor_;
 };
 
-// `linear` and `physical`: q = X, u = offset + Phi X with a mass-orthonormal Phi.
+// `linear`, `physical` and `cubature`: q = X, u = offset + Phi X with a mass-orthonormal Phi.
 class ModalMethod : public MethodModel
 {
 public:

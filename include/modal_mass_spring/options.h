@@ -12,6 +12,7 @@ enum class Method
   Full,      // no reduction: the reference
   Linear,    // modal, F = -Lambda X
   Physical,  // modal, F = Phi^T f(x0 + Phi X)
+  Cubature,  // modal, F ~ sum over a few springs of w_s Phi_s^T f_s (An, Kim & James 2008)
 };
 
 // Where K is taken and the modal coordinates are measured from.
@@ -42,7 +43,7 @@ enum class BasisKind
   ModalDerivatives,  // the modes plus directions from their modal derivatives (Barbic & James)
 };
 
-// "full", "linear", "physical"
+// "full", "linear", "physical", "cubature"
 std::string toString(Method method);
 // Throws std::invalid_argument naming the valid methods.
 Method parseMethod(const std::string& name);

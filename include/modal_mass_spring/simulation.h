@@ -1,6 +1,7 @@
 // A simulation: a grid, its modal basis and the chosen method, stepped by an integrator.
 #pragma once
 
+#include "modal_mass_spring/cubature.h"
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/method_model.h"
 #include "modal_mass_spring/modal_basis.h"
@@ -8,6 +9,7 @@
 #include "modal_mass_spring/options.h"
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -42,7 +44,18 @@ struct SimulationParams
   // directions from their modal derivatives (0 unless basis is modal_derivatives).
   BasisKind basis = BasisKind::LinearModes;
   int num_derivative_modes = 0;
+  // `cubature`'s training (see CubatureParams): the relative force error to reach, in (0, 1); the
+  // most springs (0: min(number of springs, 1000)); the random poses; the largest particle
+  // displacement of a pose (m); the seed of the poses and candidate sets.
+  double cubature_tolerance = 0.02;
+  int cubature_max_springs = 0;
+  int cubature_training_poses = 100;
+  double cubature_pose_size = 0.4;
+  int cubature_seed = 1;
 };
+
+// The cubature training parameters of a simulation's.
+CubatureParams cubatureParams(const SimulationParams& params);
 
 // Throws std::invalid_argument (rejectParameter) for the first invalid parameter of either set,
 // naming it, its value and what is allowed: the grid's (validateGridParams), then the simulation's,
@@ -80,7 +93,8 @@ class Simulation
 public:
   // Validates both parameter sets (validateParameters) before building anything, then builds the
   // linearization point and the basis, telling on_stage as each stage starts ("equilibrium",
-  // "stiffness", "factorisation", "eigensolver", "modal derivatives"). Throws std::invalid_argument naming the offending
+  // "stiffness", "factorisation", "eigensolver", "modal derivatives" with that basis, and "cubature"
+  // when the method is `cubature`). Throws std::invalid_argument naming the offending
   // parameter, std::runtime_error when a stage fails.
   Simulation(const GridParams& grid_params, const SimulationParams& params, const StageFn& on_stage = {});
 
@@ -105,8 +119,11 @@ public:
   // Switches method, carrying the motion over without moving a particle: going to a modal method,
   // X = Phi^T M u and the rest of u, which the modes cannot carry, stays frozen as an offset of the
   // modal reference configuration (until reset); going to full, u = offset + Phi X. Clears a
-  // divergence: the last good state goes on under the new method.
+  // divergence: the last good state goes on under the new method. The first switch to `cubature`
+  // trains it (trainCubature, seconds on a large grid).
   void setMethod(Method method);
+  // The trained cubature (springs, weights, training report), or null before `cubature` was first used.
+  const Cubature* cubature() const { return cubature_ ? &*cubature_ : nullptr; }
   // Rebuilds the integrators for a new time step (validated as at construction); keeps the state.
   void setTimeStep(double dt);
   // Back to the initial positions, at rest, time 0. The external force stays.
@@ -181,6 +198,7 @@ private:
   DerivativeBasisInfo derivative_info_;
   SparseMatrix stiffness_;  // K at x_ref on the free dofs
   Eigen::VectorXd mass_;    // diagonal of M on the free dofs
+  std::optional<Cubature> cubature_;  // trained at the linearization point when first needed
   double total_mass_ = 0.0;  // weighs the divergence check into an RMS displacement in metres
   std::unique_ptr<MethodModel> model_;
   long step_count_ = 0;

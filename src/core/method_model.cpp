@@ -2,6 +2,7 @@
 #include "modal_mass_spring/method_model.h"
 
 #include <algorithm>
+#include <stdexcept>
 
 namespace modal_mass_spring
 {
@@ -85,6 +86,12 @@ std::unique_ptr<ModalForceModel> makeModalForce(Method method, const LinearizedG
 {
   if (method == Method::Linear)
     return std::make_unique<LinearModalForceModel>(lin.grid, lin.basis, lin.x_ref);
+  if (method == Method::Cubature)
+  {
+    if (!lin.cubature)
+      throw std::logic_error("the cubature method needs a trained cubature");
+    return std::make_unique<CubatureForceModel>(lin.grid, lin.basis, lin.x_ref, *lin.cubature);
+  }
   return std::make_unique<PhysicalModalForceModel>(lin.grid, lin.basis, lin.x_ref);
 }
 

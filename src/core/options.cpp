@@ -29,7 +29,7 @@ const std::vector<std::string> kBases{"linear_modes", "modal_derivatives"};
 
 const std::vector<std::string>& methodNames()
 {
-  static const std::vector<std::string> names{"full", "linear", "physical"};
+  static const std::vector<std::string> names{"full", "linear", "physical", "cubature"};
   return names;
 }
 std::string toString(Method method) { return methodNames()[static_cast<int>(method)]; }

@@ -118,6 +118,21 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
     rejectParameter("newton_max_iterations", p.newton_max_iterations, "must be an integer >= 1");
   if (!std::isfinite(p.hht_alpha) || p.hht_alpha < -1.0 / 3.0 || p.hht_alpha > 0.0)
     rejectParameter("hht_alpha", p.hht_alpha, "must be in [-1/3, 0] (0: Newmark average acceleration)");
+  if (!std::isfinite(p.cubature_tolerance) || p.cubature_tolerance <= 0.0 || p.cubature_tolerance >= 1.0)
+    rejectParameter("cubature_tolerance", p.cubature_tolerance,
+                    "must be in (0, 1) (the relative force error over the training poses)");
+  const long long springs = countSprings(grid);
+  if (p.cubature_max_springs < 0 || p.cubature_max_springs > springs)
+    rejectParameter("cubature_max_springs", p.cubature_max_springs,
+                    "must be 0 (up to min(number of springs, " + std::to_string(kDefaultMaxSprings) +
+                        ")) or in [1, " + std::to_string(springs) + "], the number of springs");
+  if (p.cubature_training_poses < 1)
+    rejectParameter("cubature_training_poses", p.cubature_training_poses, "must be an integer >= 1");
+  if (!std::isfinite(p.cubature_pose_size) || p.cubature_pose_size <= 0.0)
+    rejectParameter("cubature_pose_size", p.cubature_pose_size,
+                    "must be a finite number of metres > 0 (the largest particle displacement of a training pose)");
+  if (p.cubature_seed < 0)
+    rejectParameter("cubature_seed", p.cubature_seed, "must be an integer >= 0");
   if (!std::isfinite(p.memory_limit_gb) || p.memory_limit_gb <= 0.0)
     rejectParameter("memory_limit_gb", p.memory_limit_gb, "must be a finite number of GB > 0");
   const double needed_gb = estimateMemoryBytes(grid, p) / 1e9;
@@ -159,9 +174,24 @@ double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
     bytes += 8.0 * n * 3.0 * r * (r + 1.0) / 2.0;
   if (r + 1.0 >= n)
     bytes += 3.0 * 8.0 * n * n;
+  // The cubature training: the selected springs' columns (with a copy while they grow), their Gram
+  // matrix and the held-out columns.
+  const double max_springs = effectiveMaxSprings(cubatureParams(p), static_cast<int>(std::min<long long>(countSprings(g), 1 << 30)));
+  bytes += 8.0 * (3.0 * p.cubature_training_poses * r * max_springs + max_springs * max_springs);
   // Positions, forces, states and scratch vectors over all dofs, and the springs.
   bytes += 8.0 * 40.0 * dim * particles + 24.0 * (blocks - 1.0) / 2.0 * particles;
   return bytes;
+}
+
+CubatureParams cubatureParams(const SimulationParams& p)
+{
+  CubatureParams c;
+  c.tolerance = p.cubature_tolerance;
+  c.max_springs = p.cubature_max_springs;
+  c.training_poses = p.cubature_training_poses;
+  c.pose_size = p.cubature_pose_size;
+  c.seed = p.cubature_seed;
+  return c;
 }
 
 Simulation::Simulation(const GridParams& grid_params, const SimulationParams& params, const StageFn& on_stage)
@@ -231,6 +261,11 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
   for (const Spring& spring : grid_.springs())
     stretched += 0.5 * spring.stiffness * std::pow(0.01 * spring.rest_length, 2);
   base_energy_scale_ = total_mass_ * g.gravity.norm() * g.spacing * std::max(g.rows, g.cols) + stretched;
+  if (params_.method == Method::Cubature)
+  {
+    stage("cubature");
+    cubature_ = trainCubature(grid_, physical_basis_, x_ref_, cubatureParams(params_));
+  }
   reset();
 }
 
@@ -242,9 +277,12 @@ IntegratorSettings Simulation::integratorSettings() const
 
 void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder)
 {
-  // `linear` needs the eigenbasis (F = -Lambda X); every other modal method uses the physical basis.
+  // `linear` needs the eigenbasis (F = -Lambda X); every other modal method uses the physical basis,
+  // and the cubature is trained on it.
   const ModalBasis& basis = method == Method::Linear ? basis_ : physical_basis_;
-  const LinearizedGrid linearized{grid_, basis, x_ref_, stiffness_, mass_};
+  if (method == Method::Cubature && !cubature_)
+    cubature_ = trainCubature(grid_, physical_basis_, x_ref_, cubatureParams(params_));
+  const LinearizedGrid linearized{grid_, basis, x_ref_, stiffness_, mass_, cubature_ ? &*cubature_ : nullptr};
   model_ = makeMethod(method, linearized, integratorSettings());
   params_.method = method;
   model_->setExternalForce(grid_.gatherFree(external_force_));

@@ -212,7 +212,7 @@ void SimulationNode::buildSimulation()
            grid.fixedParticles().size(), toString(simulation_->method()).c_str(),
            describeModes(simulation_->basis().frequencies, simulation_->basis().num_zero_modes).c_str(),
            describeStartupTimes(simulation_->linearization(), simulation_->basis(), total_seconds,
-                                simulation_->derivativeInfo())
+                                simulation_->derivativeInfo(), simulation_->cubature())
                .c_str(),
            sim_params.time_step, steps_per_tick_, params_.publish_rate, params_.real_time_factor);
   const LinearizationInfo& lin = simulation_->linearization();
@@ -226,6 +226,8 @@ void SimulationNode::buildSimulation()
                      .c_str()
                : "");
   ROS_INFO("%s", describeBasis(sim_params, simulation_->derivativeInfo(), simulation_->physicalBasis()).c_str());
+  if (const Cubature* cubature = simulation_->cubature())
+    ROS_INFO("%s", describeCubature(*cubature, static_cast<int>(grid.springs().size())).c_str());
 }
 
 void SimulationNode::publishStaticFrame()
@@ -332,6 +334,13 @@ void SimulationNode::onTick(const ros::TimerEvent&)
     status.derivative_directions = derivatives.derivative_directions;
     status.basis_seconds = simulation_->basis().build_seconds + derivatives.seconds;
     status.largest_dropped_singular_value = derivatives.largest_dropped_singular_value;
+    if (const Cubature* cubature = simulation_->cubature())
+    {
+      status.cubature_springs = static_cast<uint32_t>(cubature->springs.size());
+      status.cubature_training_error = cubature->training_error;
+      status.cubature_heldout_error = cubature->heldout_error;
+      status.cubature_training_seconds = cubature->training_seconds;
+    }
 
     if (params_.status_log_period > 0.0 && (ros::WallTime::now() - last_status_log_).toSec() >= params_.status_log_period)
     {
@@ -433,7 +442,10 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   }
   const std::string previous = toString(simulation_->method());
   const bool was_diverged = simulation_->diverged();
+  const bool trains = method == Method::Cubature && !simulation_->cubature();
   simulation_->setMethod(method);
+  if (trains)
+    ROS_INFO("%s", describeCubature(*simulation_->cubature(), static_cast<int>(simulation_->grid().springs().size())).c_str());
   divergence_message_.clear();
   ++state_changes_;
   response.success = true;

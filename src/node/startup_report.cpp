@@ -53,7 +53,7 @@ std::string describeModes(const Eigen::VectorXd& frequencies, int num_zero_modes
 }
 
 std::string describeStartupTimes(const LinearizationInfo& linearization, const ModalBasis& basis, double total_seconds,
-                                 const DerivativeBasisInfo& derivatives)
+                                 const DerivativeBasisInfo& derivatives, const Cubature* cubature)
 {
   std::ostringstream out;
   out << "start-up " << seconds(total_seconds) << ": ";
@@ -65,6 +65,8 @@ std::string describeStartupTimes(const LinearizationInfo& linearization, const M
   out << ", eigensolver " << seconds(std::max(0.0, basis.build_seconds - basis.factorization_seconds));
   if (derivatives.derivative_directions > 0)
     out << ", modal derivatives " << seconds(derivatives.seconds);
+  if (cubature)
+    out << ", cubature " << seconds(cubature->training_seconds);
   return out.str();
 }
 
@@ -96,6 +98,8 @@ std::string describeStage(const std::string& stage)
     return "computing the modes (eigensolver)";
   if (stage == "modal derivatives")
     return "computing the modal derivatives and their directions (modal derivatives)";
+  if (stage == "cubature")
+    return "training the cubature's springs and weights (cubature)";
   return stage;
 }
 

@@ -20,9 +20,10 @@ std::string describeModes(const Eigen::VectorXd& frequencies, int num_zero_modes
 
 // "start-up 3.1 s: equilibrium 3.02 s, stiffness 2.1 ms, factorisation 4.9 ms, eigensolver 28.9 ms"
 // (equilibrium only when it was solved); `total_seconds` is the whole Simulation construction.
-// With modal derivatives, ", modal derivatives 12.3 ms" at the end.
+// With modal derivatives, ", modal derivatives 12.3 ms" at the end; with a cubature trained at
+// start-up, its training time ("..., cubature 0.29 s").
 std::string describeStartupTimes(const LinearizationInfo& linearization, const ModalBasis& basis, double total_seconds,
-                                 const DerivativeBasisInfo& derivatives = {});
+                                 const DerivativeBasisInfo& derivatives = {}, const Cubature* cubature = nullptr);
 
 // "basis linear_modes" or "basis modal_derivatives: 6 linear modes kept, 6 derivative directions added
 // (from 21 derivatives) in 12.3 ms, frequencies up to 126 rad/s; singular values (relative) smallest

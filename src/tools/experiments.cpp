@@ -321,6 +321,12 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
   result.basis = setup.sim.basis;
   result.derivatives = modal.derivativeInfo();
   result.physical_frequencies = modal.physicalBasis().frequencies;
+  for (const AccuracyRun& run : runs)
+    if (const Cubature* c = run.sim->cubature())
+      result.cubature = CubatureRow{setup.variant, static_cast<int>(c->springs.size()),
+                                    static_cast<int>(grid.springs().size()), c->training_poses,
+                                    setup.sim.cubature_tolerance, c->training_error, c->heldout_error,
+                                    c->training_seconds};
 
   auto record = [&](long step) {
     const Eigen::Matrix3Xd reference = runs[0].sim->points();
@@ -663,6 +669,15 @@ void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows)
     out << e.variant << ',' << e.method << ',' << e.step << ',' << Field{e.time} << ',' << Field{e.max_distance}
         << ',' << Field{e.rms_distance} << ',' << Field{e.max_displacement} << ',' << Field{e.energy} << ','
         << (e.diverged ? 1 : 0) << ',' << Field{e.step_seconds} << ',' << Field{e.center_y} << '\n';
+}
+
+void writeCubatureCsv(std::ostream& out, const std::vector<CubatureRow>& rows)
+{
+  precise(out) << "variant,springs,grid_springs,training_poses,tolerance,training_error,heldout_error,training_seconds\n";
+  for (const CubatureRow& r : rows)
+    out << r.variant << ',' << r.springs << ',' << r.grid_springs << ',' << r.training_poses << ','
+        << Field{r.tolerance} << ',' << Field{r.training_error} << ',' << Field{r.heldout_error} << ','
+        << Field{r.training_seconds} << '\n';
 }
 
 void writeSnapshotCsv(std::ostream& out, const Grid& grid, const std::vector<Snapshot>& snapshots)

@@ -43,8 +43,9 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
   --experiment LIST     comma-separated: cost, accuracy, stability, or all (default: all)
   --output DIR          folder for the CSV files (default: .)
   --tag NAME            file name tag, <experiment>_<tag>.csv (default: the config file's stem); no '/'
-  --methods LIST        comma-separated of full, linear, physical (default: all three; accuracy
-                        always runs full as the reference)
+  --methods LIST        comma-separated of full, linear, physical, cubature (default: all four;
+                        accuracy always runs full as the reference and writes cubature's training
+                        report, |T|, training and held-out error and time, to accuracy_<tag>_cubature.csv)
   --set KEY=VALUE       override one parameter of the config (VALUE is YAML); repeatable, once per key
   --vary KEY=V1,V2,...  run every experiment for each value; several --vary give every combination,
                         e.g. --vary integrator=explicit,implicit --vary linearization=rest,equilibrium
@@ -171,7 +172,7 @@ struct Options
   std::vector<std::string> experiments = kExperiments;
   std::string output = ".";
   std::string tag;
-  std::vector<Method> methods{Method::Full, Method::Linear, Method::Physical};
+  std::vector<Method> methods{Method::Full, Method::Linear, Method::Physical, Method::Cubature};
   std::vector<std::pair<std::string, std::string>> sets;
   std::vector<std::pair<std::string, std::vector<std::string>>> varies;
   bool quiet = false;
@@ -214,7 +215,10 @@ void setMethods(Options& o, const std::string& text)
     }
     catch (const std::invalid_argument&)
     {
-      rejectParameter("--methods", "'" + name + "'", "unknown method: must be full, linear or physical");
+      std::string names;
+      for (const std::string& known : methodNames())
+        names += (names.empty() ? "" : ", ") + known;
+      rejectParameter("--methods", "'" + name + "'", "unknown method: must be one of " + names);
     }
   }
 }
@@ -626,6 +630,7 @@ void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>&
   std::vector<ErrorSample> errors;
   std::vector<Snapshot> snapshots;
   std::vector<std::string> messages;
+  std::vector<CubatureRow> cubatures;
   std::vector<std::vector<std::string>> table{
       {"variant", "method", "step", "time s", "max distance m", "RMS distance m", "max displacement m"}};
   for (const ExperimentSetup& setup : setups)
@@ -636,6 +641,15 @@ void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>&
     snapshots.insert(snapshots.end(), result.snapshots.begin(), result.snapshots.end());
     messages.insert(messages.end(), result.messages.begin(), result.messages.end());
     printAccuracyHeader(o, setup, result);
+    if (result.cubature)
+    {
+      const CubatureRow& c = *result.cubature;
+      cubatures.push_back(c);
+      std::cout << "cubature (" << setup.variant << "): " << c.springs << " of " << c.grid_springs
+                << " springs, training error " << fmt(100.0 * c.training_error) << "% on " << c.training_poses
+                << " poses (cubature_tolerance " << fmt(100.0 * c.tolerance) << "%), held-out "
+                << fmt(100.0 * c.heldout_error) << "%, trained in " << fmt(c.training_seconds) << " s\n";
+    }
     for (const ErrorSample& e : result.errors)
     {
       if (e.step % o.accuracy.interval != 0 && e.step != o.accuracy.steps)
@@ -650,6 +664,11 @@ void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>&
   }
   std::ofstream out = openCsv(o, "accuracy_" + o.tag + "_error.csv");
   writeErrorCsv(out, errors);
+  if (!cubatures.empty())
+  {
+    std::ofstream cubature_out = openCsv(o, "accuracy_" + o.tag + "_cubature.csv");
+    writeCubatureCsv(cubature_out, cubatures);
+  }
   if (o.accuracy.snapshots)
   {
     std::ofstream snap = openCsv(o, "accuracy_" + o.tag + "_snapshots.csv");
