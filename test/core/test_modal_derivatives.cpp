@@ -226,6 +226,33 @@ TEST(ModalDerivatives, SwingOfAHangingSheetIsFollowedBetterThanWithAsManyLinearM
   EXPECT_LT(enriched_error, 0.5 * linear_modes_error);
 }
 
+TEST(ModalDerivatives, CubatureIsTrainedOnTheEnrichedBasis)
+{
+  // `cubature` uses the basis of `physical`: with derivative directions its force stands in for the
+  // enriched physical force, and it follows the enriched physical method through a swing.
+  GridParams g = sheet(3, 8, 3, true);
+  g.structural_stiffness = 50.0;
+  SimulationParams s = withDerivatives(Method::Physical, 3, 3, Linearization::Equilibrium);
+  s.time_step = 1e-3;
+  s.cubature_tolerance = 0.01;
+  Simulation physical(g, s);
+  s.method = Method::Cubature;
+  Simulation cubature(g, s);
+  ASSERT_NE(cubature.cubature(), nullptr);
+  EXPECT_EQ(cubature.physicalBasis().phi.cols(), 6);
+  EXPECT_LT(cubature.cubature()->heldout_error, 2.0 * s.cubature_tolerance);
+  double gap = 0.0, moved = 0.0;
+  for (int k = 0; k < 150; ++k)
+  {
+    ASSERT_FALSE(physical.step(10).diverged);
+    ASSERT_FALSE(cubature.step(10).diverged);
+    gap = std::max(gap, rmsDistance(physical.grid(), cubature.positions(), physical.positions()));
+    moved = std::max(moved, rmsDistance(physical.grid(), physical.positions(), physical.startPositions()));
+  }
+  EXPECT_GT(moved, 0.01);
+  EXPECT_LT(gap, 0.1 * moved);
+}
+
 TEST(ModalDerivatives, SwitchingBetweenTheTwoBasesKeepsEveryParticle)
 {
   // `linear` runs in the eigenbasis, `physical` in the enriched one: a switch projects through the
