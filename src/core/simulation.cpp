@@ -171,7 +171,12 @@ double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
   const double d = p.basis == BasisKind::ModalDerivatives ? p.num_derivative_modes : 0.0;
   bytes += 8.0 * n * 3.0 * (r + d);
   if (p.basis == BasisKind::ModalDerivatives)
-    bytes += 8.0 * n * 3.0 * r * (r + 1.0) / 2.0;
+  {
+    // Derivatives, right-hand sides and weighted copies (n x pairs), and the mass-PCA's Gram matrix
+    // with its eigenvectors (pairs x pairs, twice).
+    const double pairs = r * (r + 1.0) / 2.0;
+    bytes += 8.0 * n * 3.0 * pairs + 8.0 * 2.0 * pairs * pairs;
+  }
   if (r + 1.0 >= n)
     bytes += 3.0 * 8.0 * n * n;
   // The cubature training: the selected springs' columns (with a copy while they grow), their Gram
