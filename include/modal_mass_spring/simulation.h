@@ -193,6 +193,7 @@ private:
   Eigen::VectorXd x_ref_;    // linearization point: u measures displacement from here
   Eigen::VectorXd x_start_;  // where reset() puts the grid
   Eigen::VectorXd u_start_;  // the same as a free-dof displacement from x_ref_
+  Eigen::VectorXd anchor_;   // the run's start as its method held it: divergence is measured from here
   ModalBasis basis_;            // the eigenbasis (`linear`)
   ModalBasis physical_basis_;   // the basis of the modal methods other than `linear`
   DerivativeBasisInfo derivative_info_;

@@ -292,7 +292,7 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
   params_.method = method;
   model_->setExternalForce(grid_.gatherFree(external_force_));
   projection_error_ = model_->assign(u, v, remainder);
-  model_->setAnchor(u_start_);
+  model_->setAnchor(anchor_);
   diverged_ = false;
   divergence_message_.clear();
 }
@@ -308,7 +308,12 @@ void Simulation::setMethod(Method method)
 
 void Simulation::setPhysicalState(const Eigen::VectorXd& u, const Eigen::VectorXd& v)
 {
+  anchor_ = u;
   install(params_.method, u, v, Remainder::Drop);
+  // Distances are measured from the start as this method holds it: a modal method's projection of a
+  // start far outside its modes has not diverged by being where the projection put it.
+  anchor_ = displacement();
+  model_->setAnchor(anchor_);
   start_energy_ = methodEnergy();
   energy_scale_ = base_energy_scale_ + kineticEnergy() + springEnergy(grid_, positions());
 }
@@ -394,6 +399,9 @@ StepResult Simulation::step(int steps)
       msg << "method '" << toString(method()) << "' diverged at step " << step_count_ + 1 << " with time_step "
           << params_.time_step << " s (" << why << "); the last good state is kept; a smaller time_step"
           << (params_.integrator == IntegratorKind::Explicit ? ", the implicit integrator" : "")
+          << (params_.integrator == IntegratorKind::Implicit && params_.hht_alpha == 0.0
+                  ? ", hht_alpha below 0 (it damps the highest frequencies that gain energy at large steps)"
+                  : "")
           << " or more damping may help";
       divergence_message_ = result.message = msg.str();
       return result;

@@ -96,11 +96,14 @@ NodeParams loadNodeParams(const ParameterSource& s, const GridParams& grid, cons
   const double steps_per_tick = p.real_time_factor / (p.publish_rate * sim.time_step);
   if (steps_per_tick > kMaxStepsPerTick)
   {
-    std::ostringstream allowed;
-    allowed << "real_time_factor / (publish_rate * time_step) = " << steps_per_tick
+    // All three decide it: name them all, with their values.
+    std::ostringstream value, allowed;
+    value << "real_time_factor " << p.real_time_factor << ", publish_rate " << p.publish_rate << " Hz, time_step "
+          << sim.time_step << " s";
+    allowed << "give real_time_factor / (publish_rate * time_step) = " << steps_per_tick
             << " steps per tick; must be at most " << kMaxStepsPerTick
             << " (lower real_time_factor, raise publish_rate or time_step)";
-    rejectParameter("real_time_factor", p.real_time_factor, allowed.str());
+    rejectParameter("real_time_factor, publish_rate, time_step", value.str(), allowed.str());
   }
 
   p.fixed_frame = frameId(s, "fixed_frame", p.fixed_frame);

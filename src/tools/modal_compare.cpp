@@ -255,7 +255,7 @@ void addVary(Options& o, const std::string& text)
 
 using Setter = std::function<void(Options&, const std::string&)>;
 
-// Every option that takes a value; each may be given once, but --set and --vary.
+// Every option that takes a value; each may be given once, except --set and --vary.
 const std::map<std::string, Setter>& valueOptions()
 {
   static const std::map<std::string, Setter> options{
@@ -339,7 +339,7 @@ Options parseArguments(int argc, char** argv)
       std::exit(0);
     }
     if (arg != "--set" && arg != "--vary" && !given.insert(arg).second)
-      rejectParameter(arg, "(given twice)", "each option may be given once, but --set and --vary");
+      rejectParameter(arg, "(given twice)", "each option may be given once (only --set and --vary may repeat)");
     if (arg == "--quiet")
       o.quiet = true;
     else if (arg == "--no-snapshots")
@@ -388,6 +388,9 @@ void warnAboutUnknownKeys(const YamlParameterSource& source)
 std::vector<ExperimentSetup> buildSetups(const Options& o)
 {
   YamlParameterSource base = YamlParameterSource::fromFile(o.config);
+  if (base.keys().empty())
+    std::cerr << "modal_compare: warning: config '" << base.origin()
+              << "' sets no parameter: every parameter takes its default (the paper's 5 x 5 2D grid)\n";
   for (const auto& [key, text] : o.sets)
     base.set(key, text);
 

@@ -3,6 +3,7 @@
 
 #include "modal_mass_spring/validation.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -118,6 +119,21 @@ YAML::Node YamlParameterSource::lookup(const std::string& key) const
   return root[key];
 }
 
+namespace
+{
+
+// ", got 'abc'": the value as written, cut short, so that a message shows what was wrong.
+std::string got(const YAML::Node& node)
+{
+  std::string text = YAML::Dump(node);
+  std::replace(text.begin(), text.end(), '\n', ' ');
+  if (text.size() > 60)
+    text = text.substr(0, 57) + "...";
+  return ", got '" + text + "'";
+}
+
+}  // namespace
+
 template <typename T>
 std::optional<T> YamlParameterSource::scalar(const std::string& key, const std::string& expected) const
 {
@@ -125,14 +141,14 @@ std::optional<T> YamlParameterSource::scalar(const std::string& key, const std::
   if (!node.IsDefined())
     return std::nullopt;
   if (!node.IsScalar())
-    throw std::invalid_argument(wrongType(key, expected));
+    throw std::invalid_argument(wrongType(key, expected) + got(node));
   try
   {
     return node.as<T>();
   }
   catch (const YAML::Exception&)
   {
-    throw std::invalid_argument(wrongType(key, expected));
+    throw std::invalid_argument(wrongType(key, expected) + got(node));
   }
 }
 
@@ -143,19 +159,19 @@ std::optional<std::vector<T>> YamlParameterSource::list(const std::string& key, 
   if (!node.IsDefined())
     return std::nullopt;
   if (!node.IsSequence())
-    throw std::invalid_argument(wrongType(key, expected));
+    throw std::invalid_argument(wrongType(key, expected) + got(node));
   std::vector<T> values;
   for (const YAML::Node& item : node)
   {
     if (!item.IsScalar())
-      throw std::invalid_argument(wrongType(key, expected));
+      throw std::invalid_argument(wrongType(key, expected) + got(node));
     try
     {
       values.push_back(item.as<T>());
     }
     catch (const YAML::Exception&)
     {
-      throw std::invalid_argument(wrongType(key, expected));
+      throw std::invalid_argument(wrongType(key, expected) + got(node));
     }
   }
   return values;

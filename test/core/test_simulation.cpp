@@ -54,7 +54,8 @@ TEST(Simulation, SingleDampedModeUnderLinearFollowsClosedForm)
   double worst = 0.0;
   for (int k = 1; k <= 3000; ++k)
   {
-    ASSERT_FALSE(sim.step().diverged);
+    const StepResult result = sim.step();
+    ASSERT_FALSE(result.diverged) << result.message;
     const double t = sim.time();
     const double expected =
         amplitude * std::exp(-0.5 * c * t) * (std::cos(omega_d * t) + 0.5 * c / omega_d * std::sin(omega_d * t));

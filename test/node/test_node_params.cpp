@@ -139,8 +139,11 @@ TEST(NodeParams, EveryNodeParameterHasARangeCheck)
       {{{"real_time_factor", -1.0}}, "invalid parameter 'real_time_factor' = -1"},
       {{{"real_time_factor", 1000.5}}, "invalid parameter 'real_time_factor' = 1000.5"},
       {{{"real_time_factor", kNaN}}, "invalid parameter 'real_time_factor' = nan"},
-      {{{"real_time_factor", 500.0}, {"publish_rate", 1.0}}, "invalid parameter 'real_time_factor' = 500: "
-                                                             "real_time_factor / (publish_rate * time_step) = 500000"},
+      {{{"real_time_factor", 500.0}, {"publish_rate", 1.0}},
+       "invalid parameter 'real_time_factor, publish_rate, time_step' = real_time_factor 500, publish_rate 1 Hz, "
+       "time_step 0.001 s: give real_time_factor / (publish_rate * time_step) = 500000"},
+      {{{"time_step", 1e-300}}, "invalid parameter 'real_time_factor, publish_rate, time_step' = real_time_factor 1, "
+                                "publish_rate 30 Hz, time_step 1e-300 s"},
       {{{"publish_rate", 0.0}}, "invalid parameter 'publish_rate' = 0: must be a number > 0 and <= 1000 Hz"},
       {{{"publish_rate", -5}}, "invalid parameter 'publish_rate' = -5"},
       {{{"publish_rate", 2000.0}}, "invalid parameter 'publish_rate' = 2000"},
