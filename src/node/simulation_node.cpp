@@ -2,6 +2,7 @@
 #include "simulation_node.h"
 
 #include "modal_mass_spring/Status.h"
+#include "grid_messages.h"
 #include "startup_report.h"
 #include "xmlrpc_parameter_source.h"
 
@@ -24,76 +25,6 @@ using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point start)
 {
   return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-std_msgs::ColorRGBA rgba(float r, float g, float b, float a = 1.0f)
-{
-  std_msgs::ColorRGBA c;
-  c.r = r;
-  c.g = g;
-  c.b = b;
-  c.a = a;
-  return c;
-}
-
-geometry_msgs::Point point(const Eigen::Vector3d& p)
-{
-  geometry_msgs::Point msg;
-  msg.x = p.x();
-  msg.y = p.y();
-  msg.z = p.z();
-  return msg;
-}
-
-visualization_msgs::MarkerArray makeMarkers(const Grid& grid, const NodeParams& params, const Eigen::Matrix3Xd& points,
-                                            const ros::Time& stamp)
-{
-  visualization_msgs::MarkerArray array;
-  visualization_msgs::Marker particles;
-  particles.header.frame_id = params.fixed_frame;
-  particles.header.stamp = stamp;
-  particles.ns = "particles";
-  particles.id = 0;
-  particles.type = visualization_msgs::Marker::SPHERE_LIST;
-  particles.action = visualization_msgs::Marker::ADD;
-  particles.pose.orientation.w = 1.0;
-  particles.scale.x = particles.scale.y = particles.scale.z = params.particle_diameter;
-  particles.color = rgba(0.2f, 0.5f, 1.0f);
-  const std_msgs::ColorRGBA free_colour = rgba(0.2f, 0.5f, 1.0f), fixed_colour = rgba(0.9f, 0.2f, 0.15f);
-  for (int k = 0; k < points.cols(); ++k)
-  {
-    particles.points.push_back(point(points.col(k) + params.offset));
-    particles.colors.push_back(grid.isFixed(k) ? fixed_colour : free_colour);
-  }
-
-  visualization_msgs::Marker springs;
-  springs.header = particles.header;
-  springs.ns = "springs";
-  springs.id = 0;
-  springs.type = visualization_msgs::Marker::LINE_LIST;
-  springs.action = visualization_msgs::Marker::ADD;
-  springs.pose.orientation.w = 1.0;
-  springs.scale.x = params.spring_width;
-  springs.color = rgba(0.8f, 0.8f, 0.8f);
-  const std_msgs::ColorRGBA rest = rgba(0.8f, 0.8f, 0.8f), stretched = rgba(1.0f, 0.1f, 0.05f),
-                            compressed = rgba(0.1f, 0.3f, 1.0f);
-  for (const Spring& spring : grid.springs())
-  {
-    springs.points.push_back(point(points.col(spring.i) + params.offset));
-    springs.points.push_back(point(points.col(spring.j) + params.offset));
-    if (!params.color_by_strain)
-      continue;
-    const double strain = ((points.col(spring.j) - points.col(spring.i)).norm() - spring.rest_length) / spring.rest_length;
-    const float t = static_cast<float>(std::min(1.0, std::abs(strain) / params.strain_scale));
-    const std_msgs::ColorRGBA& end = strain > 0.0 ? stretched : compressed;
-    const std_msgs::ColorRGBA c = rgba(rest.r + t * (end.r - rest.r), rest.g + t * (end.g - rest.g),
-                                       rest.b + t * (end.b - rest.b));
-    springs.colors.push_back(c);
-    springs.colors.push_back(c);
-  }
-  array.markers.push_back(particles);
-  array.markers.push_back(springs);
-  return array;
 }
 
 // Polls a StartupProgress from its own thread while the simulation is built.
@@ -124,6 +55,22 @@ private:
   bool done_ = false;
   std::thread thread_;  // last: starts once the rest is there
 };
+
+MarkerOptions markerOptions(const NodeParams& params)
+{
+  MarkerOptions options;
+  options.frame_id = params.fixed_frame;
+  options.offset = params.offset;
+  options.surface = params.show_surface;
+  options.particles = params.show_particles;
+  options.springs = params.show_springs;
+  options.color_by_strain = params.color_by_strain;
+  options.strain_scale = params.strain_scale;
+  options.particle_diameter = params.particle_diameter;
+  options.spring_width = params.spring_width;
+  options.surface_max_cells = params.surface_max_cells;
+  return options;
+}
 
 }  // namespace
 
@@ -293,7 +240,7 @@ void SimulationNode::onTick(const ros::TimerEvent&)
     const double energy = simulation_->totalEnergy();
     if (std::isfinite(energy))
       last_energy_ = energy;
-    markers = makeMarkers(simulation_->grid(), params_, last_points_, stamp);
+    markers = makeMarkers(simulation_->grid(), markerOptions(params_), last_points_, stamp);
     if (send_tf)
     {
       frames.reserve(params_.tf_particles.size());

@@ -83,6 +83,11 @@ CASES = [
     ({"particle_diameter": -1.0}, [], ["particle_diameter"]),
     ({"spring_width": 0.0}, [], ["spring_width"]),
     ({"status_log_period": -1.0}, [], ["status_log_period"]),
+    ({"detail_max_particles": -1}, [], ["detail_max_particles"]),
+    ({"surface_max_cells": 0}, [], ["surface_max_cells"]),
+    ({"show_surface": "yes"}, [], ["show_surface"]),
+    ({"show_particles": 2}, [], ["show_particles"]),
+    ({"show_springs": "off"}, [], ["show_springs"]),
     ({}, ["_diagnostic_period:=-1"], ["diagnostic_period"]),
     ({"diagnostic_period": 0.0}, [], ["diagnostic_period"]),
     # A grid whose equilibrium and basis would take minutes: the node parameter fails at once.

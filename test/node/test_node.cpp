@@ -50,13 +50,21 @@ typename Msg::ConstPtr waitFor(const std::string& topic, const std::function<boo
   return found;
 }
 
-// Particle positions of a marker array (the SPHERE_LIST).
-std::vector<geometry_msgs::Point> particles(const MarkerArray& array)
+// The marker of namespace `ns` in an array, or null.
+const visualization_msgs::Marker* findMarker(const MarkerArray& array, const std::string& ns)
 {
   for (const auto& marker : array.markers)
-    if (marker.ns == "particles")
-      return marker.points;
-  ADD_FAILURE() << "no particles marker";
+    if (marker.ns == ns)
+      return &marker;
+  return nullptr;
+}
+
+// Particle positions of a marker array (the SPHERE_LIST).
+std::vector<geometry_msgs::Point> particles(const MarkerArray& array, const std::string& ns = "particles")
+{
+  if (const auto* marker = findMarker(array, ns))
+    return marker->points;
+  ADD_FAILURE() << "no " << ns << " marker";
   return {};
 }
 
@@ -149,14 +157,21 @@ TEST(Topology, MarkersHaveTheGridsParticlesAndSprings)
     SCOPED_TRACE(name);
     const auto array = NodeUnderTest(name).markers();
     ASSERT_TRUE(array);
-    ASSERT_EQ(array->markers.size(), 2u);
-    const auto& spheres = array->markers[0];
-    const auto& lines = array->markers[1];
-    EXPECT_EQ(spheres.ns, "particles");
+    const std::string prefix = param<std::string>("~marker_prefix", "");
+    ASSERT_TRUE(findMarker(*array, prefix + "particles"));
+    ASSERT_TRUE(findMarker(*array, prefix + "springs"));
+    ASSERT_TRUE(findMarker(*array, prefix + "surface"));
+    const auto& spheres = *findMarker(*array, prefix + "particles");
+    const auto& lines = *findMarker(*array, prefix + "springs");
+    const auto& surface = *findMarker(*array, prefix + "surface");
     EXPECT_EQ(spheres.id, 0);
     EXPECT_EQ(spheres.type, visualization_msgs::Marker::SPHERE_LIST);
-    EXPECT_EQ(lines.ns, "springs");
     EXPECT_EQ(lines.id, 0);
+    EXPECT_EQ(surface.type, visualization_msgs::Marker::TRIANGLE_LIST);
+    EXPECT_EQ(surface.colors.size(), surface.points.size()) << "a strain colour per vertex";
+    // Two triangles per cell, both windings, at every size a shipped config has.
+    const int rows = param(name + "/rows", 0), cols = param(name + "/cols", 0);
+    EXPECT_EQ(static_cast<int>(surface.points.size()), 12 * (rows - 1) * (cols - 1));
     EXPECT_EQ(lines.type, visualization_msgs::Marker::LINE_LIST);
     EXPECT_EQ(spheres.header.frame_id, fixed_frame);
     EXPECT_EQ(lines.header.frame_id, fixed_frame);
@@ -171,7 +186,7 @@ TEST(Topology, MarkersHaveTheGridsParticlesAndSprings)
     {
       EXPECT_EQ(fixed, expected_fixed);
     }
-    for (const auto* marker : {&spheres, &lines})
+    for (const auto* marker : {&spheres, &lines, &surface})
     {
       for (const auto& p : marker->points)
       {
@@ -205,7 +220,7 @@ TEST(Topology, ConfiguredFramesAreBroadcastWhereTheParticlesAre)
     // The transform at a marker's stamp puts the particle frame on the particle drawn.
     const auto array = NodeUnderTest(name).markers();
     ASSERT_TRUE(array);
-    const auto& spheres = array->markers[0];
+    const auto& spheres = *findMarker(*array, param<std::string>("~marker_prefix", "") + "particles");
     for (int particle : tf_particles)
     {
       const std::string frame = grid_frame + "/particle_" + std::to_string(particle);
