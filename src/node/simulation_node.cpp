@@ -137,6 +137,8 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
     private_params = XmlRpc::XmlRpcValue();
   const XmlRpcParameterSource source(private_params);
   config_ = loadNodeConfiguration(source, source.keys());
+  private_params_ = private_params;
+  accepted_ = config_;
   for (const auto& key : config_.unknown_keys)
     ROS_WARN("parameter '%s/%s' is not a parameter of this node and is ignored", private_nh_.getNamespace().c_str(),
              key.c_str());
@@ -178,6 +180,8 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
   service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
   service_spinner_->start();
 
+  startLiveTuning();
+
   last_status_log_ = ros::WallTime::now();
   const double period = 1.0 / params.publish_rate;
   if (use_sim_time_)
@@ -192,9 +196,17 @@ SimulationNode::~SimulationNode()
     service_spinner_->stop();
   timer_.stop();
   wall_timer_.stop();
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+    pending_rebuild_.reset();
+  }
+  if (rebuild_thread_.joinable())
+    rebuild_thread_.join();  // a basis being built is finished and dropped
 }
 
-std::unique_ptr<Simulation> SimulationNode::buildSimulation(const SimulationParams& sim_params, bool report) const
+std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& grid_params,
+                                                            const SimulationParams& sim_params, bool report) const
 {
   const auto start = Clock::now();
   StartupProgress progress([](const std::string& line) { ROS_INFO("%s", line.c_str()); },
@@ -202,7 +214,7 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const SimulationPara
   std::unique_ptr<Simulation> simulation;
   {
     ProgressWatcher watcher(progress);
-    simulation = std::make_unique<Simulation>(config_.grid, sim_params,
+    simulation = std::make_unique<Simulation>(grid_params, sim_params,
                                               [&progress](const std::string& stage) { progress.onStage(stage); });
   }
   if (!report)
@@ -241,7 +253,7 @@ void SimulationNode::buildTracks()
     sim_params.method = methods[k];
     Track track;
     track.name = toString(methods[k]);
-    track.simulation = buildSimulation(sim_params, true);
+    track.simulation = buildSimulation(config_.grid, sim_params, true);
     track.offset = lockstep() ? methodOffset(params, k) : params.offset;
     track.grid_frame = lockstep() ? track.name + "/" + params.grid_frame : params.grid_frame;
     track.ns_prefix = lockstep() ? track.name + "/" : "";
@@ -253,7 +265,7 @@ void SimulationNode::buildTracks()
     sim_params.method = Method::Full;
     Track shadow;
     shadow.name = "shadow_full";
-    shadow.simulation = buildSimulation(sim_params, false);
+    shadow.simulation = buildSimulation(config_.grid, sim_params, false);
     shadow.offset = params.offset;
     shadow.ns_prefix = "shadow_full/";
     tracks_.push_back(std::move(shadow));
@@ -348,6 +360,7 @@ void SimulationNode::onTick()
   double period = 0.0;
   {
     std::unique_lock<std::mutex> lock(mutex_);
+    swapRebuilt();
     const NodeParams& params = config_.node;
     const double dt = config_.simulation.time_step;
     period = 1.0 / params.publish_rate;
@@ -420,7 +433,7 @@ void SimulationNode::onTick()
       std::snprintf(line, sizeof line,
                     "%s: method %s, step %ld, simulated %.3f s, energy %.6g J, %.3f ms of stepping per tick%s",
                     stateName(first).c_str(), lockstep() ? "s in lockstep" : toString(first.simulation->method()).c_str(),
-                    first.simulation->stepCount(), first.simulation->time(), first.last_energy,
+                    steps(first), simTime(first), first.last_energy,
                     1e3 * tick_step_seconds_,
                     lockstep() ? (", real-time factor " + std::to_string(achieved_factor_)).c_str() : "");
       status_line = line;
@@ -513,8 +526,8 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     status.linearization = toString(simulation.params().linearization);
     status.integrator = toString(simulation.params().integrator);
     status.newton_iterations = simulation.lastNewtonIterations();
-    status.step_count = simulation.stepCount();
-    status.sim_time = simulation.time();
+    status.step_count = steps(track);
+    status.sim_time = simTime(track);
     status.tick_steps = track.tick_steps;
     status.tick_step_seconds = lockstep() ? track.tick_seconds : tick_step_seconds_;
     status.total_energy = track.last_energy;
@@ -567,6 +580,8 @@ uint8_t SimulationNode::state(const Track& track) const
 {
   if (track.simulation->diverged())
     return Status::DIVERGED;
+  if (rebuilding())
+    return Status::REBUILDING;
   return paused_ ? Status::PAUSED : Status::RUNNING;
 }
 
@@ -604,8 +619,8 @@ void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& statu
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, paused_ ? "paused" : "stepping");
   status.add("state", stateName(first));
   status.add("method", lockstep() ? "lockstep" : toString(simulation.method()));
-  status.add("step count", simulation.stepCount());
-  status.add("simulated time (s)", simulation.time());
+  status.add("step count", steps(first));
+  status.add("simulated time (s)", simTime(first));
   status.add("steps per tick", params.real_time_factor / (params.publish_rate * config_.simulation.time_step));
   status.add("mean stepping per tick (s)", mean_cost);
   status.add("tick period (s)", period);
@@ -653,7 +668,7 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   ++state_changes_;
   response.success = true;
   response.message = "switched from " + previous + " to " + request.method + " at step " +
-                     std::to_string(simulation.stepCount()) + (was_diverged ? ", recovering from the divergence" : "");
+                     std::to_string(steps(primary())) + (was_diverged ? ", recovering from the divergence" : "");
   ROS_INFO("%s", response.message.c_str());
   return true;
 }
@@ -664,6 +679,7 @@ bool SimulationNode::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Respo
   for (Track& track : tracks_)
   {
     track.simulation->reset();
+    track.step_offset = 0;
     track.divergence_message.clear();
   }
   synchronise();
@@ -684,8 +700,7 @@ bool SimulationNode::pause(std_srvs::SetBool::Request& request, std_srvs::SetBoo
     ++state_changes_;
   paused_ = request.data;
   response.success = true;
-  response.message = std::string(paused_ ? "paused" : "running") + " at step " +
-                     std::to_string(primary().simulation->stepCount());
+  response.message = std::string(paused_ ? "paused" : "running") + " at step " + std::to_string(steps(primary()));
   ROS_INFO("%s", response.message.c_str());
   return true;
 }
@@ -696,8 +711,8 @@ bool SimulationNode::step(Step::Request& request, Step::Response& response)
   {
     ServiceLock lock(*this);
     Simulation& simulation = *primary().simulation;
-    response.step_count = simulation.stepCount();
-    response.sim_time = simulation.time();
+    response.step_count = steps(primary());
+    response.sim_time = simTime(primary());
     response.success = false;
     if (!paused_)
     {
@@ -724,23 +739,23 @@ bool SimulationNode::step(Step::Request& request, Step::Response& response)
     uint32_t taken = 0;
     while (taken < request.steps && stepAll())
       ++taken;
-    int steps = 0;
+    int stepped = 0;
     for (Track& track : tracks_)
     {
-      steps = std::max(steps, track.tick_steps);
+      stepped = std::max(stepped, track.tick_steps);
       if (track.tick_steps > 0)
         track.step_seconds = track.tick_seconds / track.tick_steps;
     }
-    clock_seconds_ += steps * config_.simulation.time_step;
+    clock_seconds_ += stepped * config_.simulation.time_step;
     ++state_changes_;
     output = snapshot(stamp());
-    response.step_count = simulation.stepCount();
-    response.sim_time = simulation.time();
+    response.step_count = steps(primary());
+    response.sim_time = simTime(primary());
     response.success = !simulation.diverged();
     response.message = simulation.diverged()
-                           ? "diverged after " + std::to_string(steps) + " steps: " + primary().divergence_message
-                           : "advanced " + std::to_string(steps) + " steps to step " +
-                                 std::to_string(simulation.stepCount());
+                           ? "diverged after " + std::to_string(stepped) + " steps: " + primary().divergence_message
+                           : "advanced " + std::to_string(stepped) + " steps to step " +
+                                 std::to_string(response.step_count);
   }
   send(output);
   return true;

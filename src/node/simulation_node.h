@@ -3,11 +3,14 @@
 #pragma once
 
 #include "modal_mass_spring/SetMethod.h"
+#include "modal_mass_spring/SimulationConfig.h"
 #include "modal_mass_spring/Step.h"
 #include "modal_mass_spring/simulation.h"
 #include "node_params.h"
 
+#include <boost/thread/recursive_mutex.hpp>
 #include <diagnostic_updater/diagnostic_updater.h>
+#include <dynamic_reconfigure/server.h>
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
@@ -19,6 +22,7 @@
 #include <atomic>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -55,12 +59,14 @@ private:
     int tick_steps = 0;
     double step_seconds = 0.0;      // the last tick's mean step
     double rms_distance = 0.0, max_distance = 0.0;  // to the reference, m
+    long step_offset = 0;  // steps of the models a rebuild replaced: the count goes on across a swap
   };
 
   // What one tick publishes, built under the lock and sent after it.
   struct Output;
 
-  std::unique_ptr<Simulation> buildSimulation(const SimulationParams& params, bool report) const;
+  std::unique_ptr<Simulation> buildSimulation(const GridParams& grid, const SimulationParams& params,
+                                              bool report) const;
   void buildTracks();
   // Puts every full track at the state of the first reduced one (the same state, the same time), so
   // that the distances measure the methods, not their start.
@@ -79,6 +85,19 @@ private:
   Track& primary() { return tracks_.front(); }
   const Track* reference() const;  // the full track the others are measured against, or null
   bool lockstep() const { return !config_.node.methods.empty(); }
+  long steps(const Track& track) const { return track.step_offset + track.simulation->stepCount(); }
+  double simTime(const Track& track) const { return steps(track) * config_.simulation.time_step; }
+
+  // Live tuning with dynamic_reconfigure (live_tuning.cpp). A change is checked as the start-up
+  // parameters are (loadNodeConfiguration) and refused whole, or applied: node parameters at the next
+  // tick, the ones that need a new basis by a rebuild in the background, swapped in at a tick boundary
+  // with the motion carried over.
+  void startLiveTuning();
+  void reconfigure(SimulationConfig& config, uint32_t level);
+  SimulationConfig tuningOf(const NodeConfiguration& configuration) const;
+  void rebuildLoop();
+  void swapRebuilt();  // with mutex_ held, at a tick boundary
+  bool rebuilding() const { return rebuilding_ || !rebuilt_.empty(); }
 
   bool setMethod(SetMethod::Request& request, SetMethod::Response& response);
   bool reset(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
@@ -116,6 +135,18 @@ private:
   ros::CallbackQueue service_queue_;
   std::unique_ptr<ros::AsyncSpinner> service_spinner_;
   ros::ServiceServer set_method_srv_, reset_srv_, pause_srv_, step_srv_;
+  // Live tuning: the private parameters as last accepted, the configuration they give, the rebuild.
+  XmlRpc::XmlRpcValue private_params_;
+  NodeConfiguration accepted_;
+  boost::recursive_mutex tuning_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<SimulationConfig>> tuning_server_;
+  std::optional<NodeConfiguration> pending_rebuild_;        // the latest change waiting to be built
+  std::vector<std::unique_ptr<Simulation>> rebuilt_;        // built, one per track, waiting for a tick
+  NodeConfiguration rebuilt_config_;
+  bool rebuilding_ = false;
+  bool stopping_ = false;
+  std::thread rebuild_thread_;
+
   ros::Timer timer_;
   ros::WallTimer wall_timer_;  // under use_sim_time: the node makes the clock, so it cannot wait on it
 };
