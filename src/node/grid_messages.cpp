@@ -113,8 +113,8 @@ visualization_msgs::MarkerArray makeMarkers(const Grid& grid, const MarkerOption
   using visualization_msgs::Marker;
   visualization_msgs::MarkerArray array;
   const bool strain_colours = options.color_by_strain && !options.ghost;
-  const float alpha = options.ghost ? 0.25f : 1.0f;
-  const std_msgs::ColorRGBA ghost_colour = rgba(0.6f, 0.6f, 0.6f, alpha);
+  const float alpha = options.ghost ? 0.4f : 1.0f;
+  const std_msgs::ColorRGBA ghost_colour = rgba(0.4f, 0.9f, 1.0f, alpha);
   auto at = [&](int k) { return point(points.col(k) + options.offset); };
 
   if (options.particles)
@@ -194,10 +194,12 @@ visualization_msgs::MarkerArray makeMarkers(const Grid& grid, const MarkerOption
   if (!options.label.empty())
   {
     Marker label = baseMarker(options, "label", Marker::TEXT_VIEW_FACING, stamp);
-    // Centred above the top row, clear of the grid and of the frame names drawn at its corner.
+    // Readable beside the grid at the distance that shows it whole; centred above the top row, clear
+    // of the grid (a sheet tilted towards the viewer would hide its lower lines) and of the frame names.
+    label.scale.z = 0.02 + 0.05 * (std::max(g.rows, g.cols) - 1) * g.spacing;
     const Eigen::Vector3d top = 0.5 * (points.col(0) + points.col(g.cols - 1)) + options.offset;
-    label.pose.position = point(top + Eigen::Vector3d(0.0, 0.0, 2.0 * g.spacing));
-    label.scale.z = std::max(0.6 * g.spacing, 0.04);
+    const double lines = 1.0 + std::count(options.label.begin(), options.label.end(), '\n');
+    label.pose.position = point(top + Eigen::Vector3d(0.0, 0.0, 0.6 * lines * label.scale.z + g.spacing));
     label.color = rgba(1.0f, 1.0f, 1.0f);
     label.text = options.label;
     array.markers.push_back(std::move(label));

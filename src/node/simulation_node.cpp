@@ -500,9 +500,17 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     options.offset = track.offset;
     options.ns_prefix = track.ns_prefix;
     if (params.show_labels)
+    {
       options.label = toString(simulation.method()) +
                       (measured ? "\nRMS " + formatDistance(track.rms_distance) + " to full" : "") + "\n" +
                       formatCost(track.step_seconds);
+      if (lockstep())
+      {
+        char pace[64];
+        std::snprintf(pace, sizeof pace, "\n%.2f x real time", achieved_factor_);
+        options.label += pace;
+      }
+    }
     grid.markers = makeMarkers(simulation.grid(), options, track.last_points, stamp);
     if (measured && ref->name == "shadow_full")
     {
@@ -510,8 +518,8 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
       MarkerOptions ghost = options;
       ghost.ns_prefix = ref->ns_prefix;
       ghost.ghost = true;
-      ghost.surface = params.show_shadow;
-      ghost.particles = ghost.springs = false;
+      ghost.surface = ghost.particles = params.show_shadow;
+      ghost.springs = false;
       ghost.label.clear();
       const auto shadow = makeMarkers(simulation.grid(), ghost, ref->last_points, stamp);
       grid.markers.markers.insert(grid.markers.markers.end(), shadow.markers.begin(), shadow.markers.end());
