@@ -144,7 +144,7 @@ TEST(GridMessages, ParticlesAndSpringsAreDrawnWhereThePointsAre)
 }
 
 // A 100 x 100 sheet with the node's defaults: particles and springs off above detail_max_particles,
-// the surface thinned to surface_max_cells. Without that, springs alone would be 1.6 MB a message.
+// the surface thinned to surface_max_cells. Without that, the springs alone would be 3.2 MB a message.
 TEST(GridMessages, HundredByHundredSheetMarkersStayUnderOneMegabyte)
 {
   const Grid grid(sheet(100, 100));
