@@ -152,7 +152,7 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
 
   for (Track& track : tracks_)
   {
-    if (track.name == "shadow_full")
+    if (track.shadow)
       continue;  // drawn with the method it shadows
     // A comparison publishes each method below its name: ~linear/markers, ~full/status, ...
     ros::NodeHandle track_nh = lockstep() ? ros::NodeHandle(private_nh_, track.name) : private_nh_;
@@ -265,6 +265,7 @@ void SimulationNode::buildTracks()
     sim_params.method = Method::Full;
     Track shadow;
     shadow.name = "shadow_full";
+    shadow.shadow = true;
     shadow.simulation = buildSimulation(config_.grid, sim_params, false);
     shadow.offset = params.offset;
     shadow.ns_prefix = "shadow_full/";
@@ -302,7 +303,7 @@ void SimulationNode::synchronise()
 const SimulationNode::Track* SimulationNode::reference() const
 {
   for (const Track& track : tracks_)
-    if (track.name == "shadow_full" || (lockstep() && track.simulation->method() == Method::Full))
+    if (track.shadow || (lockstep() && track.simulation->method() == Method::Full))
       return &track;
   return nullptr;
 }
@@ -487,7 +488,7 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     last_tf_stamp_ = stamp;
   for (const Track& track : tracks_)
   {
-    if (track.name == "shadow_full")
+    if (track.shadow)
       continue;
     const Simulation& simulation = *track.simulation;
     const bool measured = ref && &track != ref;
@@ -512,7 +513,7 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
       }
     }
     grid.markers = makeMarkers(simulation.grid(), options, track.last_points, stamp);
-    if (measured && ref->name == "shadow_full")
+    if (measured && ref->shadow)
     {
       // The reference drawn faintly where the method is: the gap between them is the error.
       MarkerOptions ghost = options;

@@ -46,7 +46,8 @@ private:
   // One simulated grid: a method of the comparison, the single method, or the shadow full.
   struct Track
   {
-    std::string name;  // the method's name; "shadow_full" for the shadow
+    std::string name;    // the method's name; "shadow_full" for the shadow
+    bool shadow = false; // the unreduced reference beside a single method: no topics of its own
     std::unique_ptr<Simulation> simulation;
     Eigen::Vector3d offset = Eigen::Vector3d::Zero();
     std::string grid_frame;

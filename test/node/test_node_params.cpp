@@ -127,6 +127,22 @@ TEST(NodeParams, ParticlesAndSpringsAreOffByDefaultAboveTheDetailSize)
   EXPECT_FALSE(c.show_particles);
 }
 
+// A comparison is centred on offset, method_spacing apart along x, in the order listed.
+TEST(NodeParams, ComparedMethodsAreDrawnSideBySide)
+{
+  const FakeSource source({{"methods", std::vector<std::string>{"linear", "full", "physical"}},
+                           {"offset", std::vector<double>{0.0, 1.0, 2.0}}});
+  const NodeParams p = loadNodeConfiguration(source, source.keys()).node;
+  ASSERT_EQ(p.methods, (std::vector<Method>{Method::Linear, Method::Full, Method::Physical}));
+  EXPECT_DOUBLE_EQ(p.method_spacing, 0.7) << "paper grid: its width 0.4 m plus three spacings";
+  EXPECT_TRUE(methodOffset(p, 0).isApprox(Eigen::Vector3d(-0.7, 1.0, 2.0)));
+  EXPECT_TRUE(methodOffset(p, 1).isApprox(Eigen::Vector3d(0.0, 1.0, 2.0)));
+  EXPECT_TRUE(methodOffset(p, 2).isApprox(Eigen::Vector3d(0.7, 1.0, 2.0)));
+  // Every method the core names can be compared.
+  const FakeSource all({{"methods", methodNames()}});
+  EXPECT_EQ(loadNodeConfiguration(all, all.keys()).node.methods.size(), methodNames().size());
+}
+
 TEST(NodeParams, ValuesAtTheEndsOfTheirRangesLoad)
 {
   const FakeSource source({{"publish_rate", 1000.0},
