@@ -149,9 +149,27 @@ void SimulationNode::rebuildLoop()
     catch (const std::exception& error)
     {
       ROS_ERROR("dynamic_reconfigure: the rebuild failed: %s; the old model runs on", error.what());
-      std::lock_guard<std::mutex> lock(mutex_);
-      accepted_.grid = config_.grid;
-      accepted_.simulation = config_.simulation;
+      SimulationConfig running;
+      {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (pending_rebuild_)
+          continue;  // a later change is waiting: it is what the values say now
+        // Back to the model that runs (or the one already built and waiting), so that the values
+        // reported and the next change start from it.
+        const NodeConfiguration& in_force = rebuilt_.empty() ? config_ : rebuilt_config_;
+        accepted_.grid = in_force.grid;
+        accepted_.simulation = in_force.simulation;
+        private_params_["alpha"] = accepted_.simulation.alpha;
+        private_params_["beta"] = accepted_.simulation.beta;
+        private_params_["structural_stiffness"] = accepted_.grid.structural_stiffness;
+        private_params_["shear_stiffness"] = accepted_.grid.shear_stiffness;
+        private_params_["bending_stiffness"] = accepted_.grid.bending_stiffness;
+        private_params_["mass"] = accepted_.grid.mass;
+        private_params_["num_modes"] = accepted_.simulation.num_modes;
+        private_params_["linearization"] = toString(accepted_.simulation.linearization);
+        running = tuningOf(accepted_);
+      }
+      tuning_server_->updateConfig(running);  // outside mutex_: the server's callback takes it
       continue;
     }
     std::lock_guard<std::mutex> lock(mutex_);
