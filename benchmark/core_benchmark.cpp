@@ -1,10 +1,13 @@
-// Google Benchmark of the core: basis construction, one step of each method, position
+// Google Benchmark of the core: basis construction (with and without modal derivatives), one step of each method, position
 // reconstruction and one evaluation of all spring forces.
+#include "modal_mass_spring/equilibrium.h"
+#include "modal_mass_spring/modal_derivatives.h"
 #include "modal_mass_spring/simulation.h"
 #include "modal_mass_spring/spring_forces.h"
 
 #include <benchmark/benchmark.h>
 
+#include <map>
 #include <memory>
 
 using namespace modal_mass_spring;
@@ -53,6 +56,58 @@ void BM_Basis2D(benchmark::State& state)
 }
 BENCHMARK(BM_Basis2D)->ArgsProduct({kSizes, {4, 30}})->Unit(benchmark::kMillisecond);
 
+// A 3D sheet hanging at its equilibrium under gravity, with K there: solved once per size (the
+// equilibrium is not what these benchmarks time).
+struct HangingSheet
+{
+  explicit HangingSheet(int size)
+    : grid(square(size, 3)), x_eq(solveEquilibrium(grid, grid.initialPositions()).positions),
+      stiffness(tangentStiffness(grid, x_eq, CompressedSprings::Drop)),
+      mass(Eigen::VectorXd::Constant(grid.numFreeDofs(), grid.particleMass()))
+  {
+  }
+  Grid grid;
+  Eigen::VectorXd x_eq;
+  SparseMatrix stiffness;
+  Eigen::VectorXd mass;
+};
+
+const HangingSheet& hangingSheet(int size)
+{
+  static std::map<int, std::unique_ptr<HangingSheet>> sheets;
+  auto& sheet = sheets[size];
+  if (!sheet)
+    sheet = std::make_unique<HangingSheet>(size);
+  return *sheet;
+}
+
+const std::vector<int64_t> kDerivativeSizes{20, 50, 100};
+
+// The r lowest modes of a hanging 3D sheet, and the same plus r directions from their modal
+// derivatives (r (r + 1) / 2 solves with one factorisation of K, and the mass-PCA): the difference is
+// what the derivatives add to a start-up.
+void BM_BasisHanging3D(benchmark::State& state)
+{
+  const HangingSheet& sheet = hangingSheet(static_cast<int>(state.range(0)));
+  for (auto _ : state)
+    benchmark::DoNotOptimize(computeModalBasis(sheet.stiffness, sheet.mass, static_cast<int>(state.range(1))));
+  state.counters["free_dofs"] = sheet.grid.numFreeDofs();
+}
+BENCHMARK(BM_BasisHanging3D)->ArgsProduct({kDerivativeSizes, {10, 20}})->Unit(benchmark::kMillisecond);
+
+void BM_BasisWithDerivativesHanging3D(benchmark::State& state)
+{
+  const HangingSheet& sheet = hangingSheet(static_cast<int>(state.range(0)));
+  const int r = static_cast<int>(state.range(1));
+  for (auto _ : state)
+  {
+    const ModalBasis modes = computeModalBasis(sheet.stiffness, sheet.mass, r);
+    benchmark::DoNotOptimize(buildDerivativeBasis(sheet.grid, sheet.x_eq, sheet.stiffness, sheet.mass, modes, r));
+  }
+  state.counters["free_dofs"] = sheet.grid.numFreeDofs();
+}
+BENCHMARK(BM_BasisWithDerivativesHanging3D)->ArgsProduct({kDerivativeSizes, {10, 20}})->Unit(benchmark::kMillisecond);
+
 void stepBenchmark(benchmark::State& state, Method method)
 {
   const auto sim = disturbedSheet(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)), method);
@@ -67,6 +122,12 @@ void BM_StepPhysical(benchmark::State& state) { stepBenchmark(state, Method::Phy
 BENCHMARK(BM_StepFull)->ArgsProduct({kSizes, {30}})->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_StepLinear)->ArgsProduct({kSizes, {4, 30}})->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_StepPhysical)->ArgsProduct({kSizes, {4, 30}})->Unit(benchmark::kMicrosecond);
+
+// Cubature beside physical on the larger sheets: its step should not grow with the grid.
+const std::vector<int64_t> kCubatureSizes{20, 50, 100, 200};
+void BM_StepCubature(benchmark::State& state) { stepBenchmark(state, Method::Cubature); }
+BENCHMARK(BM_StepPhysical)->Args({200, 30})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_StepCubature)->ArgsProduct({kCubatureSizes, {4, 30}})->Unit(benchmark::kMicrosecond);
 
 // Implicit Newmark: Newton iterations with the sparse (full) or r x r (physical) tangent.
 void implicitBenchmark(benchmark::State& state, Method method)
@@ -84,7 +145,24 @@ void BM_ImplicitLinear(benchmark::State& state) { implicitBenchmark(state, Metho
 void BM_ImplicitPhysical(benchmark::State& state) { implicitBenchmark(state, Method::Physical); }
 BENCHMARK(BM_ImplicitFull)->ArgsProduct({{5, 20, 50}, {30}})->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_ImplicitLinear)->ArgsProduct({{5, 20, 100}, {30}})->Unit(benchmark::kMicrosecond);
-BENCHMARK(BM_ImplicitPhysical)->ArgsProduct({{5, 20, 50, 100}, {30}})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_ImplicitPhysical)->ArgsProduct({{5, 20, 50, 100, 200}, {30}})->Unit(benchmark::kMicrosecond);
+void BM_ImplicitCubature(benchmark::State& state) { implicitBenchmark(state, Method::Cubature); }
+BENCHMARK(BM_ImplicitCubature)->ArgsProduct({kCubatureSizes, {30}})->Unit(benchmark::kMicrosecond);
+
+// The cubature's training alone, on the basis of a sheet (built once, outside the timing), with the
+// size of T and the errors it reached as counters.
+void BM_TrainCubature(benchmark::State& state)
+{
+  const auto sim = disturbedSheet(static_cast<int>(state.range(0)), static_cast<int>(state.range(1)), Method::Linear);
+  const CubatureParams params = cubatureParams(sim->params());
+  Cubature cubature;
+  for (auto _ : state)
+    cubature = trainCubature(sim->grid(), sim->basis(), sim->linearizationPositions(), params);
+  state.counters["springs"] = static_cast<double>(cubature.springs.size());
+  state.counters["training_error"] = cubature.training_error;
+  state.counters["heldout_error"] = cubature.heldout_error;
+}
+BENCHMARK(BM_TrainCubature)->ArgsProduct({{20, 50, 100}, {30}})->Unit(benchmark::kMillisecond)->Iterations(1);
 
 // x = x0 + Phi X for every particle: what a modal method pays only when positions are wanted.
 void BM_Reconstruct(benchmark::State& state)

@@ -23,9 +23,45 @@ data="$REPO_DIR/docs/data"
 configs="$REPO_DIR/config/compare"
 mkdir -p "$data"
 only="${COMPARE_ONLY:-}"
-if [ -n "$only" ] && [ "$only" != stability ]; then
-  echo "compare.sh: COMPARE_ONLY must be empty or 'stability', not '$only'" >&2
+if [ -n "$only" ] && [ "$only" != stability ] && [ "$only" != derivatives ]; then
+  echo "compare.sh: COMPARE_ONLY must be empty, 'stability' or 'derivatives', not '$only'" >&2
   exit 2
+fi
+# Modal derivatives against linear modes (docs/results.md, "Modal derivatives"): physical with R linear
+# modes plus D derivative directions against linear and physical with R + D linear modes, each against
+# full, on the paper's 3D sheet at its equilibrium and on a 50 x 50 cloth; and the largest explicit
+# step of each. Writes docs/data/derivatives/ and docs/derivatives_*.png.
+derivatives() {
+  local out="$data/derivatives" config setup r d steps name
+  mkdir -p "$out"
+  rm -f "$out"/*.csv
+  # config, linear modes R, derivative directions D, steps (5 s each)
+  for setup in "paper_3d 10 20 5000" "cloth_50 10 10 10000" "cloth_50 5 15 10000"; do
+    read -r config r d steps <<<"$setup"
+    name="${config}_r${r}_d${d}"
+    local common=(--config "$configs/$config.yaml" --set linearization=equilibrium --steps "$steps" --interval "$steps"
+      --sample 20 --no-snapshots --output "$out")
+    "$tool" "${common[@]}" --tag "derivatives_${name}_linear_modes" --experiment accuracy \
+      --set num_modes=$((r + d)) --methods linear,physical "$@"
+    "$tool" "${common[@]}" --tag "derivatives_${name}_modal_derivatives" --experiment accuracy \
+      --set num_modes="$r" --set basis=modal_derivatives --set num_derivative_modes="$d" --methods physical "$@"
+    "$tool" "${common[@]}" --tag "derivatives_${name}_linear_modes" --experiment stability \
+      --set num_modes=$((r + d)) --methods linear,physical --stability-steps 2000 --tolerance 0.02 "$@"
+    "$tool" "${common[@]}" --tag "derivatives_${name}_modal_derivatives" --experiment stability \
+      --set num_modes="$r" --set basis=modal_derivatives --set num_derivative_modes="$d" --methods physical \
+      --stability-steps 2000 --tolerance 0.02 "$@"
+  done
+}
+if [ "$only" = derivatives ]; then
+  mkdir -p "$data/derivatives"
+  {
+    echo "# modal_compare, modal derivatives, $(date -u +%Y-%m-%dT%H:%MZ), commit $(git -C "$REPO_DIR" describe --always --dirty)"
+    echo "# load average $(cut -d' ' -f1-3 /proc/loadavg) at the start"
+    derivatives "$@"
+    echo "# load average $(cut -d' ' -f1-3 /proc/loadavg) at the end"
+  } | tee "$data/derivatives/summary.txt"
+  /usr/bin/python3 "$REPO_DIR/scripts/plot_comparison.py" --data "$data/derivatives" --out "$REPO_DIR/docs"
+  exit 0
 fi
 if [ "$only" = stability ]; then
   rm -f "$data"/stability_*.csv
@@ -72,7 +108,7 @@ timed() { [ "$only" != stability ]; }
     "$tool" --config "$configs/$config.yaml" --tag "${config}_integrators" --experiment stability "${extra[@]}" \
       --vary integrator=explicit,implicit --tolerance 0.05 --check-factor 10 --output "$data" "$@"
   done
-  # Stability that is not monotone in the time step (the robustness issue, item 12): each method
+  # Stability that is not monotone in the time step: each method
   # under the explicit scheme, and implicit full and physical, 5000 steps a trial; the search
   # reports the largest step below which every step tried is stable and the stable windows above it.
   "$tool" --config "$configs/nonmonotone_2d.yaml" --experiment stability --stability-steps 5000 --output "$data" "$@"
@@ -82,3 +118,7 @@ timed() { [ "$only" != stability ]; }
 } | tee "$summary"
 
 /usr/bin/python3 "$REPO_DIR/scripts/plot_comparison.py" --data "$data" --out "$REPO_DIR/docs"
+# The modal-derivatives runs, with their own summary and figures.
+if [ -z "$only" ]; then
+  COMPARE_ONLY=derivatives COMPARE_BUILD=0 bash "${BASH_SOURCE[0]}" "$@"
+fi

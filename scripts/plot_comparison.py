@@ -12,6 +12,11 @@ Reads, from DIR, every file the tool writes and draws:
   accuracy_combinations_<config>_dt<N>ms_error.csv (runs with --reference-time-step, one per time
       step) -> combinations.png (error against the converged reference and wall time per simulated
       second, against the time step, for every method x linearization x integrator)
+  accuracy_derivatives_<config>_linear_modes_error.csv with
+  accuracy_derivatives_<config>_modal_derivatives_error.csv -> derivatives_<config>.png (RMS distance
+      to `full` over time and the swing, the sheet's mean y, of `linear` and `physical` with R + D
+      linear modes and `physical` with R modes plus D derivative directions; the swing period of each
+      from the mean y's zero crossings)
 and writes the numbers behind them as Markdown tables to DIR/tables.md, for docs/results.md to quote.
 The columns it needs are listed in COLUMNS: a file without them stops the script with a message.
 """
@@ -19,6 +24,7 @@ import argparse
 import csv
 import math
 import pathlib
+import re
 import sys
 
 import matplotlib
@@ -34,7 +40,7 @@ COLUMNS = {
     "stability": ["variant", "method", "stable_dt", "unstable_dt", "steps", "tolerance", "modal_bound",
                   "full_bound"],
 }
-METHOD_COLORS = {"full": "0.35", "linear": "tab:red", "physical": "tab:blue", "reference": "0.35",
+METHOD_COLORS = {"full": "0.35", "linear": "tab:red", "physical": "tab:blue", "cubature": "tab:green", "reference": "0.35",
                  "reference_half_step": "black"}
 REFERENCES = ("reference", "reference_half_step")
 VARIANT_STYLES = ["-", "--", ":", "-."]
@@ -432,6 +438,109 @@ def markdown(header, rows):
     return "\n".join(lines) + "\n"
 
 
+def derivative_files(data):
+    """{config: (linear_modes error file, modal_derivatives error file)} for the pairs present."""
+    found = {}
+    for path in sorted(data.glob("accuracy_derivatives_*_modal_derivatives_error.csv")):
+        config = tag_of(path, "accuracy_derivatives_", "_modal_derivatives_error.csv")
+        twin = path.with_name(f"accuracy_derivatives_{config}_linear_modes_error.csv")
+        if twin.exists():
+            found[config] = (twin, path)
+    return found
+
+
+def swing_period(series):
+    """Mean period (s) of a swing from the zero crossings of (t, y - its mean); NaN below 3 crossings."""
+    if not series:
+        return math.nan
+    mean = sum(y for _, y in series) / len(series)
+    crossings = []
+    for (t0, y0), (t1, y1) in zip(series, series[1:]):
+        if (y0 - mean) * (y1 - mean) < 0:
+            crossings.append(t0 + (t1 - t0) * (y0 - mean) / ((y0 - mean) - (y1 - mean)))
+    if len(crossings) < 3:
+        return math.nan
+    return 2 * (crossings[-1] - crossings[0]) / (len(crossings) - 1)
+
+
+def derivative_labels(config):
+    """Labels of the four runs; with R and D from a name ending in _r<R>_d<D>, their basis sizes."""
+    match = re.search(r"_r(\d+)_d(\d+)$", config)
+    if not match:
+        return ["full", "linear", "physical, linear modes", "physical, modal derivatives"]
+    r, d = int(match.group(1)), int(match.group(2))
+    return ["full", f"linear, {r + d} modes", f"physical, {r + d} linear modes",
+            f"physical, {r} modes + {d} derivative directions"]
+
+
+def derivative_runs(config, pair):
+    """[(label, method rows)] of full, linear, physical with linear modes, physical with derivatives."""
+    linear_rows, derivative_rows = (read_csv(p, "error") for p in pair)
+    labels = derivative_labels(config)
+    runs = [(labels[0], [r for r in linear_rows if r["method"] == "full"]),
+            (labels[1], [r for r in linear_rows if r["method"] == "linear"]),
+            (labels[2], [r for r in linear_rows if r["method"] == "physical"]),
+            (labels[3], [r for r in derivative_rows if r["method"] == "physical"])]
+    return [(label, rows) for label, rows in runs if rows]
+
+
+def derivative_summary(rows):
+    valid = [r for r in rows if r["diverged"] == "0" and int(r["step"]) > 0]
+    mean_rms = sum(number(r["rms_distance"]) for r in valid) / max(1, len(valid))
+    swing = [(number(r["time"]), number(r["center_y"])) for r in rows if r["diverged"] == "0"]
+    diverged = any(r["diverged"] == "1" for r in rows)
+    return mean_rms, swing_period(swing), diverged
+
+
+DERIVATIVE_COLORS = ["0.35", "tab:red", "tab:blue", "tab:green"]  # in the order of derivative_labels
+
+
+def plot_derivatives(found, out):
+    written = []
+    for config, pair in found.items():
+        runs = derivative_runs(config, pair)
+        colors = dict(zip(derivative_labels(config), DERIVATIVE_COLORS))
+        fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+        for label, rows in runs:
+            ok = [r for r in rows if r["diverged"] == "0"]
+            t = [number(r["time"]) for r in ok]
+            if label != "full":
+                axes[0].plot(t, [number(r["rms_distance"]) for r in ok], color=colors[label], label=label, lw=1)
+            axes[1].plot(t, [number(r["center_y"]) for r in ok], color=colors[label], label=label, lw=1)
+        axes[0].set_title("RMS particle distance to full", fontsize=10)
+        axes[0].set_ylabel("m")
+        axes[1].set_title("the swing: mean y of the particles", fontsize=10)
+        axes[1].set_ylabel("m")
+        for ax in axes:
+            ax.set_xlabel("time (s)")
+            ax.grid(True, alpha=0.3)
+            ax.legend(fontsize=8)
+        fig.suptitle(f"{config}: modal derivatives against linear modes", fontsize=10)
+        fig.tight_layout()
+        target = out / f"derivatives_{config}.png"
+        fig.savefig(target, dpi=110)
+        plt.close(fig)
+        written.append(target)
+    return written
+
+
+def derivative_tables(found):
+    parts = []
+    for config, pair in found.items():
+        runs = derivative_runs(config, pair)
+        full_period = derivative_summary(runs[0][1])[1]
+        body = []
+        for label, rows in runs:
+            mean_rms, period, diverged = derivative_summary(rows)
+            body.append([label, "-" if label == "full" else fmt(mean_rms) + (" (diverged)" if diverged else ""),
+                         fmt(period), fmt(period / full_period)])
+        parts.append(f"## {pair[0].name}, {pair[1].name}: modal derivatives\n\nMean RMS distance to full over "
+                     "every sample after step 0; the swing period from the zero crossings of the particles' mean y, "
+                     "and its ratio to full's.\n\n"
+                     + markdown(["method", "mean RMS distance (m)", "swing period (s)", "period / full's"], body))
+    return parts
+
+
 def write_tables(data, target):
     """The figures' numbers as Markdown: per-step cost, error every snapshot interval, stable steps."""
     parts = ["# Numbers behind the figures\n\nWritten by scripts/plot_comparison.py from the CSV files in this folder.\n"]
@@ -484,6 +593,7 @@ def write_tables(data, target):
         parts.append(f"## {path.name}: largest stable time step (ms), {rows[0]['steps']} steps, relative tolerance "
                      f"{rows[0]['tolerance']}\n\n" + markdown(header, body))
     parts += combination_tables(combination_files(data))
+    parts += derivative_tables(derivative_files(data))
     target.write_text("\n".join(parts))
     return [target]
 
@@ -505,14 +615,20 @@ def main(argv=None):
         # Of the runs against the converged reference, only the smallest time step gets an error figure;
         # combinations.png draws them all.
         skip = {p for steps in combination_files(data).values() for dt, p in steps.items() if dt != min(steps)}
+        # The modal-derivative runs are drawn in pairs (derivatives_<config>.png), not one by one.
+        skip |= {p for pair in derivative_files(data).values() for p in pair}
         for path in sorted(data.glob("accuracy_*_error.csv")):
             if path not in skip:
                 written += plot_error(path, out)
         for path in sorted(data.glob("stability_*.csv")):
-            written += plot_stability(path, out)
+            if not path.name.startswith("stability_derivatives_"):  # tabulated only, in tables.md
+                written += plot_stability(path, out)
         combinations = combination_files(data)
         if combinations:
             written += plot_combinations(combinations, out)
+        derivatives = derivative_files(data)
+        if derivatives:
+            written += plot_derivatives(derivatives, out)
         if written:
             written += write_tables(data, data / "tables.md")
     except ColumnError as error:

@@ -26,6 +26,12 @@ public:
   virtual void tangentStiffness(const Eigen::VectorXd& q, SparseMatrix& k) = 0;
   // True when F is affine in q, so one Newton iteration solves an implicit step exactly.
   virtual bool isLinear() const { return false; }
+  // The round-off of one evaluation of F (its norm, N in these coordinates): an iteration cannot
+  // bring a residual below it. Where forces balance (an equilibrium) it is the only scale there is.
+  double roundoff() const { return roundoff_; }
+
+protected:
+  double roundoff_ = 0.0;
 };
 
 // The spring energy of the last force evaluation, kept for energy() at the same q.
@@ -76,6 +82,9 @@ class ModalForceModel : public ForceModel
 public:
   virtual void setReference(const Eigen::VectorXd& x_ref) = 0;
 };
+
+// The round-off of Phi^T f, the modal models' force, at positions near x_ref (see ForceModel::roundoff).
+double modalRoundoff(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref);
 
 // `linear` (O'Brien): F = Phi^T (f(x_ref) + f_g) - Lambda X, the force linearised at x_ref.
 class LinearModalForceModel : public ModalForceModel

@@ -35,6 +35,8 @@ constexpr long long kMaxParticles = 10000000;
 void validateGridParams(const GridParams& params);
 // The number of free degrees of freedom of a grid with these parameters (64 bits, not validated).
 long long countFreeDofs(const GridParams& params);
+// The number of springs of a grid with these parameters (64 bits, not validated).
+long long countSprings(const GridParams& params);
 
 struct Spring
 {

@@ -94,7 +94,7 @@ private:
   // Sets next.v, next.a from next.q, stores R(q') in residual_ and returns its norm.
   double residual(ForceModel& model, const State& s, State& next);
   // The residual below which round-off hides any further progress.
-  double roundoff(const State& next) const;
+  double roundoff(const ForceModel& model, const State& next) const;
 
   const double alpha_, beta_, gamma_;  // HHT alpha and the Newmark parameters it implies
   int max_iterations_;

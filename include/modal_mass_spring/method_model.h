@@ -3,6 +3,7 @@
 // for the modal methods.
 #pragma once
 
+#include "modal_mass_spring/cubature.h"
 #include "modal_mass_spring/force_model.h"
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/integrator.h"
@@ -25,6 +26,34 @@ struct LinearizedGrid
   const Eigen::VectorXd& x_ref;   // linearization point: q = 0 stands for it
   const SparseMatrix& stiffness;  // K(x_ref) on the free dofs
   const Eigen::VectorXd& mass;    // the diagonal of M on the free dofs
+  const Cubature* cubature = nullptr;  // the trained springs and weights, for `cubature`
+};
+
+// A method's force model plus a constant external load G in the same coordinates: F(q) + G, with
+// the load's potential -G . q in the energy, so that a constant load keeps the dynamics conservative
+// and the divergence check meaningful.
+class LoadedForceModel : public ForceModel
+{
+public:
+  explicit LoadedForceModel(ForceModel& inner) : inner_(inner) { roundoff_ = inner.roundoff(); }
+  void setLoad(const Eigen::VectorXd& load) { load_ = load; }
+  int size() const override { return inner_.size(); }
+  void force(const Eigen::VectorXd& q, Eigen::VectorXd& f) override
+  {
+    inner_.force(q, f);
+    if (load_.size() > 0)
+      f += load_;
+  }
+  double energy(const Eigen::VectorXd& q) override
+  {
+    return inner_.energy(q) - (load_.size() > 0 ? load_.dot(q) : 0.0);
+  }
+  void tangentStiffness(const Eigen::VectorXd& q, SparseMatrix& k) override { inner_.tangentStiffness(q, k); }
+  bool isLinear() const override { return inner_.isLinear(); }
+
+private:
+  ForceModel& inner_;
+  Eigen::VectorXd load_;  // empty: no load
 };
 
 // What a method's integrator is built from besides its force model.
@@ -67,11 +96,14 @@ public:
   virtual double anchorDistanceSquared(const Eigen::VectorXd& q) const = 0;
   // Kinetic plus potential energy in this method's own measure, the one its dynamics conserve
   // without damping: the physical energy for `full` and `physical`, the quadratic model's for `linear`.
-  double energy(const State& s) { return kineticEnergy(s) + force_->energy(s.q); }
+  double energy(const State& s) { return kineticEnergy(s) + loaded_.energy(s.q); }
+  // Sets the external force on the free dofs (N, physical coordinates; empty or zero: none), which
+  // then acts like the springs and gravity; the state keeps q and v, its acceleration follows.
+  void setExternalForce(const Eigen::VectorXd& f_free);
 
   // Takes one step from state() into next(); false when the integrator refuses it. commit() makes
   // next() the state.
-  bool step() { return integrator_->step(*force_, state_, next_); }
+  bool step() { return integrator_->step(loaded_, state_, next_); }
   void commit() { std::swap(state_, next_); }
   const State& state() const { return state_; }
   const State& next() const { return next_; }
@@ -80,6 +112,8 @@ protected:
   MethodModel(Method method, const LinearizedGrid& linearized, std::unique_ptr<ForceModel> force);
   // Mass and damping in this method's coordinates.
   virtual MassDamping massDamping(double alpha, double beta) const = 0;
+  // A free-dof force in this method's coordinates.
+  virtual Eigen::VectorXd generalizedForce(const Eigen::VectorXd& f_free) const = 0;
   // Sets the state to (q, v), with the acceleration the forces give.
   void setState(const Eigen::VectorXd& q, const Eigen::VectorXd& v);
   ForceModel& forceModel() { return *force_; }
@@ -89,6 +123,7 @@ protected:
 private:
   Method method_;
   std::unique_ptr<ForceModel> force_;
+  LoadedForceModel loaded_;  // force_ plus the external force: what the integrator sees
   std::unique_ptr<Integrator> integrator_;
   State state_, next_;
 };
@@ -107,10 +142,11 @@ public:
 
 private:
   MassDamping massDamping(double alpha, double beta) const override;
+  Eigen::VectorXd generalizedForce(const Eigen::VectorXd& f_free) const override { return f_free; }
   Eigen::VectorXd anchor_;
 };
 
-// `linear` and `physical`: q = X, u = offset + Phi X with a mass-orthonormal Phi.
+// `linear`, `physical` and `cubature`: q = X, u = offset + Phi X with a mass-orthonormal Phi.
 class ModalMethod : public MethodModel
 {
 public:
@@ -125,6 +161,8 @@ public:
 
 private:
   MassDamping massDamping(double alpha, double beta) const override;
+  // Phi^T f from the rows of the dofs the force touches.
+  Eigen::VectorXd generalizedForce(const Eigen::VectorXd& f_free) const override;
   void setOffset(const Eigen::VectorXd& offset);
 
   ModalForceModel* modal_force_;  // owned by the base

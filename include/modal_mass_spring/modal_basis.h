@@ -22,6 +22,10 @@ struct ModalBasis
   int deflation_passes = 0;     // extra Lanczos passes that looked for more of a large null space
   double build_seconds = 0.0;
   double factorization_seconds = 0.0;  // of build_seconds, the sparse LDLT of K - sigma M
+  // Phi^T K Phi (r x r, dense) when the columns are not all eigenvectors of K (a basis with modal
+  // derivatives: the reduced stiffness and Rayleigh damping are then dense); empty for an eigenbasis,
+  // where it is diag(eigenvalues).
+  Eigen::MatrixXd reduced_stiffness;
 };
 
 // Told the name of each stage of a long computation as it starts ("factorisation", "eigensolver"),

@@ -12,6 +12,7 @@ enum class Method
   Full,      // no reduction: the reference
   Linear,    // modal, F = -Lambda X
   Physical,  // modal, F = Phi^T f(x0 + Phi X)
+  Cubature,  // modal, F ~ sum over a few springs of w_s Phi_s^T f_s (An, Kim & James 2008)
 };
 
 // Where K is taken and the modal coordinates are measured from.
@@ -34,7 +35,15 @@ enum class InitialState
   Equilibrium,  // the static equilibrium, at rest
 };
 
-// "full", "linear", "physical"
+// The basis of the modal methods that compute spring forces (`physical`); `linear` always keeps
+// the eigenbasis, which its F = -Lambda X needs.
+enum class BasisKind
+{
+  LinearModes,       // the r lowest modes (the paper)
+  ModalDerivatives,  // the modes plus directions from their modal derivatives (Barbic & James)
+};
+
+// "full", "linear", "physical", "cubature"
 std::string toString(Method method);
 // Throws std::invalid_argument naming the valid methods.
 Method parseMethod(const std::string& name);
@@ -47,5 +56,8 @@ std::string toString(IntegratorKind integrator);
 IntegratorKind parseIntegrator(const std::string& name);
 std::string toString(InitialState initial_state);
 InitialState parseInitialState(const std::string& name);
+// "linear_modes", "modal_derivatives"
+std::string toString(BasisKind basis);
+BasisKind parseBasis(const std::string& name);
 
 }  // namespace modal_mass_spring

@@ -1,12 +1,15 @@
 // A simulation: a grid, its modal basis and the chosen method, stepped by an integrator.
 #pragma once
 
+#include "modal_mass_spring/cubature.h"
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/method_model.h"
 #include "modal_mass_spring/modal_basis.h"
+#include "modal_mass_spring/modal_derivatives.h"
 #include "modal_mass_spring/options.h"
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -37,7 +40,22 @@ struct SimulationParams
   // Refuse a problem whose build would need more memory than this (GB, estimated before anything is
   // allocated): the default leaves room on a 24 GB machine.
   double memory_limit_gb = 12.0;
+  // The basis of `physical`: the num_modes lowest modes, or those plus num_derivative_modes
+  // directions from their modal derivatives (0 unless basis is modal_derivatives).
+  BasisKind basis = BasisKind::LinearModes;
+  int num_derivative_modes = 0;
+  // `cubature`'s training (see CubatureParams): the relative force error to reach, in (0, 1); the
+  // most springs (0: min(number of springs, 1000)); the random poses; the largest particle
+  // displacement of a pose (m); the seed of the poses and candidate sets.
+  double cubature_tolerance = 0.02;
+  int cubature_max_springs = 0;
+  int cubature_training_poses = 100;
+  double cubature_pose_size = 0.4;
+  int cubature_seed = 1;
 };
+
+// The cubature training parameters of a simulation's.
+CubatureParams cubatureParams(const SimulationParams& params);
 
 // Throws std::invalid_argument (rejectParameter) for the first invalid parameter of either set,
 // naming it, its value and what is allowed: the grid's (validateGridParams), then the simulation's,
@@ -75,7 +93,8 @@ class Simulation
 public:
   // Validates both parameter sets (validateParameters) before building anything, then builds the
   // linearization point and the basis, telling on_stage as each stage starts ("equilibrium",
-  // "stiffness", "factorisation", "eigensolver"). Throws std::invalid_argument naming the offending
+  // "stiffness", "factorisation", "eigensolver", "modal derivatives" with that basis, and "cubature"
+  // when the method is `cubature`). Throws std::invalid_argument naming the offending
   // parameter, std::runtime_error when a stage fails.
   Simulation(const GridParams& grid_params, const SimulationParams& params, const StageFn& on_stage = {});
 
@@ -87,19 +106,35 @@ public:
   Simulation& operator=(Simulation&&) = delete;
 
   const Grid& grid() const { return grid_; }
+  // The eigenbasis: the num_modes lowest modes, `linear`'s basis.
   const ModalBasis& basis() const { return basis_; }
+  // The basis of every modal method that computes spring forces (all but `linear`): the eigenbasis
+  // itself, or with basis: modal_derivatives the modes plus their derivative directions.
+  const ModalBasis& physicalBasis() const { return physical_basis_; }
+  // What building the derivative directions did (all zero with basis: linear_modes).
+  const DerivativeBasisInfo& derivativeInfo() const { return derivative_info_; }
   const SimulationParams& params() const { return params_; }
   Method method() const { return model_->method(); }
 
   // Switches method, carrying the motion over without moving a particle: going to a modal method,
   // X = Phi^T M u and the rest of u, which the modes cannot carry, stays frozen as an offset of the
   // modal reference configuration (until reset); going to full, u = offset + Phi X. Clears a
-  // divergence: the last good state goes on under the new method.
+  // divergence: the last good state goes on under the new method. The first switch to `cubature`
+  // trains it (trainCubature, seconds on a large grid).
   void setMethod(Method method);
+  // The trained cubature (springs, weights, training report), or null before `cubature` was first used.
+  const Cubature* cubature() const { return cubature_ ? &*cubature_ : nullptr; }
   // Rebuilds the integrators for a new time step (validated as at construction); keeps the state.
   void setTimeStep(double dt);
-  // Back to the initial positions, at rest, time 0.
+  // Back to the initial positions, at rest, time 0. The external force stays.
   void reset();
+  // Sets the external force on every particle (N, a vector of dimension values per particle, as
+  // positions()), replacing the previous one; zero clears it. It acts on every method in physical
+  // coordinates (the modal methods project the touched particles' rows of Phi) and stays through
+  // method switches and resets until changed. Forces on fixed particles do nothing. Throws
+  // std::invalid_argument for a vector of the wrong size or with a non-finite entry, changing nothing.
+  void setExternalForce(const Eigen::VectorXd& force);
+  const Eigen::VectorXd& externalForce() const { return external_force_; }
   // Sets the state from free-dof displacements (from the linearization point) and velocities, with no
   // frozen offset. A
   // modal method takes their M-orthogonal projection; projectionError() then says how far (m, the
@@ -158,9 +193,12 @@ private:
   Eigen::VectorXd x_ref_;    // linearization point: u measures displacement from here
   Eigen::VectorXd x_start_;  // where reset() puts the grid
   Eigen::VectorXd u_start_;  // the same as a free-dof displacement from x_ref_
-  ModalBasis basis_;
+  ModalBasis basis_;            // the eigenbasis (`linear`)
+  ModalBasis physical_basis_;   // the basis of the modal methods other than `linear`
+  DerivativeBasisInfo derivative_info_;
   SparseMatrix stiffness_;  // K at x_ref on the free dofs
   Eigen::VectorXd mass_;    // diagonal of M on the free dofs
+  std::optional<Cubature> cubature_;  // trained at the linearization point when first needed
   double total_mass_ = 0.0;  // weighs the divergence check into an RMS displacement in metres
   std::unique_ptr<MethodModel> model_;
   long step_count_ = 0;
@@ -171,6 +209,7 @@ private:
   double energy_scale_ = 0.0;       // the base plus the start's spring and kinetic energy
   double start_energy_ = 0.0;  // the method's energy at the start of the run, carried over switches
   double projection_error_ = 0.0;
+  Eigen::VectorXd external_force_;  // on every dof; zero: none
 };
 
 }  // namespace modal_mass_spring

@@ -14,6 +14,11 @@ using SparseMatrix = Eigen::SparseMatrix<double>;
 // the spring energy, from the same lengths at little extra cost.
 void springForces(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f, double* energy = nullptr);
 
+// The round-off of the spring forces on one dof at positions x (N): a spring's force
+// k (l - l0) d / l is computed from coordinates of size |x|, so it carries an error of about
+// k |x| eps, and a particle sums up to 12 of them. No iteration brings an unbalanced force below it.
+double springForceRoundoff(const Grid& grid, const Eigen::VectorXd& x);
+
 // Total spring energy sum 1/2 k (l - l0)^2.
 double springEnergy(const Grid& grid, const Eigen::VectorXd& x);
 
@@ -31,6 +36,11 @@ enum class CompressedSprings
 SparseMatrix tangentStiffness(const Grid& grid, const Eigen::VectorXd& x,
                               CompressedSprings compressed = CompressedSprings::Keep,
                               int* num_dropped = nullptr);
+
+// dK/dx[direction]: the directional derivative of the exact tangent K(x) (CompressedSprings::Keep)
+// along a free-dof displacement, the third derivative of the spring energy contracted with it. Free-dof
+// numbering; (dK/dx[Phi_j]) Phi_i is the right-hand side of the modal derivative Psi_ij.
+SparseMatrix tangentStiffnessDerivative(const Grid& grid, const Eigen::VectorXd& x, const Eigen::VectorXd& direction);
 
 // (K(x) Phi)^T from Phi^T (r x free dofs) without assembling K: a spring adds its 2 x 2 block
 // pattern to the rows of its two particles. The reduced tangent Phi^T K Phi then costs O(springs r

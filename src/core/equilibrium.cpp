@@ -36,14 +36,9 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
   // Forces are compared with one particle's weight, or without gravity with a small spring force.
   const double weight = p.mass * p.gravity.norm();
   const double scale = weight > 0.0 ? weight : p.structural_stiffness * p.spacing;
-  // No iteration gets the unbalanced force below the round-off of the spring forces: a spring's
-  // force k (l - l0) d / l is computed from coordinates of size |x|, so it carries an error of about
-  // k |x| eps, and a particle sums up to 12 of them. On stiff grids that is above 1e-9 of a weight.
-  double stiffest = std::max(p.structural_stiffness, p.shear_stiffness);
-  if (p.bending)
-    stiffest = std::max(stiffest, p.bending_stiffness);
-  const double extent = std::max(start.cwiseAbs().maxCoeff(), p.spacing * std::max(p.rows, p.cols));
-  const double roundoff = 12.0 * stiffest * extent * std::numeric_limits<double>::epsilon();
+  // No iteration gets the unbalanced force below the round-off of the spring forces; on stiff grids
+  // that is above 1e-9 of a weight.
+  const double roundoff = springForceRoundoff(grid, start);
   const double target = std::max(tolerance * scale, 10.0 * roundoff);
   const double fallback = std::max(std::sqrt(tolerance) * scale, 1000.0 * roundoff);
 

@@ -3,12 +3,21 @@
 
 #include "modal_mass_spring/spring_forces.h"
 
+#include <cmath>
+
 namespace modal_mass_spring
 {
+
+double modalRoundoff(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref)
+{
+  // Every dof's force carries about the same error; Phi^T adds them up, at worst in absolute value.
+  return springForceRoundoff(grid, x_ref) * (basis.phi.cwiseAbs().transpose() * Eigen::VectorXd::Ones(basis.phi.rows())).norm();
+}
 
 FullForceModel::FullForceModel(const Grid& grid, const Eigen::VectorXd& x_ref)
   : grid_(grid), x_ref_(x_ref), x_(x_ref), f_all_(x_ref.size())
 {
+  roundoff_ = springForceRoundoff(grid, x_ref) * std::sqrt(static_cast<double>(grid.numFreeDofs()));
 }
 
 void FullForceModel::setPositions(const Eigen::VectorXd& u)
@@ -49,6 +58,7 @@ LinearModalForceModel::LinearModalForceModel(const Grid& grid, const ModalBasis&
                                              const Eigen::VectorXd& x_ref)
   : grid_(grid), basis_(basis), lambda_(basis.eigenvalues)
 {
+  roundoff_ = modalRoundoff(grid, basis, x_ref);
   setReference(x_ref);
 }
 
@@ -88,6 +98,7 @@ PhysicalModalForceModel::PhysicalModalForceModel(const Grid& grid, const ModalBa
     f_all_(x_ref.size()),
     f_free_(grid.numFreeDofs())
 {
+  roundoff_ = modalRoundoff(grid, basis, x_ref);
 }
 
 void PhysicalModalForceModel::setPositions(const Eigen::VectorXd& modal)

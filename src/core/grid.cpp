@@ -64,6 +64,15 @@ long long countFreeDofs(const GridParams& p)
   return p.dimension * (static_cast<long long>(p.rows) * p.cols - num_fixed);
 }
 
+long long countSprings(const GridParams& p)
+{
+  const long long rows = p.rows, cols = p.cols;
+  long long count = rows * (cols - 1) + (rows - 1) * cols + 2 * (rows - 1) * (cols - 1);
+  if (p.bending)
+    count += rows * std::max(cols - 2, 0LL) + std::max(rows - 2, 0LL) * cols;
+  return count;
+}
+
 Grid::Grid(const GridParams& params) : params_(params)
 {
   validateGridParams(params_);

@@ -164,8 +164,10 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
   for (last_iterations_ = 1; last_iterations_ <= max_iterations_; ++last_iterations_)
   {
     const double residual_norm = residual(model, s, next);
-    // Converged when the unbalanced force is small against the forces at play.
-    if (residual_norm <= tolerance_ * (force_.norm() + inertial_norm_) + roundoff(next))
+    // Converged when the unbalanced force is small against the forces at play, or at the
+    // round-off of the forces: where they balance (a grid resting at its equilibrium) there is no
+    // other scale.
+    if (residual_norm <= tolerance_ * (force_.norm() + inertial_norm_) + roundoff(model, next))
       return true;
 
     Eigen::VectorXd delta;
@@ -216,17 +218,19 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
       // it is small anyway (the square root of the tolerance), refuse the step otherwise.
       next.q = start;
       residual(model, s, next);
-      return residual_norm <= std::sqrt(tolerance_) * (force_.norm() + inertial_norm_) + roundoff(next);
+      return residual_norm <= std::sqrt(tolerance_) * (force_.norm() + inertial_norm_) + roundoff(model, next);
     }
   }
   return false;
 }
 
-double ImplicitNewmark::roundoff(const State& next) const
+double ImplicitNewmark::roundoff(const ForceModel& model, const State& next) const
 {
   // a' = (q' - y) / (beta h^2) differences nearly equal numbers: its round-off is about
-  // eps |q'| / (beta h^2), which no Newton iteration removes when the motion is tiny.
-  return 100.0 * std::numeric_limits<double>::epsilon() / (beta_ * h_ * h_) * system_.mass.cwiseProduct(next.q).norm();
+  // eps |q'| / (beta h^2), which no Newton iteration removes when the motion is tiny; F(q') carries
+  // the round-off of the spring forces.
+  return 100.0 * std::numeric_limits<double>::epsilon() / (beta_ * h_ * h_) * system_.mass.cwiseProduct(next.q).norm() +
+         10.0 * model.roundoff();
 }
 
 double ImplicitNewmark::residual(ForceModel& model, const State& s, State& next)

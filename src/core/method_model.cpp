@@ -2,6 +2,7 @@
 #include "modal_mass_spring/method_model.h"
 
 #include <algorithm>
+#include <stdexcept>
 
 namespace modal_mass_spring
 {
@@ -20,8 +21,18 @@ SparseMatrix diagonalMatrix(const Eigen::VectorXd& d)
 }  // namespace
 
 MethodModel::MethodModel(Method method, const LinearizedGrid& linearized, std::unique_ptr<ForceModel> force)
-  : lin_(linearized), method_(method), force_(std::move(force))
+  : lin_(linearized), method_(method), force_(std::move(force)), loaded_(*force_)
 {
+}
+
+void MethodModel::setExternalForce(const Eigen::VectorXd& f_free)
+{
+  if (f_free.size() == 0 || f_free.isZero(0.0))
+    loaded_.setLoad(Eigen::VectorXd());
+  else
+    loaded_.setLoad(generalizedForce(f_free));
+  if (state_.q.size() > 0)
+    integrator_->initialize(loaded_, state_);
 }
 
 void MethodModel::configure(const IntegratorSettings& settings)
@@ -33,14 +44,14 @@ void MethodModel::configure(const IntegratorSettings& settings)
   else
     integrator_ = std::make_unique<ExplicitNewmark>(std::move(system), settings.time_step);
   if (state_.q.size() > 0)
-    integrator_->initialize(*force_, state_);
+    integrator_->initialize(loaded_, state_);
 }
 
 void MethodModel::setState(const Eigen::VectorXd& q, const Eigen::VectorXd& v)
 {
   state_.q = q;
   state_.v = v;
-  integrator_->initialize(*force_, state_);
+  integrator_->initialize(loaded_, state_);
 }
 
 FullMethod::FullMethod(const LinearizedGrid& linearized, const IntegratorSettings& settings)
@@ -75,6 +86,12 @@ std::unique_ptr<ModalForceModel> makeModalForce(Method method, const LinearizedG
 {
   if (method == Method::Linear)
     return std::make_unique<LinearModalForceModel>(lin.grid, lin.basis, lin.x_ref);
+  if (method == Method::Cubature)
+  {
+    if (!lin.cubature)
+      throw std::logic_error("the cubature method needs a trained cubature");
+    return std::make_unique<CubatureForceModel>(lin.grid, lin.basis, lin.x_ref, *lin.cubature);
+  }
   return std::make_unique<PhysicalModalForceModel>(lin.grid, lin.basis, lin.x_ref);
 }
 
@@ -91,6 +108,13 @@ ModalMethod::ModalMethod(Method method, const LinearizedGrid& linearized, const 
 
 MassDamping ModalMethod::massDamping(double alpha, double beta) const
 {
+  const Eigen::Index r = lin_.basis.phi.cols();
+  if (lin_.basis.reduced_stiffness.size() > 0)
+  {
+    // Not an eigenbasis (modal derivatives): Phi^T C Phi = alpha I + beta Phi^T K Phi is dense.
+    const Eigen::MatrixXd damping = alpha * Eigen::MatrixXd::Identity(r, r) + beta * lin_.basis.reduced_stiffness;
+    return MassDamping{Eigen::VectorXd::Ones(r), damping.sparseView()};
+  }
   // Phi^T M Phi = I and Phi^T K Phi = Lambda: Rayleigh damping is diagonal, alpha + beta lambda^2.
   const Eigen::VectorXd damping = (alpha + beta * lin_.basis.eigenvalues.array()).matrix();
   return MassDamping{Eigen::VectorXd::Ones(damping.size()), diagonalMatrix(damping)};
@@ -126,6 +150,16 @@ double ModalMethod::assign(const Eigen::VectorXd& u, const Eigen::VectorXd& v, R
   }
   setState(modal, phi.transpose() * lin_.mass.cwiseProduct(v));
   return dropped;
+}
+
+Eigen::VectorXd ModalMethod::generalizedForce(const Eigen::VectorXd& f_free) const
+{
+  // A force on a few particles touches a few rows of Phi: O(touched dofs x r), not O(n r).
+  Eigen::VectorXd load = Eigen::VectorXd::Zero(lin_.basis.phi.cols());
+  for (int k = 0; k < f_free.size(); ++k)
+    if (f_free[k] != 0.0)
+      load += f_free[k] * lin_.basis.phi.row(k).transpose();
+  return load;
 }
 
 Eigen::VectorXd ModalMethod::displacement(const State& s) const

@@ -23,12 +23,13 @@ int parseName(const std::string& parameter, const std::string& name, const std::
 const std::vector<std::string> kLinearizations{"rest", "equilibrium"};
 const std::vector<std::string> kIntegrators{"explicit", "implicit"};
 const std::vector<std::string> kInitialStates{"initial", "equilibrium"};
+const std::vector<std::string> kBases{"linear_modes", "modal_derivatives"};
 
 }  // namespace
 
 const std::vector<std::string>& methodNames()
 {
-  static const std::vector<std::string> names{"full", "linear", "physical"};
+  static const std::vector<std::string> names{"full", "linear", "physical", "cubature"};
   return names;
 }
 std::string toString(Method method) { return methodNames()[static_cast<int>(method)]; }
@@ -49,5 +50,8 @@ InitialState parseInitialState(const std::string& name)
 {
   return static_cast<InitialState>(parseName("initial_state", name, kInitialStates));
 }
+
+std::string toString(BasisKind value) { return kBases[static_cast<int>(value)]; }
+BasisKind parseBasis(const std::string& name) { return static_cast<BasisKind>(parseName("basis", name, kBases)); }
 
 }  // namespace modal_mass_spring

@@ -55,6 +55,14 @@ SimulationParams loadSimulationParams(const ParameterSource& s)
   p.hht_alpha = s.getDouble("hht_alpha").value_or(p.hht_alpha);
   p.energy_tolerance = s.getDouble("energy_tolerance").value_or(p.energy_tolerance);
   p.memory_limit_gb = s.getDouble("memory_limit_gb").value_or(p.memory_limit_gb);
+  if (const auto name = s.getString("basis"))
+    p.basis = parseBasis(*name);
+  p.num_derivative_modes = s.getInt("num_derivative_modes").value_or(p.num_derivative_modes);
+  p.cubature_tolerance = s.getDouble("cubature_tolerance").value_or(p.cubature_tolerance);
+  p.cubature_max_springs = s.getInt("cubature_max_springs").value_or(p.cubature_max_springs);
+  p.cubature_training_poses = s.getInt("cubature_training_poses").value_or(p.cubature_training_poses);
+  p.cubature_pose_size = s.getDouble("cubature_pose_size").value_or(p.cubature_pose_size);
+  p.cubature_seed = s.getInt("cubature_seed").value_or(p.cubature_seed);
   return p;
 }
 

@@ -67,6 +67,35 @@ void validateScales(const GridParams& g)
   }
 }
 
+// basis and num_derivative_modes: checks that need no build (the derivatives' own span is checked
+// when they are computed).
+void validateBasis(const GridParams& grid, const SimulationParams& p, long long n)
+{
+  const long long d = p.num_derivative_modes;
+  if (d < 0)
+    rejectParameter("num_derivative_modes", d, "must be an integer >= 0");
+  if (p.basis == BasisKind::LinearModes)
+  {
+    if (d != 0)
+      rejectParameter("num_derivative_modes", d,
+                      "must be 0 with basis: linear_modes (derivative directions are added only with basis: "
+                      "modal_derivatives)");
+    return;
+  }
+  if (grid.dimension == 3 && p.linearization == Linearization::Rest)
+    rejectParameter("basis", "modal_derivatives",
+                    "needs a stiffness without zero modes, and a 3D sheet at rest has none out of its plane; use "
+                    "linearization: equilibrium, or basis: linear_modes");
+  const long long r = p.num_modes;
+  const long long pairs = r * (r + 1) / 2;
+  if (d < 1 || d > pairs || r + d > n)
+    rejectParameter("num_derivative_modes", d,
+                    "must be in [1, " + std::to_string(std::min(pairs, n - r)) + "] with basis: modal_derivatives: at most the " +
+                        std::to_string(pairs) + " pairs of the num_modes = " + std::to_string(r) +
+                        " linear modes, and num_modes + num_derivative_modes at most the " + std::to_string(n) +
+                        " free degrees of freedom");
+}
+
 }  // namespace
 
 void validateParameters(const GridParams& grid, const SimulationParams& p)
@@ -77,6 +106,7 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
   if (p.num_modes < 1 || p.num_modes > n)
     rejectParameter("num_modes", p.num_modes,
                     "must be in [1, " + std::to_string(n) + "], the number of free degrees of freedom");
+  validateBasis(grid, p, n);
   requireNonNegative("alpha", p.alpha);
   requireNonNegative("beta", p.beta);
   validateTimeStep(p.time_step);
@@ -88,6 +118,21 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
     rejectParameter("newton_max_iterations", p.newton_max_iterations, "must be an integer >= 1");
   if (!std::isfinite(p.hht_alpha) || p.hht_alpha < -1.0 / 3.0 || p.hht_alpha > 0.0)
     rejectParameter("hht_alpha", p.hht_alpha, "must be in [-1/3, 0] (0: Newmark average acceleration)");
+  if (!std::isfinite(p.cubature_tolerance) || p.cubature_tolerance <= 0.0 || p.cubature_tolerance >= 1.0)
+    rejectParameter("cubature_tolerance", p.cubature_tolerance,
+                    "must be in (0, 1) (the relative force error over the training poses)");
+  const long long springs = countSprings(grid);
+  if (p.cubature_max_springs < 0 || p.cubature_max_springs > springs)
+    rejectParameter("cubature_max_springs", p.cubature_max_springs,
+                    "must be 0 (up to min(number of springs, " + std::to_string(kDefaultMaxSprings) +
+                        ")) or in [1, " + std::to_string(springs) + "], the number of springs");
+  if (p.cubature_training_poses < 1)
+    rejectParameter("cubature_training_poses", p.cubature_training_poses, "must be an integer >= 1");
+  if (!std::isfinite(p.cubature_pose_size) || p.cubature_pose_size <= 0.0)
+    rejectParameter("cubature_pose_size", p.cubature_pose_size,
+                    "must be a finite number of metres > 0 (the largest particle displacement of a training pose)");
+  if (p.cubature_seed < 0)
+    rejectParameter("cubature_seed", p.cubature_seed, "must be an integer >= 0");
   if (!std::isfinite(p.memory_limit_gb) || p.memory_limit_gb <= 0.0)
     rejectParameter("memory_limit_gb", p.memory_limit_gb, "must be a finite number of GB > 0");
   const double needed_gb = estimateMemoryBytes(grid, p) / 1e9;
@@ -121,11 +166,37 @@ double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
   // The basis: Phi, the physical model's Phi^T and (K Phi)^T, the Lanczos vectors and the Ritz
   // vectors of deflated passes; a dense eigensolver when r is close to n.
   bytes += 8.0 * n * (3.0 * r + std::max(2.0 * r + 1.0, r + 20.0) + 2.0 * r);
+  // The physical basis (a copy, or the modes and their derivative directions, three times for the
+  // force model), and while it is built the derivatives of every pair with their right-hand sides.
+  const double d = p.basis == BasisKind::ModalDerivatives ? p.num_derivative_modes : 0.0;
+  bytes += 8.0 * n * 3.0 * (r + d);
+  if (p.basis == BasisKind::ModalDerivatives)
+  {
+    // Derivatives, right-hand sides and weighted copies (n x pairs), and the mass-PCA's Gram matrix
+    // with its eigenvectors (pairs x pairs, twice).
+    const double pairs = r * (r + 1.0) / 2.0;
+    bytes += 8.0 * n * 3.0 * pairs + 8.0 * 2.0 * pairs * pairs;
+  }
   if (r + 1.0 >= n)
     bytes += 3.0 * 8.0 * n * n;
+  // The cubature training: the selected springs' columns (with a copy while they grow), their Gram
+  // matrix and the held-out columns.
+  const double max_springs = effectiveMaxSprings(cubatureParams(p), static_cast<int>(std::min<long long>(countSprings(g), 1 << 30)));
+  bytes += 8.0 * (3.0 * p.cubature_training_poses * r * max_springs + max_springs * max_springs);
   // Positions, forces, states and scratch vectors over all dofs, and the springs.
   bytes += 8.0 * 40.0 * dim * particles + 24.0 * (blocks - 1.0) / 2.0 * particles;
   return bytes;
+}
+
+CubatureParams cubatureParams(const SimulationParams& p)
+{
+  CubatureParams c;
+  c.tolerance = p.cubature_tolerance;
+  c.max_springs = p.cubature_max_springs;
+  c.training_poses = p.cubature_training_poses;
+  c.pose_size = p.cubature_pose_size;
+  c.seed = p.cubature_seed;
+  return c;
 }
 
 Simulation::Simulation(const GridParams& grid_params, const SimulationParams& params, const StageFn& on_stage)
@@ -176,12 +247,30 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
                     "give a modal basis that is not finite; keep stiffness / mass and spacing in a range where "
                     "frequencies and lengths are representable");
   }
+  if (params_.basis == BasisKind::ModalDerivatives)
+  {
+    stage("modal derivatives");
+    physical_basis_ = buildDerivativeBasis(grid_, x_ref_, stiffness_, mass_, basis_, params_.num_derivative_modes,
+                                           &derivative_info_);
+    if (!physical_basis_.phi.allFinite() || !physical_basis_.reduced_stiffness.allFinite())
+      throw std::runtime_error("modal derivatives: the basis is not finite");
+  }
+  else
+  {
+    physical_basis_ = basis_;
+  }
 
   u_start_ = grid_.gatherFree(x_start_ - x_ref_);
+  external_force_ = Eigen::VectorXd::Zero(x_ref_.size());
   double stretched = 0.0;
   for (const Spring& spring : grid_.springs())
     stretched += 0.5 * spring.stiffness * std::pow(0.01 * spring.rest_length, 2);
   base_energy_scale_ = total_mass_ * g.gravity.norm() * g.spacing * std::max(g.rows, g.cols) + stretched;
+  if (params_.method == Method::Cubature)
+  {
+    stage("cubature");
+    cubature_ = trainCubature(grid_, physical_basis_, x_ref_, cubatureParams(params_));
+  }
   reset();
 }
 
@@ -193,9 +282,15 @@ IntegratorSettings Simulation::integratorSettings() const
 
 void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder)
 {
-  const LinearizedGrid linearized{grid_, basis_, x_ref_, stiffness_, mass_};
+  // `linear` needs the eigenbasis (F = -Lambda X); every other modal method uses the physical basis,
+  // and the cubature is trained on it.
+  const ModalBasis& basis = method == Method::Linear ? basis_ : physical_basis_;
+  if (method == Method::Cubature && !cubature_)
+    cubature_ = trainCubature(grid_, physical_basis_, x_ref_, cubatureParams(params_));
+  const LinearizedGrid linearized{grid_, basis, x_ref_, stiffness_, mass_, cubature_ ? &*cubature_ : nullptr};
   model_ = makeMethod(method, linearized, integratorSettings());
   params_.method = method;
+  model_->setExternalForce(grid_.gatherFree(external_force_));
   projection_error_ = model_->assign(u, v, remainder);
   model_->setAnchor(u_start_);
   diverged_ = false;
@@ -225,6 +320,24 @@ void Simulation::setTimeStep(double dt)
   validateParameters(grid_.params(), changed);
   params_.time_step = dt;
   model_->configure(integratorSettings());
+}
+
+void Simulation::setExternalForce(const Eigen::VectorXd& force)
+{
+  if (force.size() != external_force_.size())
+    rejectParameter("external force", std::to_string(force.size()) + " values",
+                    "must have " + std::to_string(external_force_.size()) + " values, " +
+                        std::to_string(grid_.dimension()) + " per particle");
+  for (int k = 0; k < force.size(); ++k)
+    if (!std::isfinite(force[k]))
+      rejectParameter("external force", "a non-finite value on particle " + std::to_string(k / grid_.dimension()),
+                      "must be finite");
+  // A constant force is conservative: its potential joins the method's energy, and the rise since
+  // the start carries over the change, as over a method switch.
+  const double rise = methodEnergy() - start_energy_;
+  external_force_ = force;
+  model_->setExternalForce(grid_.gatherFree(external_force_));
+  start_energy_ = methodEnergy() - rise;
 }
 
 void Simulation::reset()

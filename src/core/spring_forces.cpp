@@ -1,6 +1,8 @@
 // Per-spring force and Hessian, written once for 2D and 3D through a fixed-size template.
 #include "modal_mass_spring/spring_forces.h"
 
+#include <algorithm>
+#include <limits>
 #include <vector>
 
 namespace modal_mass_spring
@@ -78,6 +80,55 @@ SparseMatrix tangentStiffnessDim(const Grid& grid, const Eigen::VectorXd& x, Com
 }
 
 template <int Dim>
+SparseMatrix tangentStiffnessDerivativeDim(const Grid& grid, const Eigen::VectorXd& x, const Eigen::VectorXd& direction)
+{
+  using Vec = Eigen::Matrix<double, Dim, 1>;
+  using Mat = Eigen::Matrix<double, Dim, Dim>;
+  std::vector<Eigen::Triplet<double>> triplets;
+  triplets.reserve(grid.springs().size() * 4 * Dim * Dim);
+  // The direction at a particle's dofs, zero where a dof is fixed.
+  auto at = [&](int particle) {
+    Vec v = Vec::Zero();
+    for (int a = 0; a < Dim; ++a)
+    {
+      const int free = grid.freeIndex(Dim * particle + a);
+      if (free >= 0)
+        v[a] = direction[free];
+    }
+    return v;
+  };
+  for (const Spring& s : grid.springs())
+  {
+    const Vec d = x.segment<Dim>(Dim * s.j) - x.segment<Dim>(Dim * s.i);
+    const double l = d.norm();
+    const Vec u = d / l;
+    const Vec delta = at(s.j) - at(s.i);
+    // Ke = k (I - l0 (I / l - d d^T / l^3)); its derivative along delta:
+    // k l0 / l^2 ((u.delta) I + delta u^T + u delta^T - 3 (u.delta) u u^T).
+    const double ud = u.dot(delta);
+    const Mat dke = s.stiffness * s.rest_length / (l * l) *
+                    (ud * Mat::Identity() + delta * u.transpose() + u * delta.transpose() - 3.0 * ud * u * u.transpose());
+    for (int r = 0; r < Dim; ++r)
+      for (int c = 0; c < Dim; ++c)
+      {
+        const int ri = grid.freeIndex(Dim * s.i + r), rj = grid.freeIndex(Dim * s.j + r);
+        const int ci = grid.freeIndex(Dim * s.i + c), cj = grid.freeIndex(Dim * s.j + c);
+        if (ri >= 0 && ci >= 0)
+          triplets.emplace_back(ri, ci, dke(r, c));
+        if (rj >= 0 && cj >= 0)
+          triplets.emplace_back(rj, cj, dke(r, c));
+        if (ri >= 0 && cj >= 0)
+          triplets.emplace_back(ri, cj, -dke(r, c));
+        if (rj >= 0 && ci >= 0)
+          triplets.emplace_back(rj, ci, -dke(r, c));
+      }
+  }
+  SparseMatrix dk(grid.numFreeDofs(), grid.numFreeDofs());
+  dk.setFromTriplets(triplets.begin(), triplets.end());
+  return dk;
+}
+
+template <int Dim>
 void tangentTimesBasisDim(const Grid& grid, const Eigen::VectorXd& x, const Eigen::MatrixXd& phi_t,
                           Eigen::MatrixXd& out)
 {
@@ -117,6 +168,13 @@ void tangentTimesBasisDim(const Grid& grid, const Eigen::VectorXd& x, const Eige
 
 }  // namespace
 
+SparseMatrix tangentStiffnessDerivative(const Grid& grid, const Eigen::VectorXd& x, const Eigen::VectorXd& direction)
+{
+  if (grid.dimension() == 2)
+    return tangentStiffnessDerivativeDim<2>(grid, x, direction);
+  return tangentStiffnessDerivativeDim<3>(grid, x, direction);
+}
+
 void tangentTimesBasis(const Grid& grid, const Eigen::VectorXd& x, const Eigen::MatrixXd& phi_t,
                        Eigen::MatrixXd& k_phi_t)
 {
@@ -132,6 +190,16 @@ void springForces(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f
     springForcesDim<2>(grid, x, f, energy);
   else
     springForcesDim<3>(grid, x, f, energy);
+}
+
+double springForceRoundoff(const Grid& grid, const Eigen::VectorXd& x)
+{
+  const GridParams& p = grid.params();
+  double stiffest = std::max(p.structural_stiffness, p.shear_stiffness);
+  if (p.bending)
+    stiffest = std::max(stiffest, p.bending_stiffness);
+  const double extent = std::max(x.cwiseAbs().maxCoeff(), p.spacing * std::max(p.rows, p.cols));
+  return 12.0 * stiffest * extent * std::numeric_limits<double>::epsilon();
 }
 
 double springEnergy(const Grid& grid, const Eigen::VectorXd& x)

@@ -227,7 +227,9 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
            grid.params().rows, grid.params().cols, grid.dimension(), grid.numParticles(), grid.springs().size(),
            grid.fixedParticles().size(), toString(simulation->method()).c_str(),
            describeModes(simulation->basis().frequencies, simulation->basis().num_zero_modes).c_str(),
-           describeStartupTimes(simulation->linearization(), simulation->basis(), total_seconds).c_str(),
+           describeStartupTimes(simulation->linearization(), simulation->basis(), total_seconds,
+                                simulation->derivativeInfo(), simulation->cubature())
+               .c_str(),
            sim_params.time_step, params.real_time_factor / (params.publish_rate * sim_params.time_step),
            params.publish_rate, params.real_time_factor);
   const LinearizationInfo& lin = simulation->linearization();
@@ -240,6 +242,9 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
                   std::to_string(simulation->projectionError()) + " m")
                      .c_str()
                : "");
+  ROS_INFO("%s", describeBasis(sim_params, simulation->derivativeInfo(), simulation->physicalBasis()).c_str());
+  if (const Cubature* cubature = simulation->cubature())
+    ROS_INFO("%s", describeCubature(*cubature, static_cast<int>(grid.springs().size())).c_str());
   return simulation;
 }
 
@@ -547,6 +552,19 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     status.max_distance = track.max_distance;
     status.step_seconds = track.step_seconds;
     status.real_time_factor = achieved_factor_;
+    const DerivativeBasisInfo& derivatives = simulation.derivativeInfo();
+    status.basis = toString(simulation.params().basis);
+    status.linear_modes = simulation.basis().phi.cols();
+    status.derivative_directions = derivatives.derivative_directions;
+    status.basis_seconds = simulation.basis().build_seconds + derivatives.seconds;
+    status.largest_dropped_singular_value = derivatives.largest_dropped_singular_value;
+    if (const Cubature* cubature = simulation.cubature())
+    {
+      status.cubature_springs = static_cast<uint32_t>(cubature->springs.size());
+      status.cubature_training_error = cubature->training_error;
+      status.cubature_heldout_error = cubature->heldout_error;
+      status.cubature_training_seconds = cubature->training_seconds;
+    }
 
     if (send_tf)
       for (int particle : params.tf_particles)
@@ -670,7 +688,10 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   }
   const std::string previous = toString(simulation.method());
   const bool was_diverged = simulation.diverged();
+  const bool trains = method == Method::Cubature && !simulation.cubature();
   simulation.setMethod(method);
+  if (trains)
+    ROS_INFO("%s", describeCubature(*simulation.cubature(), static_cast<int>(simulation.grid().springs().size())).c_str());
   primary().name = toString(method);
   primary().divergence_message.clear();
   synchronise();  // the shadow full starts again from the state carried over

@@ -52,7 +52,8 @@ std::string describeModes(const Eigen::VectorXd& frequencies, int num_zero_modes
   return out.str();
 }
 
-std::string describeStartupTimes(const LinearizationInfo& linearization, const ModalBasis& basis, double total_seconds)
+std::string describeStartupTimes(const LinearizationInfo& linearization, const ModalBasis& basis, double total_seconds,
+                                 const DerivativeBasisInfo& derivatives, const Cubature* cubature)
 {
   std::ostringstream out;
   out << "start-up " << seconds(total_seconds) << ": ";
@@ -62,6 +63,26 @@ std::string describeStartupTimes(const LinearizationInfo& linearization, const M
   if (basis.factorization_seconds > 0.0)
     out << ", factorisation " << seconds(basis.factorization_seconds);
   out << ", eigensolver " << seconds(std::max(0.0, basis.build_seconds - basis.factorization_seconds));
+  if (derivatives.derivative_directions > 0)
+    out << ", modal derivatives " << seconds(derivatives.seconds);
+  if (cubature)
+    out << ", cubature " << seconds(cubature->training_seconds);
+  return out.str();
+}
+
+std::string describeBasis(const SimulationParams& params, const DerivativeBasisInfo& info, const ModalBasis& physical_basis)
+{
+  std::ostringstream out;
+  out << "basis " << toString(params.basis);
+  if (params.basis == BasisKind::LinearModes)
+    return out.str();
+  out << ": " << info.linear_modes << " linear modes kept, " << info.derivative_directions
+      << " derivative directions added (from " << info.derivatives_computed << " derivatives) in "
+      << seconds(info.seconds);
+  if (physical_basis.frequencies.size() > 0)
+    out << ", frequencies up to " << number(physical_basis.frequencies.maxCoeff()) << " rad/s";
+  out << "; singular values (relative to the largest) smallest kept " << number(info.smallest_kept_singular_value)
+      << ", largest dropped " << number(info.largest_dropped_singular_value);
   return out.str();
 }
 
@@ -75,6 +96,10 @@ std::string describeStage(const std::string& stage)
     return "factorising the shifted stiffness matrix (factorisation)";
   if (stage == "eigensolver")
     return "computing the modes (eigensolver)";
+  if (stage == "modal derivatives")
+    return "computing the modal derivatives and their directions (modal derivatives)";
+  if (stage == "cubature")
+    return "training the cubature's springs and weights (cubature)";
   return stage;
 }
 

@@ -290,12 +290,13 @@ ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, const Accurac
   e.step_seconds = run.timed && step > 0 ? run.step_seconds : 0.0;
   if (e.diverged)
   {
-    e.max_distance = e.rms_distance = e.max_displacement = e.energy = std::numeric_limits<double>::quiet_NaN();
+    e.max_distance = e.rms_distance = e.max_displacement = e.energy = e.center_y = std::numeric_limits<double>::quiet_NaN();
     return e;
   }
   distances(grid, run.sim->points(), reference, e.max_distance, e.rms_distance);
   e.max_displacement = maxDisplacement(grid, run.sim->points());
   e.energy = run.sim->totalEnergy();
+  e.center_y = run.sim->points().row(1).mean();
   return e;
 }
 
@@ -317,6 +318,15 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
   const Simulation& modal = *runs.back().sim;  // every run of the setup has the same basis
   result.frequencies = modal.basis().frequencies;
   result.num_zero_modes = modal.basis().num_zero_modes;
+  result.basis = setup.sim.basis;
+  result.derivatives = modal.derivativeInfo();
+  result.physical_frequencies = modal.physicalBasis().frequencies;
+  for (const AccuracyRun& run : runs)
+    if (const Cubature* c = run.sim->cubature())
+      result.cubature = CubatureRow{setup.variant, static_cast<int>(c->springs.size()),
+                                    static_cast<int>(grid.springs().size()), c->training_poses,
+                                    setup.sim.cubature_tolerance, c->training_error, c->heldout_error,
+                                    c->training_seconds};
 
   auto record = [&](long step) {
     const Eigen::Matrix3Xd reference = runs[0].sim->points();
@@ -584,7 +594,8 @@ std::vector<StabilityRow> runStability(const ExperimentSetup& setup, const Stabi
     row.method = toString(method);
     row.steps = options.steps;
     row.tolerance = options.tolerance;
-    row.modal_bound = 2.0 / sim.basis().frequencies.maxCoeff();
+    const ModalBasis& basis = method == Method::Linear ? sim.basis() : sim.physicalBasis();
+    row.modal_bound = 2.0 / basis.frequencies.maxCoeff();
     row.full_bound = 2.0 / highestFrequencyAtRest(sim.grid());
     const std::string label = "stability " + row.method;
     report(progress, label, static_cast<double>(m) / options.methods.size());
@@ -653,11 +664,20 @@ void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows)
 
 void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows)
 {
-  precise(out) << "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds\n";
+  precise(out) << "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds,center_y\n";
   for (const ErrorSample& e : rows)
     out << e.variant << ',' << e.method << ',' << e.step << ',' << Field{e.time} << ',' << Field{e.max_distance}
         << ',' << Field{e.rms_distance} << ',' << Field{e.max_displacement} << ',' << Field{e.energy} << ','
-        << (e.diverged ? 1 : 0) << ',' << Field{e.step_seconds} << '\n';
+        << (e.diverged ? 1 : 0) << ',' << Field{e.step_seconds} << ',' << Field{e.center_y} << '\n';
+}
+
+void writeCubatureCsv(std::ostream& out, const std::vector<CubatureRow>& rows)
+{
+  precise(out) << "variant,springs,grid_springs,training_poses,tolerance,training_error,heldout_error,training_seconds\n";
+  for (const CubatureRow& r : rows)
+    out << r.variant << ',' << r.springs << ',' << r.grid_springs << ',' << r.training_poses << ','
+        << Field{r.tolerance} << ',' << Field{r.training_error} << ',' << Field{r.heldout_error} << ','
+        << Field{r.training_seconds} << '\n';
 }
 
 void writeSnapshotCsv(std::ostream& out, const Grid& grid, const std::vector<Snapshot>& snapshots)

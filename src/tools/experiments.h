@@ -7,6 +7,7 @@
 
 #include <functional>
 #include <ostream>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -37,7 +38,7 @@ using ProgressFn = std::function<void(const std::string&, double)>;
 struct CostOptions
 {
   std::vector<int> sizes{5, 10, 20, 40};  // square grids, sizes x sizes particles
-  std::vector<Method> methods{Method::Full, Method::Linear, Method::Physical};
+  std::vector<Method> methods{Method::Full, Method::Linear, Method::Physical, Method::Cubature};
   int repeats = 7;                   // timed runs per method and size; the median is reported
   double min_repeat_seconds = 0.02;  // each timed run takes at least this many steps' worth
   int build_repeats = 3;             // basis builds per size; the median is reported
@@ -60,7 +61,7 @@ std::vector<CostRow> runCost(const ExperimentSetup& setup, const CostOptions& op
 
 struct AccuracyOptions
 {
-  std::vector<Method> methods{Method::Linear, Method::Physical};  // compared with `full`
+  std::vector<Method> methods{Method::Linear, Method::Physical, Method::Cubature};  // compared with `full`
   int steps = 5000;
   int interval = 1000;  // snapshots of every particle every `interval` steps, as in the paper
   int sample = 10;      // error samples every `sample` steps (must divide `interval`)
@@ -86,6 +87,8 @@ struct ErrorSample
   bool diverged = false;          // the method diverged at or before this step: no distances
   // Wall time per step over the `sample` steps that led here (0 at step 0 and for the reference).
   double step_seconds = 0.0;
+  // The particles' mean y (m): a swing of a 3D sheet about its top edge (along x) moves it; 0 in 2D.
+  double center_y = 0.0;
 };
 
 struct Snapshot
@@ -94,6 +97,14 @@ struct Snapshot
   long step = 0;
   double time = 0.0;
   Eigen::Matrix3Xd points;
+};
+
+// A cubature's training report (|T|, errors, time) for one setup.
+struct CubatureRow
+{
+  std::string variant;
+  int springs = 0, grid_springs = 0, training_poses = 0;
+  double tolerance = 0.0, training_error = 0.0, heldout_error = 0.0, training_seconds = 0.0;
 };
 
 struct AccuracyResult
@@ -105,9 +116,15 @@ struct AccuracyResult
   // (method "reference_half_step"), and the largest RMS and largest particle distance between them.
   std::vector<ErrorSample> reference_check;
   double reference_check_max_rms = 0.0, reference_check_max_distance = 0.0;
-  // The basis of the setup (the same for every method).
+  // The eigenbasis of the setup (`linear`'s), and the basis of `physical`: with modal derivatives,
+  // what building them did and the Ritz frequencies of the whole basis.
   Eigen::VectorXd frequencies;
   int num_zero_modes = 0;
+  BasisKind basis = BasisKind::LinearModes;
+  DerivativeBasisInfo derivatives;
+  Eigen::VectorXd physical_frequencies;
+  // The training of `cubature` when it was compared, and the grid's number of springs.
+  std::optional<CubatureRow> cubature;
 };
 
 AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& options, const ProgressFn& progress = {});
@@ -119,7 +136,7 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
 // below which every step it tried was stable, then the stable windows it found above that.
 struct StabilityOptions
 {
-  std::vector<Method> methods{Method::Full, Method::Linear, Method::Physical};
+  std::vector<Method> methods{Method::Full, Method::Linear, Method::Physical, Method::Cubature};
   int steps = 10000;        // S: a time step is stable when S steps from the setup's initial state do not diverge
   double tolerance = 1e-3;  // the last bracket is bisected until (unstable - stable) <= tolerance * stable
   double max_time_step = 10.0;  // s; no divergence up to here counts as unbounded
@@ -195,6 +212,7 @@ double highestFrequencyAtRest(const Grid& grid, int max_dofs = 3000);
 
 void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows);
 void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows);
+void writeCubatureCsv(std::ostream& out, const std::vector<CubatureRow>& rows);
 // The accuracy experiment's summary per variant and method: mean and largest RMS distance to the
 // reference, the distance at the end, and the median wall time per step.
 struct AccuracySummary

@@ -43,8 +43,9 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
   --experiment LIST     comma-separated: cost, accuracy, stability, or all (default: all)
   --output DIR          folder for the CSV files (default: .)
   --tag NAME            file name tag, <experiment>_<tag>.csv (default: the config file's stem); no '/'
-  --methods LIST        comma-separated of full, linear, physical (default: all three; accuracy
-                        always runs full as the reference)
+  --methods LIST        comma-separated of full, linear, physical, cubature (default: all four;
+                        accuracy always runs full as the reference and writes cubature's training
+                        report, |T|, training and held-out error and time, to accuracy_<tag>_cubature.csv)
   --set KEY=VALUE       override one parameter of the config (VALUE is YAML); repeatable, once per key
   --vary KEY=V1,V2,...  run every experiment for each value; several --vary give every combination,
                         e.g. --vary integrator=explicit,implicit --vary linearization=rest,equilibrium
@@ -171,7 +172,7 @@ struct Options
   std::vector<std::string> experiments = kExperiments;
   std::string output = ".";
   std::string tag;
-  std::vector<Method> methods{Method::Full, Method::Linear, Method::Physical};
+  std::vector<Method> methods{Method::Full, Method::Linear, Method::Physical, Method::Cubature};
   std::vector<std::pair<std::string, std::string>> sets;
   std::vector<std::pair<std::string, std::vector<std::string>>> varies;
   bool quiet = false;
@@ -214,7 +215,10 @@ void setMethods(Options& o, const std::string& text)
     }
     catch (const std::invalid_argument&)
     {
-      rejectParameter("--methods", "'" + name + "'", "unknown method: must be full, linear or physical");
+      std::string names;
+      for (const std::string& known : methodNames())
+        names += (names.empty() ? "" : ", ") + known;
+      rejectParameter("--methods", "'" + name + "'", "unknown method: must be one of " + names);
     }
   }
 }
@@ -590,6 +594,16 @@ void printAccuracyHeader(const Options& o, const ExperimentSetup& setup, const A
     freq << (k ? " " : "") << fmt(result.frequencies[k]);
   std::cout << "basis (" << setup.variant << "): " << result.frequencies.size() << " modes, "
             << result.num_zero_modes << " zero, omega [rad/s] = " << freq.str() << "\n";
+  if (result.basis == BasisKind::ModalDerivatives)
+  {
+    const DerivativeBasisInfo& d = result.derivatives;
+    std::cout << "physical basis (" << setup.variant << "): modal_derivatives, " << d.linear_modes
+              << " linear modes kept, " << d.derivative_directions << " derivative directions added (from "
+              << d.derivatives_computed << " derivatives) in " << fmt(1e3 * d.seconds) << " ms, omega up to "
+              << fmt(result.physical_frequencies.maxCoeff()) << " rad/s; singular values relative to the largest: "
+              << "smallest kept " << fmt(d.smallest_kept_singular_value) << ", largest dropped "
+              << fmt(d.largest_dropped_singular_value) << "\n";
+  }
   if (o.accuracy.reference_time_step > 0.0)
     std::cout << "reference (" << setup.variant << "): full, explicit, dt = " << fmt(o.accuracy.reference_time_step)
               << " s; against dt / 2: largest RMS distance " << fmt(result.reference_check_max_rms)
@@ -616,6 +630,7 @@ void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>&
   std::vector<ErrorSample> errors;
   std::vector<Snapshot> snapshots;
   std::vector<std::string> messages;
+  std::vector<CubatureRow> cubatures;
   std::vector<std::vector<std::string>> table{
       {"variant", "method", "step", "time s", "max distance m", "RMS distance m", "max displacement m"}};
   for (const ExperimentSetup& setup : setups)
@@ -626,6 +641,15 @@ void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>&
     snapshots.insert(snapshots.end(), result.snapshots.begin(), result.snapshots.end());
     messages.insert(messages.end(), result.messages.begin(), result.messages.end());
     printAccuracyHeader(o, setup, result);
+    if (result.cubature)
+    {
+      const CubatureRow& c = *result.cubature;
+      cubatures.push_back(c);
+      std::cout << "cubature (" << setup.variant << "): " << c.springs << " of " << c.grid_springs
+                << " springs, training error " << fmt(100.0 * c.training_error) << "% on " << c.training_poses
+                << " poses (cubature_tolerance " << fmt(100.0 * c.tolerance) << "%), held-out "
+                << fmt(100.0 * c.heldout_error) << "%, trained in " << fmt(c.training_seconds) << " s\n";
+    }
     for (const ErrorSample& e : result.errors)
     {
       if (e.step % o.accuracy.interval != 0 && e.step != o.accuracy.steps)
@@ -640,6 +664,11 @@ void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>&
   }
   std::ofstream out = openCsv(o, "accuracy_" + o.tag + "_error.csv");
   writeErrorCsv(out, errors);
+  if (!cubatures.empty())
+  {
+    std::ofstream cubature_out = openCsv(o, "accuracy_" + o.tag + "_cubature.csv");
+    writeCubatureCsv(cubature_out, cubatures);
+  }
   if (o.accuracy.snapshots)
   {
     std::ofstream snap = openCsv(o, "accuracy_" + o.tag + "_snapshots.csv");
@@ -705,9 +734,15 @@ void runStabilityExperiment(const Options& o, const std::vector<ExperimentSetup>
   std::vector<std::vector<std::string>> table{{"variant", "method", "largest stable dt s", "diverges at s", "trials",
                                                "2/omega (highest mode)", "2/omega (K(x0), all dofs)",
                                                "stable windows above s"}};
+  // No divergence found, or no bound (every mode a zero mode): said in words, never inf.
+  auto finiteOr = [](double value, const std::string& otherwise) {
+    return std::isfinite(value) ? fmt(value, 6) : otherwise;
+  };
+  const std::string unbounded = "none up to " + fmt(o.stability.max_time_step);
   for (const StabilityRow& r : rows)
-    table.push_back({r.variant, r.method, fmt(r.stable_dt, 6), fmt(r.unstable_dt, 6), std::to_string(r.trials),
-                     fmt(r.modal_bound, 6), fmt(r.full_bound, 6), windowsText(r.windows)});
+    table.push_back({r.variant, r.method, fmt(r.stable_dt, 6), finiteOr(r.unstable_dt, unbounded),
+                     std::to_string(r.trials), finiteOr(r.modal_bound, "none (all zero modes)"),
+                     finiteOr(r.full_bound, "-"), windowsText(r.windows)});
   std::ostringstream title;
   title << "stability (" << o.tag << "): " << o.stability.steps << " steps without divergence; every step tried "
         << "below the largest stable one was stable (scan ratio " << o.stability.scan_ratio

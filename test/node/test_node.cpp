@@ -432,7 +432,7 @@ TEST_F(Services, SetMethodKeepsTheParticlesWhereTheyWere)
   ros::WallDuration(0.5).sleep();
   ASSERT_GT(stepMotion(), 100 * kCarriedOver) << "the grid must move for this test to mean anything";
   // From a modal method to another and to full the positions carry over exactly (same Phi X).
-  for (const std::string method : {"linear", "full"})
+  for (const std::string method : {"linear", "cubature", "full"})
   {
     SCOPED_TRACE(method);
     const auto held = pauseAndHold();
@@ -464,6 +464,28 @@ TEST_F(Services, SetMethodFromFullToModalKeepsTheParticles)
   EXPECT_LE(maxDistance(held, particles(*next.first)), kCarriedOver);
 }
 
+// The first switch to `cubature` trains it; ~status then carries its training report.
+TEST_F(Services, SetMethodToCubatureReportsItsTraining)
+{
+  const auto response = node.setMethod("cubature");
+  ASSERT_TRUE(response.success) << response.message;
+  const auto next = node.tick([](const Status& s) { return s.method == "cubature"; });
+  ASSERT_TRUE(next.second);
+  const Status& s = *next.second;
+  const int rows = param("/modal_mass_spring/rows", 0), cols = param("/modal_mass_spring/cols", 0);
+  const unsigned springs = static_cast<unsigned>(rows * (cols - 1) + (rows - 1) * cols + 2 * (rows - 1) * (cols - 1));
+  EXPECT_GT(s.cubature_springs, 0u);
+  EXPECT_LE(s.cubature_springs, springs);
+  EXPECT_GT(s.cubature_training_error, 0.0);
+  EXPECT_LT(s.cubature_training_error, 1.0);
+  EXPECT_GT(s.cubature_heldout_error, 0.0);
+  EXPECT_LT(s.cubature_heldout_error, 1.0);
+  EXPECT_GT(s.cubature_training_seconds, 0.0);
+  const auto later = node.status([&](const Status& t) { return t.step_count > s.step_count; });
+  ASSERT_TRUE(later) << "cubature steps";
+  EXPECT_EQ(later->state, Status::RUNNING);
+}
+
 TEST_F(Services, UnknownMethodIsRefusedAndChangesNothing)
 {
   ros::WallDuration(0.3).sleep();
@@ -471,7 +493,7 @@ TEST_F(Services, UnknownMethodIsRefusedAndChangesNothing)
   const auto before = node.status();
   const auto response = node.setMethod("implicit");
   EXPECT_FALSE(response.success);
-  for (const char* word : {"implicit", "full", "linear", "physical"})
+  for (const char* word : {"implicit", "full", "linear", "physical", "cubature"})
     EXPECT_NE(response.message.find(word), std::string::npos) << response.message;
   const auto after = node.tick([](const Status&) { return true; });
   EXPECT_EQ(after.second->method, before->method);

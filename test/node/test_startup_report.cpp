@@ -47,6 +47,35 @@ TEST(StartupReport, EveryStageHasItsTime)
   EXPECT_EQ(rest.rfind("start-up 50 ms: stiffness", 0), 0u) << rest;
 }
 
+TEST(StartupReport, ModalDerivativesAreReportedWithTheirTimeAndSingularValues)
+{
+  SimulationParams params;
+  DerivativeBasisInfo info;
+  ModalBasis basis;
+  EXPECT_EQ(describeBasis(params, info, basis), "basis linear_modes");
+  params.basis = BasisKind::ModalDerivatives;
+  info.linear_modes = 6;
+  info.derivative_directions = 4;
+  info.derivatives_computed = 21;
+  info.seconds = 0.0123;
+  info.smallest_kept_singular_value = 0.12;
+  info.largest_dropped_singular_value = 0.081;
+  basis.frequencies.resize(3);
+  basis.frequencies << 4.2, 126.4, 25.0;
+  EXPECT_EQ(describeBasis(params, info, basis),
+            "basis modal_derivatives: 6 linear modes kept, 4 derivative directions added (from 21 derivatives) in "
+            "12.3 ms, frequencies up to 126.4 rad/s; singular values (relative to the largest) smallest kept 0.12, "
+            "largest dropped 0.081");
+  LinearizationInfo lin;
+  lin.stiffness_seconds = 0.0021;
+  basis.build_seconds = 0.0338;
+  basis.factorization_seconds = 0.0049;
+  EXPECT_EQ(describeStartupTimes(lin, basis, 0.05, info),
+            "start-up 50 ms: stiffness 2.1 ms, factorisation 4.9 ms, eigensolver 28.9 ms, modal derivatives 12.3 ms");
+  EXPECT_EQ(describeStage("modal derivatives"),
+            "computing the modal derivatives and their directions (modal derivatives)");
+}
+
 struct FakeClockLog
 {
   double now = 0.0;

@@ -79,6 +79,7 @@ TEST_F(ModalCompareTool, SmallRunEndToEndToPngs)
                           " --steps 200 --interval 100 --sample 20 --sizes 5 --repeats 2 --min-repeat-seconds 0.001"));
   ASSERT_EQ(r3.status, 0) << r3.output;
   EXPECT_NE(r2.output.find("accuracy (paper_2d)"), std::string::npos) << r2.output;  // the summary table
+  EXPECT_NE(r2.output.find("cubature (base): "), std::string::npos) << r2.output;  // its training report
   // Beyond the paper: the combinations against a converged reference, and the stability of both integrators
   // with the implicit one checked at ten times the explicit one's step.
   const CommandResult rc = run(tool("--config " + config("paper_2d.yaml") +
@@ -100,7 +101,9 @@ TEST_F(ModalCompareTool, SmallRunEndToEndToPngs)
                            "stability_paper_2d.csv", "cost_small_3d.csv", "accuracy_small_3d_snapshots.csv"})
     ASSERT_TRUE(fs::exists(data / name)) << name;
   EXPECT_EQ(firstLine(data / "accuracy_paper_2d_error.csv"),
-            "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds");
+            "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds,center_y");
+  EXPECT_EQ(firstLine(data / "accuracy_paper_2d_cubature.csv"),
+            "variant,springs,grid_springs,training_poses,tolerance,training_error,heldout_error,training_seconds");
   EXPECT_EQ(firstLine(data / "stability_integrators.csv"),
             "variant,method,stable_dt,unstable_dt,trials,steps,tolerance,modal_bound,full_bound,stable_windows,"
             "check_dt,check_stable");

@@ -76,10 +76,11 @@ TEST(Stability, ModalMethodsAllowLargerStepsThanFullOnThePaper2dSetup)
   std::map<std::string, StabilityRow> by_method;
   for (const StabilityRow& r : runStability(setup, options))
     by_method[r.method] = r;
-  ASSERT_EQ(by_method.size(), 3u);
+  ASSERT_EQ(by_method.size(), 4u);
   // full is bounded by the highest frequency of all dofs, the modal methods by the basis.
   EXPECT_LT(by_method["full"].stable_dt, by_method["linear"].stable_dt);
   EXPECT_LT(by_method["full"].stable_dt, by_method["physical"].stable_dt);
+  EXPECT_LT(by_method["full"].stable_dt, by_method["cubature"].stable_dt);
   // linear is bounded by its highest mode alone: the bracket holds 2 / omega_4 (to the finite run's
   // hair of lateness, ~1e-6 relative at 3000 steps).
   const StabilityRow& linear = by_method["linear"];
@@ -88,7 +89,7 @@ TEST(Stability, ModalMethodsAllowLargerStepsThanFullOnThePaper2dSetup)
   EXPECT_LE(linear.unstable_dt - linear.stable_dt, options.tolerance * linear.stable_dt);
 }
 
-// The grid of the robustness issue (item 12): 5 x 5 in 2D, 1 m, 1 kg, 50 N/m, alpha 0.1, 4 modes.
+// A grid whose stability is not monotone in the time step: 5 x 5 in 2D, 1 m, 1 kg, 50 N/m, alpha 0.1, 4 modes.
 // Explicit `physical` diverges at 0.3165 s and 0.32 s but runs 5000 steps at 0.317, 0.33 and 0.34 s:
 // stability is not monotone in the time step. Bisection from a doubling bracket [0.256, 0.512] can
 // land in a stable pocket above a divergence; the search must report a step below which every step
@@ -227,8 +228,13 @@ TEST(Accuracy, SamplesEveryMethodFromTheSameStateWithFullAsReference)
   options.interval = 100;
   options.sample = 20;
   const AccuracyResult result = runAccuracy(setup, options);
-  EXPECT_EQ(result.errors.size(), 3u * (200 / 20 + 1));
-  EXPECT_EQ(result.snapshots.size(), 3u * 3u);  // steps 0, 100, 200
+  EXPECT_EQ(result.errors.size(), 4u * (200 / 20 + 1));
+  EXPECT_EQ(result.snapshots.size(), 4u * 3u);  // steps 0, 100, 200
+  ASSERT_TRUE(result.cubature);  // the training report of the cubature run
+  EXPECT_GT(result.cubature->springs, 0);
+  EXPECT_LE(result.cubature->springs, result.cubature->grid_springs);
+  EXPECT_EQ(result.cubature->grid_springs, 72);
+  EXPECT_GT(result.cubature->heldout_error, 0.0);
   for (const ErrorSample& e : result.errors)
   {
     if (e.step == 0)  // every method starts from the same state
@@ -312,11 +318,11 @@ TEST(Csv, NonFiniteNumbersAreEmptyFields)
   diverged.method = "linear";
   diverged.step = 10;
   diverged.diverged = true;
-  diverged.max_distance = diverged.rms_distance = diverged.max_displacement = diverged.energy =
+  diverged.max_distance = diverged.rms_distance = diverged.max_displacement = diverged.energy = diverged.center_y =
       std::numeric_limits<double>::quiet_NaN();
   std::ostringstream errors;
   writeErrorCsv(errors, {diverged});
-  EXPECT_EQ(errors.str().substr(errors.str().find('\n') + 1), "base,linear,10,0,,,,,1,0\n");
+  EXPECT_EQ(errors.str().substr(errors.str().find('\n') + 1), "base,linear,10,0,,,,,1,0,\n");
 
   StabilityRow row;
   row.variant = "base";
@@ -366,10 +372,11 @@ TEST(Cost, ReportsEveryMethodAndSize)
   options.min_repeat_seconds = 1e-3;
   options.build_repeats = 1;
   const std::vector<CostRow> rows = runCost(setup, options);
-  ASSERT_EQ(rows.size(), 6u);
+  ASSERT_EQ(rows.size(), 8u);  // 2 sizes x 4 methods
   EXPECT_EQ(rows[0].particles, 16);
-  EXPECT_EQ(rows[3].particles, 36);
-  EXPECT_EQ(rows[3].free_dofs, 2 * 30);
+  EXPECT_EQ(rows[4].particles, 36);
+  EXPECT_EQ(rows[4].free_dofs, 2 * 30);
+  EXPECT_EQ(rows[7].method, "cubature");
   for (const CostRow& r : rows)
   {
     EXPECT_GT(r.step_seconds, 0.0);

@@ -1,0 +1,331 @@
+// Cubature training (greedy selection, NNLS refits) and the cubature force model.
+#include "modal_mass_spring/cubature.h"
+
+#include "modal_mass_spring/nnls.h"
+#include "modal_mass_spring/spring_forces.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cmath>
+#include <random>
+#include <utility>
+
+namespace modal_mass_spring
+{
+namespace
+{
+
+// Up to 3 entries, never on the heap: per-spring vectors and blocks in the inner loops.
+using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 3, 1>;
+using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 3, 3>;
+
+// D_s = Phi_j - Phi_i: the spring's vector from i to j changes by D_s X (dim x r; fixed rows are 0).
+Eigen::MatrixXd springRows(const Grid& grid, const Eigen::MatrixXd& phi, const Spring& s)
+{
+  const int dim = grid.dimension();
+  Eigen::MatrixXd rows = Eigen::MatrixXd::Zero(dim, phi.cols());
+  for (int a = 0; a < dim; ++a)
+  {
+    const int fi = grid.freeIndex(dim * s.i + a), fj = grid.freeIndex(dim * s.j + a);
+    if (fj >= 0)
+      rows.row(a) += phi.row(fj);
+    if (fi >= 0)
+      rows.row(a) -= phi.row(fi);
+  }
+  return rows;
+}
+
+// The force on particle i of a spring whose vector from i to j is d; its energy in `energy`.
+SmallVector springForce(const Spring& s, const SmallVector& d, double* energy = nullptr)
+{
+  const double l = d.norm();
+  const double stretch = l - s.rest_length;
+  if (energy)
+    *energy = 0.5 * s.stiffness * stretch * stretch;
+  return s.stiffness * stretch / l * d;
+}
+
+Eigen::VectorXd restDiff(const Grid& grid, const Eigen::VectorXd& x, const Spring& s)
+{
+  const int dim = grid.dimension();
+  return x.segment(dim * s.j, dim) - x.segment(dim * s.i, dim);
+}
+
+// Phi^T f_spring(x_ref + Phi X) on the free dofs.
+Eigen::VectorXd reducedSpringForce(const Grid& grid, const Eigen::MatrixXd& phi, const Eigen::VectorXd& x_ref,
+                                   const Eigen::VectorXd& modal)
+{
+  Eigen::VectorXd x = x_ref;
+  grid.addFree(phi * modal, x);
+  Eigen::VectorXd f;
+  springForces(grid, x, f);
+  return phi.transpose() * grid.gatherFree(f);
+}
+
+// `count` poses (columns): N(0, 1) amplitudes times omega_1 / omega_i (An et al.: low modes move
+// most), scaled so that the largest particle displacement is uniform in (0, size].
+Eigen::MatrixXd randomPoses(const Grid& grid, const ModalBasis& basis, int count, double size, std::mt19937_64& rng)
+{
+  const Eigen::Index r = basis.phi.cols();
+  const int dim = grid.dimension();
+  double omega_1 = 0.0;
+  for (Eigen::Index i = 0; i < r && omega_1 == 0.0; ++i)
+    omega_1 = basis.frequencies[i];
+  std::normal_distribution<double> normal;
+  std::uniform_real_distribution<double> uniform;
+  Eigen::MatrixXd poses(r, count);
+  for (int p = 0; p < count; ++p)
+  {
+    for (Eigen::Index i = 0; i < r; ++i)
+    {
+      const double omega = basis.frequencies[i];
+      poses(i, p) = normal(rng) * (omega > 0.0 && omega_1 > 0.0 ? omega_1 / omega : 1.0);
+    }
+    const Eigen::VectorXd u = basis.phi * poses.col(p);
+    double largest = 0.0;
+    for (Eigen::Index k = 0; k + dim <= u.size(); k += dim)
+      largest = std::max(largest, u.segment(k, dim).norm());
+    const double magnitude = size * (1.0 - uniform(rng));  // (0, size]
+    poses.col(p) *= largest > 0.0 ? magnitude / largest : 0.0;
+  }
+  return poses;
+}
+
+// The training problem: targets b and, for any spring, its column of the (never stored) matrix A.
+// Both are stacked pose by pose (r entries each) and every pose is scaled by 1 / |its target|, so
+// |A w - b| / |b| is the RMS over poses of the relative error.
+class TrainingSet
+{
+public:
+  TrainingSet(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref, Eigen::MatrixXd poses)
+    : grid_(grid), phi_(basis.phi), x_ref_(x_ref), poses_(std::move(poses))
+  {
+    const Eigen::Index r = phi_.cols(), count = poses_.cols();
+    const Eigen::VectorXd base = reducedSpringForce(grid, phi_, x_ref, Eigen::VectorXd::Zero(r));
+    scale_.resize(count);
+    b_.resize(r * count);
+    for (Eigen::Index p = 0; p < count; ++p)
+    {
+      const Eigen::VectorXd target = reducedSpringForce(grid, phi_, x_ref, poses_.col(p)) - base;
+      const double norm = target.norm();
+      scale_[p] = norm > 0.0 ? 1.0 / norm : 0.0;  // a pose that moves no spring carries no information
+      b_.segment(p * r, r) = scale_[p] * target;
+    }
+  }
+
+  const Eigen::VectorXd& target() const { return b_; }
+
+  // (g_s(X_p) - g_s(0)) scaled, for every pose p.
+  Eigen::VectorXd column(int spring) const
+  {
+    const Spring& s = grid_.springs()[spring];
+    const Eigen::MatrixXd rows = springRows(grid_, phi_, s);
+    const SmallVector d0 = restDiff(grid_, x_ref_, s);
+    const SmallVector f0 = springForce(s, d0);
+    const Eigen::MatrixXd d = (rows * poses_).colwise() + Eigen::VectorXd(d0);
+    Eigen::MatrixXd f(d.rows(), d.cols());
+    for (Eigen::Index p = 0; p < d.cols(); ++p)
+      f.col(p) = scale_[p] * (springForce(s, d.col(p)) - f0);
+    Eigen::MatrixXd g = -rows.transpose() * f;  // r x poses
+    return Eigen::Map<const Eigen::VectorXd>(g.data(), g.size());
+  }
+
+private:
+  const Grid& grid_;
+  const Eigen::MatrixXd& phi_;
+  const Eigen::VectorXd& x_ref_;
+  Eigen::MatrixXd poses_;
+  Eigen::VectorXd scale_, b_;
+};
+
+}  // namespace
+
+std::string describeCubature(const Cubature& c, int num_springs)
+{
+  char text[256];
+  std::snprintf(text, sizeof text,
+                "cubature: %zu of %d springs, training error %.3g%% on %d poses, held-out %.3g%%, trained in %.3g s",
+                c.springs.size(), num_springs, 100.0 * c.training_error, c.training_poses, 100.0 * c.heldout_error,
+                c.training_seconds);
+  return text;
+}
+
+int effectiveMaxSprings(const CubatureParams& params, int num_springs)
+{
+  return params.max_springs > 0 ? std::min(params.max_springs, num_springs)
+                                : std::min(kDefaultMaxSprings, num_springs);
+}
+
+Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref,
+                       const CubatureParams& params)
+{
+  const auto start = std::chrono::steady_clock::now();
+  std::mt19937_64 rng(static_cast<std::uint64_t>(params.seed));
+  Eigen::MatrixXd training_poses = randomPoses(grid, basis, params.training_poses, params.pose_size, rng);
+  Eigen::MatrixXd heldout_poses = randomPoses(grid, basis, params.training_poses, params.pose_size, rng);
+  const TrainingSet training(grid, basis, x_ref, std::move(training_poses));
+  const Eigen::VectorXd& b = training.target();
+  const double b_norm = b.norm();
+  const int max_springs = effectiveMaxSprings(params, static_cast<int>(grid.springs().size()));
+
+  std::vector<int> pool(grid.springs().size()), selected;
+  for (size_t k = 0; k < pool.size(); ++k)
+    pool[k] = static_cast<int>(k);
+  Eigen::MatrixXd a(b.size(), std::min(max_springs, 64));  // the selected springs' columns
+  Eigen::MatrixXd gram(0, 0);
+  Eigen::VectorXd atb(0), w(0), residual = b;
+  double error = b_norm > 0.0 ? 1.0 : 0.0;
+  while (error > params.tolerance && static_cast<int>(selected.size()) < max_springs && !pool.empty())
+  {
+    // The candidate, among a random subset, whose column points most along the residual.
+    const size_t candidates = std::min<size_t>(kCubatureCandidates, pool.size());
+    int best = -1;
+    double best_score = 0.0;
+    Eigen::VectorXd best_column;
+    for (size_t c = 0; c < candidates; ++c)
+    {
+      std::swap(pool[c], pool[c + std::uniform_int_distribution<size_t>(0, pool.size() - 1 - c)(rng)]);
+      Eigen::VectorXd column = training.column(pool[c]);
+      const double norm = column.norm();
+      const double score = norm > 0.0 ? column.dot(residual) / norm : 0.0;
+      if (score > best_score)
+      {
+        best = static_cast<int>(c);
+        best_score = score;
+        best_column = std::move(column);
+      }
+    }
+    if (best < 0)
+      break;  // no spring reduces the residual
+    selected.push_back(pool[best]);
+    pool[best] = pool.back();
+    pool.pop_back();
+
+    const Eigen::Index k = static_cast<Eigen::Index>(selected.size()) - 1;
+    if (k >= a.cols())
+      a.conservativeResize(Eigen::NoChange, std::min<Eigen::Index>(2 * a.cols(), max_springs));
+    a.col(k) = best_column;
+    gram.conservativeResize(k + 1, k + 1);
+    gram.row(k).head(k + 1) = best_column.transpose() * a.leftCols(k + 1);
+    gram.col(k).head(k) = gram.row(k).head(k).transpose();
+    atb.conservativeResize(k + 1);
+    atb[k] = best_column.dot(b);
+    w.conservativeResize(k + 1);
+    w[k] = 0.0;
+    solveNnlsNormal(gram, atb, w);
+    residual = b - a.leftCols(k + 1) * w;
+    error = residual.norm() / b_norm;
+  }
+
+  Cubature cubature;
+  cubature.training_poses = params.training_poses;
+  cubature.training_error = error;
+  std::vector<double> weights;
+  for (size_t k = 0; k < selected.size(); ++k)
+    if (w[static_cast<Eigen::Index>(k)] > 0.0)
+    {
+      cubature.springs.push_back(selected[k]);
+      weights.push_back(w[static_cast<Eigen::Index>(k)]);
+    }
+  cubature.weights = Eigen::Map<const Eigen::VectorXd>(weights.data(), static_cast<Eigen::Index>(weights.size()));
+
+  const TrainingSet heldout(grid, basis, x_ref, std::move(heldout_poses));
+  Eigen::VectorXd fit = Eigen::VectorXd::Zero(heldout.target().size());
+  for (size_t k = 0; k < cubature.springs.size(); ++k)
+    fit += cubature.weights[static_cast<Eigen::Index>(k)] * heldout.column(cubature.springs[k]);
+  const double heldout_norm = heldout.target().norm();
+  cubature.heldout_error = heldout_norm > 0.0 ? (fit - heldout.target()).norm() / heldout_norm : 0.0;
+  cubature.training_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return cubature;
+}
+
+CubatureForceModel::CubatureForceModel(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref,
+                                       const Cubature& cubature)
+  : grid_(grid), basis_(basis), dim_(grid.dimension()), weights_(cubature.weights)
+{
+  const Eigen::Index count = static_cast<Eigen::Index>(cubature.springs.size());
+  diff_.resize(count * dim_, basis.phi.cols());
+  for (Eigen::Index t = 0; t < count; ++t)
+  {
+    springs_.push_back(grid.springs()[cubature.springs[t]]);
+    diff_.middleRows(t * dim_, dim_) = springRows(grid, basis.phi, springs_.back());
+  }
+  // The exact force at the reference is part of F: it carries the round-off of every spring.
+  roundoff_ = modalRoundoff(grid, basis, x_ref);
+  setReference(x_ref);
+}
+
+void CubatureForceModel::setReference(const Eigen::VectorXd& x_ref)
+{
+  rest_diff_.resize(diff_.rows());
+  for (size_t t = 0; t < springs_.size(); ++t)
+    rest_diff_.segment(static_cast<Eigen::Index>(t) * dim_, dim_) = restDiff(grid_, x_ref, springs_[t]);
+  // The exact force and energy at the reference, minus what the cubature gives there.
+  Eigen::VectorXd f_all;
+  double spring_energy = 0.0;
+  springForces(grid_, x_ref, f_all, &spring_energy);
+  f_all += grid_.gravityForce();
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(size());
+  Eigen::VectorXd at_zero;
+  const double cubature_energy = weightedSprings(zero, &at_zero);
+  constant_ = basis_.phi.transpose() * grid_.gatherFree(f_all) - at_zero;
+  energy_constant_ = spring_energy + gravityEnergy(grid_, x_ref) - cubature_energy;
+  cache_.clear();
+}
+
+double CubatureForceModel::weightedSprings(const Eigen::VectorXd& modal, Eigen::VectorXd* f)
+{
+  d_.noalias() = diff_ * modal;
+  d_ += rest_diff_;
+  fd_.resize(d_.size());
+  double energy = 0.0;
+  for (size_t t = 0; t < springs_.size(); ++t)
+  {
+    const Eigen::Index row = static_cast<Eigen::Index>(t) * dim_;
+    double e = 0.0;
+    fd_.segment(row, dim_) = weights_[static_cast<Eigen::Index>(t)] * springForce(springs_[t], d_.segment(row, dim_), &e);
+    energy += weights_[static_cast<Eigen::Index>(t)] * e;
+  }
+  if (f)
+    f->noalias() = -diff_.transpose() * fd_;  // dE_s/dX = D_s^T f_i
+  return energy;
+}
+
+void CubatureForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorXd& f)
+{
+  const double energy = weightedSprings(modal, &f);
+  f += constant_;
+  cache_.store(modal, energy + energy_constant_ - constant_.dot(modal));
+}
+
+double CubatureForceModel::energy(const Eigen::VectorXd& modal)
+{
+  double cached = 0.0;
+  if (cache_.find(modal, cached))
+    return cached;
+  return weightedSprings(modal, nullptr) + energy_constant_ - constant_.dot(modal);
+}
+
+void CubatureForceModel::tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k)
+{
+  d_.noalias() = diff_ * modal;
+  d_ += rest_diff_;
+  Eigen::MatrixXd weighted(diff_.rows(), diff_.cols());  // blocks w_s K_s D_s
+  for (size_t t = 0; t < springs_.size(); ++t)
+  {
+    const Eigen::Index row = static_cast<Eigen::Index>(t) * dim_;
+    const Spring& s = springs_[t];
+    const SmallVector d = d_.segment(row, dim_);
+    const double l = d.norm();
+    const SmallVector u = d / l;
+    const SmallMatrix uu = u * u.transpose();
+    const SmallMatrix ke = weights_[static_cast<Eigen::Index>(t)] * s.stiffness *
+                           (uu + (1.0 - s.rest_length / l) * (SmallMatrix::Identity(dim_, dim_) - uu));
+    weighted.middleRows(row, dim_).noalias() = ke * diff_.middleRows(row, dim_);
+  }
+  const Eigen::MatrixXd reduced = diff_.transpose() * weighted;
+  k = reduced.sparseView();
+}
+
+}  // namespace modal_mass_spring

@@ -1,0 +1,358 @@
+// The cubature method and its NNLS solver: known answers, agreement with `physical`, derivatives
+// by central differences, the training's held-out error, and its parameters' errors.
+#include "modal_mass_spring/cubature.h"
+#include "modal_mass_spring/method_model.h"
+#include "modal_mass_spring/nnls.h"
+#include "modal_mass_spring/simulation.h"
+#include "modal_mass_spring/spring_forces.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <string>
+
+using namespace modal_mass_spring;
+
+namespace
+{
+
+// config/compare/paper_2d.yaml and paper_3d.yaml.
+GridParams paper2D()
+{
+  GridParams g;
+  g.mass = 0.02;
+  return g;
+}
+
+GridParams paper3D()
+{
+  GridParams g;
+  g.rows = g.cols = 10;
+  g.dimension = 3;
+  g.rotation_deg = 45.0;
+  return g;
+}
+
+SimulationParams paperParams(Method method, int r, Linearization linearization = Linearization::Rest)
+{
+  SimulationParams s;
+  s.method = method;
+  s.num_modes = r;
+  s.alpha = 0.2;
+  s.linearization = linearization;
+  return s;
+}
+
+Cubature everySpringAtWeightOne(const Grid& grid)
+{
+  Cubature c;
+  for (size_t k = 0; k < grid.springs().size(); ++k)
+    c.springs.push_back(static_cast<int>(k));
+  c.weights = Eigen::VectorXd::Ones(static_cast<Eigen::Index>(c.springs.size()));
+  return c;
+}
+
+// A pose that moves the largest particle by about `size` metres.
+Eigen::VectorXd pose(const Simulation& sim, double size, unsigned seed)
+{
+  std::srand(seed);
+  const Eigen::VectorXd modal = Eigen::VectorXd::Random(sim.basis().phi.cols());
+  return modal * size / (sim.basis().phi * modal).cwiseAbs().maxCoeff();
+}
+
+std::string refusal(const std::function<void()>& build)
+{
+  try
+  {
+    build();
+  }
+  catch (const std::invalid_argument& e)
+  {
+    return e.what();
+  }
+  return "";
+}
+
+bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
+
+}  // namespace
+
+TEST(Nnls, ActiveConstraintGivesTheBoundaryMinimum)
+{
+  // Unconstrained, A w = b has w = (-1, 1); with w >= 0 the minimum is at w1 = 0, w2 = 1/2.
+  Eigen::MatrixXd a(2, 2);
+  a << 1, 1, 0, 1;
+  const Eigen::Vector2d b(0, 1);
+  NnlsResult result;
+  const Eigen::VectorXd w = nnls(a, b, &result);
+  EXPECT_TRUE(result.converged);
+  EXPECT_NEAR(w[0], 0.0, 1e-14);
+  EXPECT_NEAR(w[1], 0.5, 1e-14);
+  // KKT: the gradient A^T (b - A w) is zero on the positive weights and <= 0 on the zero ones.
+  const Eigen::VectorXd gradient = a.transpose() * (b - a * w);
+  EXPECT_NEAR(gradient[1], 0.0, 1e-14);
+  EXPECT_LT(gradient[0], 0.0);
+}
+
+TEST(Nnls, ExactNonNegativeFitIsFound)
+{
+  std::srand(3);
+  const Eigen::MatrixXd a = Eigen::MatrixXd::Random(40, 8);
+  Eigen::VectorXd truth(8);
+  truth << 0.5, 0.0, 2.0, 1.0, 0.0, 0.25, 3.0, 0.0;
+  const Eigen::VectorXd w = nnls(a, a * truth);
+  EXPECT_LT((w - truth).cwiseAbs().maxCoeff(), 1e-10) << w.transpose();
+}
+
+TEST(Nnls, RankDeficientProblemReachesTheMinimumResidual)
+{
+  // The third column repeats the first and the fourth is the sum of the first two: many weight
+  // vectors fit b exactly; any of them must be non-negative with a zero residual.
+  std::srand(5);
+  Eigen::MatrixXd a(30, 4);
+  a.leftCols(2) = Eigen::MatrixXd::Random(30, 2);
+  a.col(2) = a.col(0);
+  a.col(3) = a.col(0) + a.col(1);
+  const Eigen::VectorXd b = a.col(0) * 1.0 + a.col(1) * 2.0;
+  NnlsResult result;
+  const Eigen::VectorXd w = nnls(a, b, &result);
+  EXPECT_TRUE(result.converged);
+  EXPECT_GE(w.minCoeff(), 0.0);
+  EXPECT_LT((a * w - b).norm(), 1e-10 * b.norm()) << w.transpose();
+
+  // A target outside the cone of the columns: -b is best fitted by w = 0.
+  const Eigen::VectorXd none = nnls(a, -b);
+  EXPECT_EQ(none.cwiseAbs().maxCoeff(), 0.0);
+}
+
+TEST(Nnls, WarmStartGivesTheColdStartSolution)
+{
+  std::srand(7);
+  const Eigen::MatrixXd a = Eigen::MatrixXd::Random(25, 10);
+  const Eigen::VectorXd b = Eigen::VectorXd::Random(25);
+  const Eigen::VectorXd cold = nnls(a, b);
+  Eigen::VectorXd warm = Eigen::VectorXd::Constant(10, 0.3);  // every variable passive at first
+  const NnlsResult result = solveNnlsNormal(a.transpose() * a, a.transpose() * b, warm);
+  EXPECT_TRUE(result.converged);
+  EXPECT_LT((warm - cold).cwiseAbs().maxCoeff(), 1e-10);
+  EXPECT_GT((cold.array() == 0.0).count(), 0);  // the problem has active constraints
+}
+
+TEST(Cubature, EverySpringAtWeightOneReproducesPhysical)
+{
+  for (const GridParams& g : {paper2D(), paper3D()})
+  {
+    const int r = g.dimension == 2 ? 4 : 30;
+    Simulation sim(g, paperParams(Method::Physical, r));
+    const Cubature all = everySpringAtWeightOne(sim.grid());
+    const Eigen::VectorXd& x_ref = sim.linearizationPositions();
+    PhysicalModalForceModel physical(sim.grid(), sim.basis(), x_ref);
+    CubatureForceModel cubature(sim.grid(), sim.basis(), x_ref, all);
+    for (double size : {0.0, 0.05, 0.3})
+    {
+      const Eigen::VectorXd modal = pose(sim, size, 11);
+      Eigen::VectorXd f_physical, f_cubature;
+      physical.force(modal, f_physical);
+      cubature.force(modal, f_cubature);
+      EXPECT_LT((f_physical - f_cubature).norm(), 1e-12 * f_physical.norm()) << size;
+      EXPECT_NEAR(physical.energy(modal), cubature.energy(modal), 1e-12 * std::abs(physical.energy(modal)) + 1e-15);
+      SparseMatrix k_physical, k_cubature;
+      physical.tangentStiffness(modal, k_physical);
+      cubature.tangentStiffness(modal, k_cubature);
+      // The flat 3D sheet's modes at rest are all out of plane, where K(x_ref) vanishes: the
+      // round-off is measured against a spring's stiffness per mass.
+      const Eigen::MatrixXd kp(k_physical), kc(k_cubature);
+      EXPECT_LT((kp - kc).norm(), 1e-12 * (kp.norm() + g.structural_stiffness / g.mass)) << g.dimension << "D " << size;
+    }
+  }
+}
+
+TEST(Cubature, EverySpringAtWeightOneFollowsThePhysicalTrajectory)
+{
+  // The same grid stepped by both methods, explicitly and implicitly, from a displaced start and
+  // after a switch that leaves a frozen offset (a moved reference).
+  Simulation sim(paper2D(), paperParams(Method::Physical, 4));
+  const Grid& grid = sim.grid();
+  const Cubature all = everySpringAtWeightOne(grid);
+  const SparseMatrix stiffness = tangentStiffness(grid, sim.linearizationPositions());
+  const Eigen::VectorXd mass = Eigen::VectorXd::Constant(grid.numFreeDofs(), grid.particleMass());
+  const LinearizedGrid lin{grid, sim.basis(), sim.linearizationPositions(), stiffness, mass, &all};
+  for (IntegratorKind kind : {IntegratorKind::Explicit, IntegratorKind::Implicit})
+  {
+    IntegratorSettings settings;
+    settings.kind = kind;
+    settings.alpha = 0.2;
+    auto physical = makeMethod(Method::Physical, lin, settings);
+    auto cubature = makeMethod(Method::Cubature, lin, settings);
+    std::srand(13);
+    const Eigen::VectorXd u = 0.02 * Eigen::VectorXd::Random(grid.numFreeDofs());
+    const Eigen::VectorXd v = Eigen::VectorXd::Zero(grid.numFreeDofs());
+    physical->assign(u, v, Remainder::Keep);
+    cubature->assign(u, v, Remainder::Keep);
+    double gap = 0.0, moved = 0.0;
+    for (int k = 0; k < 2000; ++k)
+    {
+      ASSERT_TRUE(physical->step());
+      ASSERT_TRUE(cubature->step());
+      physical->commit();
+      cubature->commit();
+      gap = std::max(gap, (physical->displacement(physical->state()) - cubature->displacement(cubature->state()))
+                              .cwiseAbs()
+                              .maxCoeff());
+      moved = std::max(moved, (physical->displacement(physical->state()) - u).cwiseAbs().maxCoeff());
+    }
+    EXPECT_GT(moved, 0.05);  // it fell: the test is not about a grid at rest
+    EXPECT_LT(gap, 1e-10) << toString(kind);
+  }
+}
+
+TEST(Cubature, ForceIsMinusEnergyGradientAndTangentIsMinusForceJacobian)
+{
+  for (const GridParams& g : {paper2D(), paper3D()})
+  {
+    const int r = g.dimension == 2 ? 4 : 30;
+    Simulation sim(g, paperParams(Method::Cubature, r));
+    ASSERT_NE(sim.cubature(), nullptr);
+    ASSERT_LT(sim.cubature()->springs.size(), sim.grid().springs().size());  // a real subset
+    CubatureForceModel model(sim.grid(), sim.basis(), sim.linearizationPositions(), *sim.cubature());
+    const Eigen::VectorXd modal = pose(sim, 0.15, 17);
+    Eigen::VectorXd f;
+    model.force(modal, f);
+    SparseMatrix k;
+    model.tangentStiffness(modal, k);
+    const Eigen::MatrixXd tangent(k);
+    EXPECT_LT((tangent - tangent.transpose()).norm(), 1e-12 * tangent.norm());
+    const double h = 1e-6 * modal.norm();
+    double force_error = 0.0, tangent_error = 0.0;
+    for (int i = 0; i < r; ++i)
+    {
+      Eigen::VectorXd plus = modal, minus = modal;
+      plus[i] += h;
+      minus[i] -= h;
+      force_error = std::max(force_error, std::abs(-(model.energy(plus) - model.energy(minus)) / (2 * h) - f[i]));
+      Eigen::VectorXd f_plus, f_minus;
+      model.force(plus, f_plus);
+      model.force(minus, f_minus);
+      tangent_error = std::max(tangent_error, (-(f_plus - f_minus) / (2 * h) - tangent.col(i)).cwiseAbs().maxCoeff());
+    }
+    EXPECT_LT(force_error, 1e-6 * f.cwiseAbs().maxCoeff()) << g.dimension << "D";
+    EXPECT_LT(tangent_error, 1e-6 * tangent.cwiseAbs().maxCoeff()) << g.dimension << "D";
+  }
+}
+
+TEST(Cubature, HeldOutErrorIsBelowTwiceTheToleranceOnThePaperSetups)
+{
+  struct Setup
+  {
+    GridParams grid;
+    int r;
+    Linearization linearization;
+  };
+  for (const Setup& setup : {Setup{paper2D(), 4, Linearization::Rest}, Setup{paper2D(), 4, Linearization::Equilibrium},
+                             Setup{paper3D(), 30, Linearization::Rest}, Setup{paper3D(), 30, Linearization::Equilibrium}})
+  {
+    const SimulationParams s = paperParams(Method::Cubature, setup.r, setup.linearization);
+    Simulation sim(setup.grid, s);
+    const Cubature& c = *sim.cubature();
+    const std::string name = std::to_string(setup.grid.dimension) + "D " + toString(setup.linearization);
+    EXPECT_LE(c.training_error, s.cubature_tolerance) << name;
+    EXPECT_LT(c.heldout_error, 2.0 * s.cubature_tolerance) << name;
+    EXPECT_GT(c.heldout_error, 0.0) << name;  // a subset, measured on poses it did not see
+    EXPECT_LT(c.springs.size(), sim.grid().springs().size()) << name;
+    EXPECT_EQ(c.weights.size(), static_cast<Eigen::Index>(c.springs.size()));
+    EXPECT_GT(c.weights.minCoeff(), 0.0) << name;
+    EXPECT_GT(c.training_seconds, 0.0);
+  }
+}
+
+TEST(Cubature, TrainingIsReproducibleAndStopsAtMaxSprings)
+{
+  SimulationParams s = paperParams(Method::Cubature, 30);
+  Simulation a(paper3D(), s), b(paper3D(), s);
+  EXPECT_EQ(a.cubature()->springs, b.cubature()->springs);
+  EXPECT_EQ(a.cubature()->weights, b.cubature()->weights);
+  s.cubature_max_springs = 5;
+  Simulation capped(paper3D(), s);
+  EXPECT_LE(capped.cubature()->springs.size(), 5u);
+  EXPECT_GT(capped.cubature()->training_error, s.cubature_tolerance);
+  EXPECT_GT(capped.cubature()->training_error, a.cubature()->training_error);
+}
+
+TEST(Cubature, TrajectoryFollowsPhysicalOnThePaper2DSetup)
+{
+  // 5 s of the paper's 2D experiment from the flat grid, which sags by about three spacings: the
+  // cubature's particles stay close to the physical method's, and its mean distance to the
+  // unreduced `full` is within 20% of physical's.
+  for (IntegratorKind kind : {IntegratorKind::Explicit, IntegratorKind::Implicit})
+  {
+    SimulationParams s = paperParams(Method::Physical, 4);
+    s.integrator = kind;
+    Simulation physical(paper2D(), s);
+    s.method = Method::Cubature;
+    Simulation cubature(paper2D(), s);
+    s.method = Method::Full;
+    Simulation full(paper2D(), s);
+    double gap = 0.0, moved = 0.0, physical_to_full = 0.0, cubature_to_full = 0.0;
+    for (int k = 0; k < 5000; ++k)
+    {
+      ASSERT_FALSE(physical.step().diverged);
+      ASSERT_FALSE(cubature.step().diverged) << k;
+      ASSERT_FALSE(full.step().diverged);
+      gap = std::max(gap, (physical.points() - cubature.points()).colwise().norm().maxCoeff());
+      moved = std::max(moved, (physical.points() - physical.grid().toPoints(physical.startPositions())).colwise().norm().maxCoeff());
+      physical_to_full += (physical.points() - full.points()).colwise().norm().mean();
+      cubature_to_full += (cubature.points() - full.points()).colwise().norm().mean();
+    }
+    EXPECT_GT(moved, 0.25) << toString(kind);
+    EXPECT_LT(gap, 0.15 * moved) << toString(kind);
+    EXPECT_LT(cubature_to_full, 1.2 * physical_to_full) << toString(kind);
+  }
+}
+
+TEST(Cubature, SwitchingToAndFromCubatureKeepsTheParticles)
+{
+  SimulationParams s = paperParams(Method::Physical, 30);
+  Simulation sim(paper3D(), s);
+  sim.step(300);
+  EXPECT_EQ(sim.cubature(), nullptr);  // trained only when first needed
+  const Eigen::VectorXd before = sim.positions();
+  sim.setMethod(Method::Cubature);
+  ASSERT_NE(sim.cubature(), nullptr);
+  EXPECT_LT((sim.positions() - before).cwiseAbs().maxCoeff(), 1e-12);
+  ASSERT_FALSE(sim.step(300).diverged);
+  const Eigen::VectorXd after = sim.positions();
+  sim.setMethod(Method::Physical);
+  EXPECT_LT((sim.positions() - after).cwiseAbs().maxCoeff(), 1e-12);
+  sim.setMethod(Method::Full);
+  sim.setMethod(Method::Cubature);  // from full: a frozen offset, the reference moved
+  EXPECT_LT((sim.positions() - after).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_FALSE(sim.step(300).diverged);
+}
+
+TEST(Cubature, BadParametersAreNamed)
+{
+  const GridParams g = paper2D();  // 72 springs
+  auto refused = [&](const std::function<void(SimulationParams&)>& change) {
+    SimulationParams s = paperParams(Method::Cubature, 4);
+    change(s);
+    return refusal([&] { validateParameters(g, s); });
+  };
+  EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.cubature_tolerance = 0.0; }), "'cubature_tolerance' = 0: must be in (0, 1)"));
+  EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.cubature_tolerance = 1.0; }), "'cubature_tolerance' = 1"));
+  EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.cubature_tolerance = NAN; }), "'cubature_tolerance'"));
+  EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.cubature_max_springs = -1; }), "'cubature_max_springs' = -1"));
+  EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.cubature_max_springs = 73; }), "[1, 72], the number of springs"));
+  EXPECT_EQ(refused([](SimulationParams& s) { s.cubature_max_springs = 72; }), "");
+  EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.cubature_training_poses = 0; }), "'cubature_training_poses' = 0"));
+  EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.cubature_training_poses = -5; }), "must be an integer >= 1"));
+  EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.cubature_pose_size = -0.1; }), "'cubature_pose_size' = -0.1"));
+  EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.cubature_pose_size = INFINITY; }), "'cubature_pose_size'"));
+  EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.cubature_seed = -1; }), "'cubature_seed' = -1"));
+  EXPECT_EQ(refused([](SimulationParams&) {}), "");
+  EXPECT_EQ(parseMethod("cubature"), Method::Cubature);
+  EXPECT_EQ(countSprings(g), static_cast<long long>(Grid(g).springs().size()));
+  GridParams bending = paper3D();
+  bending.bending = true;
+  EXPECT_EQ(countSprings(bending), static_cast<long long>(Grid(bending).springs().size()));
+}
