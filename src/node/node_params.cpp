@@ -17,12 +17,14 @@ namespace
 constexpr double kMaxStepsPerTick = 100000.0;
 // Lengths and scales beyond this (m, or a strain) are typing mistakes, and would overflow the markers.
 constexpr double kMaxLength = 1e6;
+// A surface of more cells than this would exceed rviz's message sizes by far (480 bytes a cell).
+constexpr int kMaxSurfaceCells = 1000000;
 
 // Remembers which keys were asked for, so the keys nobody reads can be named.
-class RecordingSource : public ParameterSource
+class RecordingSource : public NodeParameterSource
 {
 public:
-  explicit RecordingSource(const ParameterSource& source) : source_(source) {}
+  explicit RecordingSource(const NodeParameterSource& source) : source_(source) {}
   std::optional<int> getInt(const std::string& key) const override { return note(key), source_.getInt(key); }
   std::optional<double> getDouble(const std::string& key) const override { return note(key), source_.getDouble(key); }
   std::optional<bool> getBool(const std::string& key) const override { return note(key), source_.getBool(key); }
@@ -38,11 +40,15 @@ public:
   {
     return note(key), source_.getDoubleList(key);
   }
+  std::optional<std::vector<std::string>> getStringList(const std::string& key) const override
+  {
+    return note(key), source_.getStringList(key);
+  }
   const std::set<std::string>& queried() const { return queried_; }
 
 private:
   void note(const std::string& key) const { queried_.insert(key); }
-  const ParameterSource& source_;
+  const NodeParameterSource& source_;
   mutable std::set<std::string> queried_;
 };
 
@@ -73,6 +79,15 @@ double nonNegative(const ParameterSource& s, const std::string& name, double fal
   return value;
 }
 
+// An integer in [min, max].
+int intInRange(const ParameterSource& s, const std::string& name, int fallback, long long min, long long max)
+{
+  const int value = s.getInt(name).value_or(fallback);
+  if (value < min || value > max)
+    rejectParameter(name, value, "must be an integer in [" + std::to_string(min) + ", " + std::to_string(max) + "]");
+  return value;
+}
+
 std::string frameId(const ParameterSource& s, const std::string& name, const std::string& fallback)
 {
   const std::string value = s.getString(name).value_or(fallback);
@@ -88,7 +103,13 @@ std::string particleFrame(const std::string& grid_frame, int particle)
   return grid_frame + "/particle_" + std::to_string(particle);
 }
 
-NodeParams loadNodeParams(const ParameterSource& s, const GridParams& grid, const SimulationParams& sim)
+Eigen::Vector3d methodOffset(const NodeParams& params, size_t index)
+{
+  const double centre = 0.5 * (static_cast<double>(params.methods.size()) - 1.0);
+  return params.offset + Eigen::Vector3d((static_cast<double>(index) - centre) * params.method_spacing, 0.0, 0.0);
+}
+
+NodeParams loadNodeParams(const NodeParameterSource& s, const GridParams& grid, const SimulationParams& sim)
 {
   NodeParams p;
   p.real_time_factor = positive(s, "real_time_factor", p.real_time_factor, 1000.0, "");
@@ -134,12 +155,43 @@ NodeParams loadNodeParams(const ParameterSource& s, const GridParams& grid, cons
   p.strain_scale = positive(s, "strain_scale", p.strain_scale, kMaxLength, "");
   p.particle_diameter = positive(s, "particle_diameter", 0.3 * grid.spacing, kMaxLength, " m");
   p.spring_width = positive(s, "spring_width", 0.06 * grid.spacing, kMaxLength, " m");
+  p.detail_max_particles = intInRange(s, "detail_max_particles", p.detail_max_particles, 0, kMaxParticles);
+  const bool detailed = n <= p.detail_max_particles;
+  p.show_surface = s.getBool("show_surface").value_or(p.show_surface);
+  p.show_particles = s.getBool("show_particles").value_or(detailed);
+  p.show_springs = s.getBool("show_springs").value_or(detailed);
+  p.surface_max_cells = intInRange(s, "surface_max_cells", p.surface_max_cells, 1, kMaxSurfaceCells);
+  p.show_labels = s.getBool("show_labels").value_or(p.show_labels);
+  p.show_shadow = s.getBool("show_shadow").value_or(p.show_shadow);
+
+  if (const auto names = s.getStringList("methods"))
+  {
+    std::string allowed;
+    for (const auto& name : methodNames())
+      allowed += (allowed.empty() ? "" : ", ") + name;
+    if (names->empty() || names->size() > methodNames().size())
+      rejectParameter("methods", std::to_string(names->size()) + " names",
+                      "must list 1 to " + std::to_string(methodNames().size()) + " of " + allowed);
+    for (const auto& name : *names)
+    {
+      if (std::find(methodNames().begin(), methodNames().end(), name) == methodNames().end())
+        rejectParameter("methods", "'" + name + "'", "each must be one of " + allowed);
+      if (std::count(names->begin(), names->end(), name) > 1)
+        rejectParameter("methods", "'" + name + "'", "each method must be listed once");
+      p.methods.push_back(parseMethod(name));
+    }
+  }
+  p.method_spacing = positive(s, "method_spacing", (grid.cols + 2) * grid.spacing, kMaxLength, " m");
+  p.shadow_full = s.getBool("shadow_full").value_or(p.shadow_full);
+  if (p.shadow_full && !p.methods.empty())
+    rejectParameter("shadow_full", "true",
+                    "must be false when methods is set (list full among the methods to compare with it)");
   p.status_log_period = nonNegative(s, "status_log_period", p.status_log_period, 86400.0, " s (0: no status lines)");
   p.diagnostic_period = positive(s, "diagnostic_period", p.diagnostic_period, 3600.0, " s");
   return p;
 }
 
-NodeConfiguration loadNodeConfiguration(const ParameterSource& source, const std::vector<std::string>& present_keys)
+NodeConfiguration loadNodeConfiguration(const NodeParameterSource& source, const std::vector<std::string>& present_keys)
 {
   const RecordingSource recording(source);
   NodeConfiguration c;

@@ -13,6 +13,13 @@
 namespace modal_mass_spring
 {
 
+// The node's sources also read lists of names (methods).
+class NodeParameterSource : public ParameterSource
+{
+public:
+  virtual std::optional<std::vector<std::string>> getStringList(const std::string& key) const = 0;
+};
+
 // Parameters of the node itself, on top of the core's GridParams and SimulationParams.
 struct NodeParams
 {
@@ -26,6 +33,22 @@ struct NodeParams
   double strain_scale = 0.1;      // |strain| drawn in full colour
   double particle_diameter = 0.0; // m
   double spring_width = 0.0;      // m
+  // Marker namespaces sent. Above detail_max_particles particles, particles and springs are off
+  // unless set: the surface alone shows a large sheet at a fraction of the bytes.
+  int detail_max_particles = 2500;
+  bool show_surface = true;
+  bool show_particles = true;
+  bool show_springs = true;
+  int surface_max_cells = 1600;   // above this, the surface skips rows and columns evenly
+  bool show_labels = true;        // a TEXT_VIEW_FACING label per grid: method, distance to full, cost
+  bool show_shadow = true;        // the shadow full's faint surface (with shadow_full)
+
+  // The live comparison: these methods stepped in lockstep from the same state, each drawn
+  // method_spacing apart along x; empty: one method (`method`). A single method may run a shadow
+  // full beside it (shadow_full) for its distance to the unreduced reference.
+  std::vector<Method> methods;
+  double method_spacing = 0.0;    // m; default: the grid's width plus three spacings
+  bool shadow_full = false;
   double status_log_period = 5.0; // s of wall time between status lines in the log; 0: never
   double diagnostic_period = 1.0; // s between /diagnostics messages (diagnostic_updater reads it too)
 };
@@ -34,7 +57,7 @@ struct NodeParams
 // depend on the grid (tf_particles, the marker sizes) come from `grid`. `grid` and `sim` must be valid
 // (validateParameters). Throws std::invalid_argument naming the parameter, its value and what is
 // allowed.
-NodeParams loadNodeParams(const ParameterSource& source, const GridParams& grid, const SimulationParams& sim);
+NodeParams loadNodeParams(const NodeParameterSource& source, const GridParams& grid, const SimulationParams& sim);
 
 // Everything the node is configured with.
 struct NodeConfiguration
@@ -49,7 +72,10 @@ struct NodeConfiguration
 // whatever the grid's size: the core's (loadGridParams, loadSimulationParams, validateParameters),
 // then the node's (loadNodeParams). `present_keys` are the keys set for the node; the ones no getter
 // asked for end in unknown_keys. Throws std::invalid_argument naming the first bad parameter.
-NodeConfiguration loadNodeConfiguration(const ParameterSource& source, const std::vector<std::string>& present_keys);
+NodeConfiguration loadNodeConfiguration(const NodeParameterSource& source, const std::vector<std::string>& present_keys);
+
+// Where the grid of `methods[index]` is drawn in a lockstep comparison: centred on `offset` along x.
+Eigen::Vector3d methodOffset(const NodeParams& params, size_t index);
 
 // The child frame of a broadcast particle.
 std::string particleFrame(const std::string& grid_frame, int particle);

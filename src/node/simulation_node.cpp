@@ -2,10 +2,13 @@
 #include "simulation_node.h"
 
 #include "modal_mass_spring/Status.h"
+#include "grid_messages.h"
 #include "startup_report.h"
 #include "xmlrpc_parameter_source.h"
 
 #include <geometry_msgs/TransformStamped.h>
+#include <rosgraph_msgs/Clock.h>
+#include <sensor_msgs/PointCloud2.h>
 
 #include <algorithm>
 #include <chrono>
@@ -24,76 +27,6 @@ using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point start)
 {
   return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-std_msgs::ColorRGBA rgba(float r, float g, float b, float a = 1.0f)
-{
-  std_msgs::ColorRGBA c;
-  c.r = r;
-  c.g = g;
-  c.b = b;
-  c.a = a;
-  return c;
-}
-
-geometry_msgs::Point point(const Eigen::Vector3d& p)
-{
-  geometry_msgs::Point msg;
-  msg.x = p.x();
-  msg.y = p.y();
-  msg.z = p.z();
-  return msg;
-}
-
-visualization_msgs::MarkerArray makeMarkers(const Grid& grid, const NodeParams& params, const Eigen::Matrix3Xd& points,
-                                            const ros::Time& stamp)
-{
-  visualization_msgs::MarkerArray array;
-  visualization_msgs::Marker particles;
-  particles.header.frame_id = params.fixed_frame;
-  particles.header.stamp = stamp;
-  particles.ns = "particles";
-  particles.id = 0;
-  particles.type = visualization_msgs::Marker::SPHERE_LIST;
-  particles.action = visualization_msgs::Marker::ADD;
-  particles.pose.orientation.w = 1.0;
-  particles.scale.x = particles.scale.y = particles.scale.z = params.particle_diameter;
-  particles.color = rgba(0.2f, 0.5f, 1.0f);
-  const std_msgs::ColorRGBA free_colour = rgba(0.2f, 0.5f, 1.0f), fixed_colour = rgba(0.9f, 0.2f, 0.15f);
-  for (int k = 0; k < points.cols(); ++k)
-  {
-    particles.points.push_back(point(points.col(k) + params.offset));
-    particles.colors.push_back(grid.isFixed(k) ? fixed_colour : free_colour);
-  }
-
-  visualization_msgs::Marker springs;
-  springs.header = particles.header;
-  springs.ns = "springs";
-  springs.id = 0;
-  springs.type = visualization_msgs::Marker::LINE_LIST;
-  springs.action = visualization_msgs::Marker::ADD;
-  springs.pose.orientation.w = 1.0;
-  springs.scale.x = params.spring_width;
-  springs.color = rgba(0.8f, 0.8f, 0.8f);
-  const std_msgs::ColorRGBA rest = rgba(0.8f, 0.8f, 0.8f), stretched = rgba(1.0f, 0.1f, 0.05f),
-                            compressed = rgba(0.1f, 0.3f, 1.0f);
-  for (const Spring& spring : grid.springs())
-  {
-    springs.points.push_back(point(points.col(spring.i) + params.offset));
-    springs.points.push_back(point(points.col(spring.j) + params.offset));
-    if (!params.color_by_strain)
-      continue;
-    const double strain = ((points.col(spring.j) - points.col(spring.i)).norm() - spring.rest_length) / spring.rest_length;
-    const float t = static_cast<float>(std::min(1.0, std::abs(strain) / params.strain_scale));
-    const std_msgs::ColorRGBA& end = strain > 0.0 ? stretched : compressed;
-    const std_msgs::ColorRGBA c = rgba(rest.r + t * (end.r - rest.r), rest.g + t * (end.g - rest.g),
-                                       rest.b + t * (end.b - rest.b));
-    springs.colors.push_back(c);
-    springs.colors.push_back(c);
-  }
-  array.markers.push_back(particles);
-  array.markers.push_back(springs);
-  return array;
 }
 
 // Polls a StartupProgress from its own thread while the simulation is built.
@@ -125,6 +58,45 @@ private:
   std::thread thread_;  // last: starts once the rest is there
 };
 
+// The largest ~step request: more would hold the services for minutes on a large grid.
+constexpr uint32_t kMaxStepRequest = 10000;
+
+std::string formatDistance(double metres)
+{
+  char text[64];
+  if (metres < 1e-3)
+    std::snprintf(text, sizeof text, "%.3g mm", 1e3 * metres);
+  else
+    std::snprintf(text, sizeof text, "%.1f mm", 1e3 * metres);
+  return text;
+}
+
+std::string formatCost(double seconds)
+{
+  char text[64];
+  if (seconds < 1e-3)
+    std::snprintf(text, sizeof text, "%.3g us/step", 1e6 * seconds);
+  else
+    std::snprintf(text, sizeof text, "%.3g ms/step", 1e3 * seconds);
+  return text;
+}
+
+MarkerOptions markerOptions(const NodeParams& params)
+{
+  MarkerOptions options;
+  options.frame_id = params.fixed_frame;
+  options.offset = params.offset;
+  options.surface = params.show_surface;
+  options.particles = params.show_particles;
+  options.springs = params.show_springs;
+  options.color_by_strain = params.color_by_strain;
+  options.strain_scale = params.strain_scale;
+  options.particle_diameter = params.particle_diameter;
+  options.spring_width = params.spring_width;
+  options.surface_max_cells = params.surface_max_cells;
+  return options;
+}
+
 }  // namespace
 
 class SimulationNode::ServiceLock
@@ -142,6 +114,20 @@ private:
   std::unique_lock<std::mutex> lock_;
 };
 
+struct SimulationNode::Output
+{
+  struct Grid
+  {
+    ros::Publisher markers_pub, status_pub, points_pub;
+    visualization_msgs::MarkerArray markers;
+    Status status;
+    sensor_msgs::PointCloud2 points;
+  };
+  std::vector<Grid> grids;
+  std::vector<geometry_msgs::TransformStamped> frames;  // empty: no TF this time
+  ros::Time stamp;
+};
+
 SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh) : nh_(nh), private_nh_(private_nh)
 {
   // Every parameter is read and checked before anything is built, so a bad one fails at once even on
@@ -151,19 +137,34 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
     private_params = XmlRpc::XmlRpcValue();
   const XmlRpcParameterSource source(private_params);
   config_ = loadNodeConfiguration(source, source.keys());
+  private_params_ = private_params;
+  accepted_ = config_;
   for (const auto& key : config_.unknown_keys)
     ROS_WARN("parameter '%s/%s' is not a parameter of this node and is ignored", private_nh_.getNamespace().c_str(),
              key.c_str());
+  const NodeParams& params = config_.node;
   // diagnostic_updater reads ~diagnostic_period itself, and only as a number: give it the checked one.
-  private_nh_.setParam("diagnostic_period", params_.diagnostic_period);
+  private_nh_.setParam("diagnostic_period", params.diagnostic_period);
+  // Under simulated time this node is the clock, as Gazebo is: it publishes /clock from its steps.
+  use_sim_time_ = ros::Time::isSimTime();
 
-  buildSimulation();
+  buildTracks();
 
-  markers_pub_ = private_nh_.advertise<visualization_msgs::MarkerArray>("markers", 1);
-  status_pub_ = private_nh_.advertise<Status>("status", 10);
-  publishStaticFrame();
+  for (Track& track : tracks_)
+  {
+    if (track.shadow)
+      continue;  // drawn with the method it shadows
+    // A comparison publishes each method below its name: ~linear/markers, ~full/status, ...
+    ros::NodeHandle track_nh = lockstep() ? ros::NodeHandle(private_nh_, track.name) : private_nh_;
+    track.markers_pub = track_nh.advertise<visualization_msgs::MarkerArray>("markers", 1);
+    track.status_pub = track_nh.advertise<Status>("status", 10);
+    track.points_pub = track_nh.advertise<sensor_msgs::PointCloud2>("points", 1);
+  }
+  if (use_sim_time_)
+    clock_pub_ = nh_.advertise<rosgraph_msgs::Clock>("/clock", 10);
+  publishStaticFrames();
 
-  const Grid& grid = simulation_->grid();
+  const Grid& grid = primary().simulation->grid();
   diagnostics_ = std::make_unique<diagnostic_updater::Updater>(nh_, private_nh_);
   diagnostics_->setHardwareID("modal_mass_spring " + std::to_string(grid.params().rows) + "x" +
                               std::to_string(grid.params().cols) + " grid");
@@ -175,11 +176,18 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
   set_method_srv_ = service_nh.advertiseService("set_method", &SimulationNode::setMethod, this);
   reset_srv_ = service_nh.advertiseService("reset", &SimulationNode::reset, this);
   pause_srv_ = service_nh.advertiseService("pause", &SimulationNode::pause, this);
+  step_srv_ = service_nh.advertiseService("step", &SimulationNode::step, this);
   service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
   service_spinner_->start();
 
+  startLiveTuning();
+
   last_status_log_ = ros::WallTime::now();
-  timer_ = nh_.createTimer(ros::Duration(1.0 / params_.publish_rate), &SimulationNode::onTick, this);
+  const double period = 1.0 / params.publish_rate;
+  if (use_sim_time_)
+    wall_timer_ = nh_.createWallTimer(ros::WallDuration(period), [this](const ros::WallTimerEvent&) { onTick(); });
+  else
+    timer_ = nh_.createTimer(ros::Duration(period), [this](const ros::TimerEvent&) { onTick(); });
 }
 
 SimulationNode::~SimulationNode()
@@ -187,181 +195,260 @@ SimulationNode::~SimulationNode()
   if (service_spinner_)
     service_spinner_->stop();
   timer_.stop();
+  wall_timer_.stop();
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+    pending_rebuild_.reset();
+  }
+  if (rebuild_thread_.joinable())
+    rebuild_thread_.join();  // a basis being built is finished and dropped
 }
 
-void SimulationNode::buildSimulation()
+std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& grid_params,
+                                                            const SimulationParams& sim_params, bool report) const
 {
-  const SimulationParams& sim_params = config_.simulation;
   const auto start = Clock::now();
   StartupProgress progress([](const std::string& line) { ROS_INFO("%s", line.c_str()); },
                            [start] { return secondsSince(start); });
+  std::unique_ptr<Simulation> simulation;
   {
     ProgressWatcher watcher(progress);
-    simulation_ = std::make_unique<Simulation>(config_.grid, sim_params,
-                                               [&progress](const std::string& stage) { progress.onStage(stage); });
+    simulation = std::make_unique<Simulation>(grid_params, sim_params,
+                                              [&progress](const std::string& stage) { progress.onStage(stage); });
   }
+  if (!report)
+    return simulation;
   const double total_seconds = secondsSince(start);
-
-  steps_per_tick_ = params_.real_time_factor / (params_.publish_rate * sim_params.time_step);
-  last_points_ = simulation_->points();
-
-  const Grid& grid = simulation_->grid();
+  const NodeParams& params = config_.node;
+  const Grid& grid = simulation->grid();
   ROS_INFO("%d x %d grid (%dD, %d particles, %zu springs, %zu fixed), method %s: %s; %s; time_step %g s, "
            "%.4g steps per tick at %g Hz, real_time_factor %g",
            grid.params().rows, grid.params().cols, grid.dimension(), grid.numParticles(), grid.springs().size(),
-           grid.fixedParticles().size(), toString(simulation_->method()).c_str(),
-           describeModes(simulation_->basis().frequencies, simulation_->basis().num_zero_modes).c_str(),
-           describeStartupTimes(simulation_->linearization(), simulation_->basis(), total_seconds,
-                                simulation_->derivativeInfo(), simulation_->cubature())
+           grid.fixedParticles().size(), toString(simulation->method()).c_str(),
+           describeModes(simulation->basis().frequencies, simulation->basis().num_zero_modes).c_str(),
+           describeStartupTimes(simulation->linearization(), simulation->basis(), total_seconds,
+                                simulation->derivativeInfo(), simulation->cubature())
                .c_str(),
-           sim_params.time_step, steps_per_tick_, params_.publish_rate, params_.real_time_factor);
-  const LinearizationInfo& lin = simulation_->linearization();
+           sim_params.time_step, params.real_time_factor / (params.publish_rate * sim_params.time_step),
+           params.publish_rate, params.real_time_factor);
+  const LinearizationInfo& lin = simulation->linearization();
   ROS_INFO("linearization %s, integrator %s, initial_state %s%s", toString(sim_params.linearization).c_str(),
            toString(sim_params.integrator).c_str(), toString(sim_params.initial_state).c_str(),
            lin.equilibrium_solved
                ? (": equilibrium in " + std::to_string(lin.equilibrium_iterations) + " Newton iterations, " +
                   std::to_string(lin.dropped_compressed_springs) + " compressed springs' geometric stiffness dropped, " +
                   "start projected onto the modes with a largest error of " +
-                  std::to_string(simulation_->projectionError()) + " m")
+                  std::to_string(simulation->projectionError()) + " m")
                      .c_str()
                : "");
-  ROS_INFO("%s", describeBasis(sim_params, simulation_->derivativeInfo(), simulation_->physicalBasis()).c_str());
-  if (const Cubature* cubature = simulation_->cubature())
+  ROS_INFO("%s", describeBasis(sim_params, simulation->derivativeInfo(), simulation->physicalBasis()).c_str());
+  if (const Cubature* cubature = simulation->cubature())
     ROS_INFO("%s", describeCubature(*cubature, static_cast<int>(grid.springs().size())).c_str());
+  return simulation;
 }
 
-void SimulationNode::publishStaticFrame()
+void SimulationNode::buildTracks()
 {
-  geometry_msgs::TransformStamped frame;
-  frame.header.stamp = ros::Time::now();
-  frame.header.frame_id = params_.fixed_frame;
-  frame.child_frame_id = params_.grid_frame;
-  frame.transform.translation.x = params_.offset.x();
-  frame.transform.translation.y = params_.offset.y();
-  frame.transform.translation.z = params_.offset.z();
-  frame.transform.rotation.w = 1.0;
-  static_broadcaster_.sendTransform(frame);
+  const NodeParams& params = config_.node;
+  const std::vector<Method> methods = lockstep() ? params.methods : std::vector<Method>{config_.simulation.method};
+  for (size_t k = 0; k < methods.size(); ++k)
+  {
+    SimulationParams sim_params = config_.simulation;
+    sim_params.method = methods[k];
+    Track track;
+    track.name = toString(methods[k]);
+    track.simulation = buildSimulation(config_.grid, sim_params, true);
+    track.offset = lockstep() ? methodOffset(params, k) : params.offset;
+    track.grid_frame = lockstep() ? track.name + "/" + params.grid_frame : params.grid_frame;
+    track.ns_prefix = lockstep() ? track.name + "/" : "";
+    tracks_.push_back(std::move(track));
+  }
+  if (params.shadow_full)
+  {
+    SimulationParams sim_params = config_.simulation;
+    sim_params.method = Method::Full;
+    Track shadow;
+    shadow.name = "shadow_full";
+    shadow.shadow = true;
+    shadow.simulation = buildSimulation(config_.grid, sim_params, false);
+    shadow.offset = params.offset;
+    shadow.ns_prefix = "shadow_full/";
+    tracks_.push_back(std::move(shadow));
+    ROS_INFO("shadow_full: an unreduced simulation runs beside %s from the same state", tracks_.front().name.c_str());
+  }
+  synchronise();
+  for (Track& track : tracks_)
+  {
+    track.last_points = track.simulation->points();
+    track.last_energy = track.simulation->totalEnergy();
+  }
 }
 
-void SimulationNode::onTick(const ros::TimerEvent&)
+void SimulationNode::synchronise()
 {
-  const double period = 1.0 / params_.publish_rate;
-  const ros::Time stamp = ros::Time::now();
-  // tf2 rejects a second transform of a frame at the same stamp (e.g. a paused /clock): skip it.
-  const bool send_tf = stamp > last_tf_stamp_ && !params_.tf_particles.empty();
-  visualization_msgs::MarkerArray markers;
+  const Track* source = nullptr;
+  for (const Track& track : tracks_)
+    if (track.simulation->method() != Method::Full || (!lockstep() && &track == &tracks_.front()))
+    {
+      source = &track;
+      break;
+    }
+  if (!source)
+    return;
+  const Eigen::VectorXd u = source->simulation->displacement(), v = source->simulation->velocity();
+  for (Track& track : tracks_)
+    if (&track != source && track.simulation->method() == Method::Full)
+    {
+      track.simulation->setPhysicalState(u, v);
+      track.divergence_message.clear();
+    }
+}
+
+const SimulationNode::Track* SimulationNode::reference() const
+{
+  for (const Track& track : tracks_)
+    if (track.shadow || (lockstep() && track.simulation->method() == Method::Full))
+      return &track;
+  return nullptr;
+}
+
+bool SimulationNode::stepAll()
+{
+  bool any_running = false;
+  for (Track& track : tracks_)
+  {
+    if (track.simulation->diverged())
+      continue;
+    const auto start = Clock::now();
+    const StepResult result = track.simulation->step(1);
+    track.tick_seconds += secondsSince(start);
+    track.tick_steps += result.steps_taken;
+    if (result.diverged)
+      track.divergence_message = result.message;
+    else
+      any_running = true;
+  }
+  return lockstep() ? any_running : !primary().simulation->diverged();
+}
+
+ros::Time SimulationNode::stamp() const
+{
+  return use_sim_time_ ? ros::Time(clock_seconds_) : ros::Time::now();
+}
+
+void SimulationNode::publishStaticFrames()
+{
+  const NodeParams& params = config_.node;
   std::vector<geometry_msgs::TransformStamped> frames;
-  Status status;
-  std::string divergence, status_line;
+  for (const Track& track : tracks_)
+  {
+    if (track.grid_frame.empty())
+      continue;
+    geometry_msgs::TransformStamped frame;
+    frame.header.stamp = stamp();
+    frame.header.frame_id = params.fixed_frame;
+    frame.child_frame_id = track.grid_frame;
+    frame.transform.translation.x = track.offset.x();
+    frame.transform.translation.y = track.offset.y();
+    frame.transform.translation.z = track.offset.z();
+    frame.transform.rotation.w = 1.0;
+    frames.push_back(frame);
+  }
+  static_broadcaster_.sendTransform(frames);
+}
+
+void SimulationNode::onTick()
+{
+  Output output;
+  std::vector<std::string> divergences;
+  std::string status_line;
+  double period = 0.0;
   {
     std::unique_lock<std::mutex> lock(mutex_);
+    swapRebuilt();
+    const NodeParams& params = config_.node;
+    const double dt = config_.simulation.time_step;
+    period = 1.0 / params.publish_rate;
+    const ros::WallTime now = ros::WallTime::now();
+    const double wall = last_tick_.isZero() ? period : (now - last_tick_).toSec();
+    last_tick_ = now;
     tick_steps_ = 0;
     tick_step_seconds_ = 0.0;
-    if (!paused_ && !simulation_->diverged())
+    for (Track& track : tracks_)
+    {
+      track.tick_seconds = 0.0;
+      track.tick_steps = 0;
+    }
+    const bool running = lockstep() ? std::any_of(tracks_.begin(), tracks_.end(),
+                                                  [](const Track& t) { return !t.simulation->diverged(); })
+                                    : !primary().simulation->diverged();
+    if (!paused_ && running)
     {
       // A fixed simulated time per tick, in whole steps; how late the tick is does not matter.
-      owed_steps_ += steps_per_tick_;
+      owed_steps_ += params.real_time_factor / (params.publish_rate * dt);
       const int steps = static_cast<int>(std::floor(owed_steps_ + 1e-9));
       owed_steps_ = std::max(0.0, owed_steps_ - steps);
       const long changes = state_changes_;
-      auto start = Clock::now();
+      const auto tick_start = Clock::now();
+      auto start = tick_start;
       for (int k = 0; k < steps; ++k)
       {
         if (services_waiting_.load() > 0)
         {
           // A service call goes in between two steps; a call that changes the state (pause, reset,
-          // set_method) ends this tick's stepping.
+          // set_method, step) ends this tick's stepping.
           tick_step_seconds_ += secondsSince(start);
           lock.unlock();
           while (services_waiting_.load() > 0)
             std::this_thread::yield();
           lock.lock();
           start = Clock::now();
-          if (state_changes_ != changes || paused_ || simulation_->diverged())
+          if (state_changes_ != changes || paused_)
             break;
         }
-        const StepResult result = simulation_->step(1);
-        tick_steps_ += result.steps_taken;
-        if (result.diverged)
+        // A comparison shows every method at the same moment: when the slowest cannot keep up, a
+        // tick steps for at most its period and drops the rest, so all slow down together.
+        if (lockstep() && secondsSince(tick_start) > period)
         {
-          divergence_message_ = divergence = result.message;
+          owed_steps_ = 0.0;
           break;
         }
+        if (!stepAll())
+          break;
       }
       tick_step_seconds_ += secondsSince(start);
     }
-
-    // The core keeps the last good state on divergence; never publish a non-finite one anyway.
-    const Eigen::Matrix3Xd points = simulation_->points();
-    if (points.allFinite())
-      last_points_ = points;
-    const double energy = simulation_->totalEnergy();
-    if (std::isfinite(energy))
-      last_energy_ = energy;
-    markers = makeMarkers(simulation_->grid(), params_, last_points_, stamp);
-    if (send_tf)
+    for (Track& track : tracks_)
     {
-      frames.reserve(params_.tf_particles.size());
-      for (int particle : params_.tf_particles)
-      {
-        geometry_msgs::TransformStamped frame;
-        frame.header.stamp = stamp;
-        frame.header.frame_id = params_.grid_frame;
-        frame.child_frame_id = particleFrame(params_.grid_frame, particle);
-        frame.transform.translation.x = last_points_(0, particle);
-        frame.transform.translation.y = last_points_(1, particle);
-        frame.transform.translation.z = last_points_(2, particle);
-        frame.transform.rotation.w = 1.0;
-        frames.push_back(frame);
-      }
+      tick_steps_ = std::max(tick_steps_, track.tick_steps);
+      if (track.tick_steps > 0)
+        track.step_seconds = track.tick_seconds / track.tick_steps;
+      if (!track.divergence_message.empty() && track.tick_steps > 0 && track.simulation->diverged())
+        divergences.push_back((tracks_.size() > 1 ? track.name + ": " : "") + track.divergence_message);
     }
-    status.header.stamp = stamp;
-    status.header.frame_id = params_.fixed_frame;
-    status.method = toString(simulation_->method());
-    status.linearization = toString(simulation_->params().linearization);
-    status.integrator = toString(simulation_->params().integrator);
-    status.newton_iterations = simulation_->lastNewtonIterations();
-    status.step_count = simulation_->stepCount();
-    status.sim_time = simulation_->time();
-    status.tick_steps = tick_steps_;
-    status.tick_step_seconds = tick_step_seconds_;
-    status.total_energy = last_energy_;
-    status.state = state();
-    status.message = simulation_->diverged() ? divergence_message_ : "";
-    const DerivativeBasisInfo& derivatives = simulation_->derivativeInfo();
-    status.basis = toString(simulation_->params().basis);
-    status.linear_modes = simulation_->basis().phi.cols();
-    status.derivative_directions = derivatives.derivative_directions;
-    status.basis_seconds = simulation_->basis().build_seconds + derivatives.seconds;
-    status.largest_dropped_singular_value = derivatives.largest_dropped_singular_value;
-    if (const Cubature* cubature = simulation_->cubature())
-    {
-      status.cubature_springs = static_cast<uint32_t>(cubature->springs.size());
-      status.cubature_training_error = cubature->training_error;
-      status.cubature_heldout_error = cubature->heldout_error;
-      status.cubature_training_seconds = cubature->training_seconds;
-    }
+    clock_seconds_ += tick_steps_ * dt;
+    achieved_factor_ = tick_steps_ * dt / std::max(wall, 1e-9);
+    output = snapshot(stamp());
 
-    if (params_.status_log_period > 0.0 && (ros::WallTime::now() - last_status_log_).toSec() >= params_.status_log_period)
+    if (params.status_log_period > 0.0 && (ros::WallTime::now() - last_status_log_).toSec() >= params.status_log_period)
     {
       last_status_log_ = ros::WallTime::now();
-      char line[256];
-      std::snprintf(line, sizeof line, "%s: method %s, step %ld, simulated %.3f s, energy %.6g J, %.3f ms of stepping per tick",
-                    stateName().c_str(), status.method.c_str(), simulation_->stepCount(), simulation_->time(),
-                    last_energy_, 1e3 * tick_step_seconds_);
+      const Track& first = primary();
+      char line[320];
+      std::snprintf(line, sizeof line,
+                    "%s: method %s, step %ld, simulated %.3f s, energy %.6g J, %.3f ms of stepping per tick%s",
+                    stateName(first).c_str(), lockstep() ? "s in lockstep" : toString(first.simulation->method()).c_str(),
+                    steps(first), simTime(first), first.last_energy,
+                    1e3 * tick_step_seconds_,
+                    lockstep() ? (", real-time factor " + std::to_string(achieved_factor_)).c_str() : "");
       status_line = line;
     }
   }
-  if (!divergence.empty())
+  for (const auto& divergence : divergences)
     ROS_ERROR("%s", divergence.c_str());
 
-  markers_pub_.publish(markers);
-  if (send_tf)
-  {
-    tf_broadcaster_.sendTransform(frames);
-    last_tf_stamp_ = stamp;
-  }
-  status_pub_.publish(status);
+  send(output);
 
   // A tick is late when its stepping alone takes longer than the period: the timer cannot keep up.
   ++diag_ticks_;
@@ -374,21 +461,167 @@ void SimulationNode::onTick(const ros::TimerEvent&)
     ROS_INFO("%s", status_line.c_str());
 }
 
-uint8_t SimulationNode::state() const
+SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
 {
-  if (simulation_->diverged())
+  const NodeParams& params = config_.node;
+  Output output;
+  output.stamp = stamp;
+  // The core keeps the last good state on divergence; never publish a non-finite one anyway.
+  for (Track& track : tracks_)
+  {
+    const Eigen::Matrix3Xd points = track.simulation->points();
+    if (points.allFinite())
+      track.last_points = points;
+    const double energy = track.simulation->totalEnergy();
+    if (std::isfinite(energy))
+      track.last_energy = energy;
+  }
+  const Track* ref = reference();
+  for (Track& track : tracks_)
+  {
+    track.rms_distance = track.max_distance = 0.0;
+    if (!ref || &track == ref)
+      continue;
+    const Eigen::VectorXd distances = (track.last_points - ref->last_points).colwise().norm();
+    track.rms_distance = std::sqrt(distances.squaredNorm() / std::max<Eigen::Index>(1, distances.size()));
+    track.max_distance = distances.maxCoeff();
+  }
+
+  // tf2 rejects a second transform of a frame at the same stamp (e.g. a paused /clock): skip it.
+  const bool send_tf = stamp > last_tf_stamp_ && !params.tf_particles.empty();
+  if (send_tf)
+    last_tf_stamp_ = stamp;
+  for (const Track& track : tracks_)
+  {
+    if (track.shadow)
+      continue;
+    const Simulation& simulation = *track.simulation;
+    const bool measured = ref && &track != ref;
+    Output::Grid grid;
+    grid.markers_pub = track.markers_pub;
+    grid.status_pub = track.status_pub;
+    grid.points_pub = track.points_pub;
+
+    MarkerOptions options = markerOptions(params);
+    options.offset = track.offset;
+    options.ns_prefix = track.ns_prefix;
+    if (params.show_labels)
+    {
+      options.label = toString(simulation.method()) +
+                      (measured ? "\nRMS " + formatDistance(track.rms_distance) + " to full" : "") + "\n" +
+                      formatCost(track.step_seconds);
+      if (lockstep())
+      {
+        char pace[64];
+        std::snprintf(pace, sizeof pace, "\n%.2f x real time", achieved_factor_);
+        options.label += pace;
+      }
+    }
+    grid.markers = makeMarkers(simulation.grid(), options, track.last_points, stamp);
+    if (measured && ref->shadow)
+    {
+      // The reference drawn faintly where the method is: the gap between them is the error.
+      MarkerOptions ghost = options;
+      ghost.ns_prefix = ref->ns_prefix;
+      ghost.ghost = true;
+      ghost.surface = ghost.particles = params.show_shadow;
+      ghost.springs = false;
+      ghost.label.clear();
+      const auto shadow = makeMarkers(simulation.grid(), ghost, ref->last_points, stamp);
+      grid.markers.markers.insert(grid.markers.markers.end(), shadow.markers.begin(), shadow.markers.end());
+    }
+    grid.points = makePointCloud(track.last_points, particleStrains(simulation.grid(), track.last_points),
+                                 track.offset, params.fixed_frame, stamp);
+
+    Status& status = grid.status;
+    status.header.stamp = stamp;
+    status.header.frame_id = params.fixed_frame;
+    status.method = toString(simulation.method());
+    status.linearization = toString(simulation.params().linearization);
+    status.integrator = toString(simulation.params().integrator);
+    status.newton_iterations = simulation.lastNewtonIterations();
+    status.step_count = steps(track);
+    status.sim_time = simTime(track);
+    status.tick_steps = track.tick_steps;
+    status.tick_step_seconds = lockstep() ? track.tick_seconds : tick_step_seconds_;
+    status.total_energy = track.last_energy;
+    status.state = state(track);
+    status.message = simulation.diverged() ? track.divergence_message : "";
+    status.reference = measured ? "full" : "";
+    status.rms_distance = track.rms_distance;
+    status.max_distance = track.max_distance;
+    status.step_seconds = track.step_seconds;
+    status.real_time_factor = achieved_factor_;
+    const DerivativeBasisInfo& derivatives = simulation.derivativeInfo();
+    status.basis = toString(simulation.params().basis);
+    status.linear_modes = simulation.basis().phi.cols();
+    status.derivative_directions = derivatives.derivative_directions;
+    status.basis_seconds = simulation.basis().build_seconds + derivatives.seconds;
+    status.largest_dropped_singular_value = derivatives.largest_dropped_singular_value;
+    if (const Cubature* cubature = simulation.cubature())
+    {
+      status.cubature_springs = static_cast<uint32_t>(cubature->springs.size());
+      status.cubature_training_error = cubature->training_error;
+      status.cubature_heldout_error = cubature->heldout_error;
+      status.cubature_training_seconds = cubature->training_seconds;
+    }
+
+    if (send_tf)
+      for (int particle : params.tf_particles)
+      {
+        geometry_msgs::TransformStamped frame;
+        frame.header.stamp = stamp;
+        frame.header.frame_id = track.grid_frame;
+        frame.child_frame_id = particleFrame(track.grid_frame, particle);
+        frame.transform.translation.x = track.last_points(0, particle);
+        frame.transform.translation.y = track.last_points(1, particle);
+        frame.transform.translation.z = track.last_points(2, particle);
+        frame.transform.rotation.w = 1.0;
+        output.frames.push_back(frame);
+      }
+    output.grids.push_back(std::move(grid));
+  }
+  return output;
+}
+
+void SimulationNode::send(const Output& output)
+{
+  if (use_sim_time_)
+  {
+    rosgraph_msgs::Clock clock;
+    clock.clock = output.stamp;
+    clock_pub_.publish(clock);
+  }
+  for (const auto& grid : output.grids)
+  {
+    grid.markers_pub.publish(grid.markers);
+    grid.points_pub.publish(grid.points);
+  }
+  if (!output.frames.empty())
+    tf_broadcaster_.sendTransform(output.frames);
+  for (const auto& grid : output.grids)
+    grid.status_pub.publish(grid.status);
+}
+
+uint8_t SimulationNode::state(const Track& track) const
+{
+  if (track.simulation->diverged())
     return Status::DIVERGED;
+  if (rebuilding())
+    return Status::REBUILDING;
   return paused_ ? Status::PAUSED : Status::RUNNING;
 }
 
-std::string SimulationNode::stateName() const
+std::string SimulationNode::stateName(const Track& track) const
 {
-  switch (state())
+  switch (state(track))
   {
     case Status::DIVERGED:
       return "DIVERGED";
     case Status::PAUSED:
       return "PAUSED";
+    case Status::REBUILDING:
+      return "REBUILDING";
     default:
       return "RUNNING";
   }
@@ -396,11 +629,14 @@ std::string SimulationNode::stateName() const
 
 void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& status)
 {
-  const double period = 1.0 / params_.publish_rate;
-  const double mean_cost = diag_ticks_ ? diag_step_seconds_ / diag_ticks_ : 0.0;
   std::lock_guard<std::mutex> lock(mutex_);
-  if (simulation_->diverged())
-    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "diverged: " + divergence_message_);
+  const NodeParams& params = config_.node;
+  const double period = 1.0 / params.publish_rate;
+  const double mean_cost = diag_ticks_ ? diag_step_seconds_ / diag_ticks_ : 0.0;
+  const Track& first = primary();
+  const Simulation& simulation = *first.simulation;
+  if (simulation.diverged())
+    status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "diverged: " + first.divergence_message);
   else if (diag_ticks_ > 0 && (mean_cost > period || 2 * diag_late_ticks_ > diag_ticks_))
     status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN,
                     "falling behind real time: %.2f ms of stepping per %.2f ms tick, %d of %d ticks late "
@@ -408,16 +644,18 @@ void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& statu
                     1e3 * mean_cost, 1e3 * period, diag_late_ticks_, diag_ticks_);
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, paused_ ? "paused" : "stepping");
-  status.add("state", stateName());
-  status.add("method", toString(simulation_->method()));
-  status.add("step count", simulation_->stepCount());
-  status.add("simulated time (s)", simulation_->time());
-  status.add("steps per tick", steps_per_tick_);
+  status.add("state", stateName(first));
+  status.add("method", lockstep() ? "lockstep" : toString(simulation.method()));
+  status.add("step count", steps(first));
+  status.add("simulated time (s)", simTime(first));
+  status.add("steps per tick", params.real_time_factor / (params.publish_rate * config_.simulation.time_step));
   status.add("mean stepping per tick (s)", mean_cost);
   status.add("tick period (s)", period);
   status.add("ticks", diag_ticks_);
   status.add("late ticks (stepping longer than the period)", diag_late_ticks_);
-  status.add("modes", static_cast<int>(simulation_->basis().frequencies.size()));
+  status.add("modes", static_cast<int>(simulation.basis().frequencies.size()));
+  if (lockstep())
+    status.add("achieved real-time factor", achieved_factor_);
   diag_ticks_ = diag_late_ticks_ = 0;
   diag_step_seconds_ = 0.0;
 }
@@ -425,6 +663,14 @@ void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& statu
 bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response& response)
 {
   ServiceLock lock(*this);
+  if (lockstep())
+  {
+    response.success = false;
+    response.message = "this node compares methods in lockstep (parameter 'methods'); set_method switches a "
+                       "single-method node";
+    return true;
+  }
+  Simulation& simulation = *primary().simulation;
   Method method;
   try
   {
@@ -437,20 +683,22 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
       names += (names.empty() ? "" : ", ") + name;
     response.success = false;
     response.message = "unknown method '" + request.method + "': must be one of " + names +
-                       "; still running '" + toString(simulation_->method()) + "'";
+                       "; still running '" + toString(simulation.method()) + "'";
     return true;
   }
-  const std::string previous = toString(simulation_->method());
-  const bool was_diverged = simulation_->diverged();
-  const bool trains = method == Method::Cubature && !simulation_->cubature();
-  simulation_->setMethod(method);
+  const std::string previous = toString(simulation.method());
+  const bool was_diverged = simulation.diverged();
+  const bool trains = method == Method::Cubature && !simulation.cubature();
+  simulation.setMethod(method);
   if (trains)
-    ROS_INFO("%s", describeCubature(*simulation_->cubature(), static_cast<int>(simulation_->grid().springs().size())).c_str());
-  divergence_message_.clear();
+    ROS_INFO("%s", describeCubature(*simulation.cubature(), static_cast<int>(simulation.grid().springs().size())).c_str());
+  primary().name = toString(method);
+  primary().divergence_message.clear();
+  synchronise();  // the shadow full starts again from the state carried over
   ++state_changes_;
   response.success = true;
   response.message = "switched from " + previous + " to " + request.method + " at step " +
-                     std::to_string(simulation_->stepCount()) + (was_diverged ? ", recovering from the divergence" : "");
+                     std::to_string(steps(primary())) + (was_diverged ? ", recovering from the divergence" : "");
   ROS_INFO("%s", response.message.c_str());
   return true;
 }
@@ -458,12 +706,18 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
 bool SimulationNode::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response)
 {
   ServiceLock lock(*this);
-  simulation_->reset();
+  for (Track& track : tracks_)
+  {
+    track.simulation->reset();
+    track.step_offset = 0;
+    track.divergence_message.clear();
+  }
+  synchronise();
   owed_steps_ = 0.0;
-  divergence_message_.clear();
   ++state_changes_;
   response.success = true;
-  response.message = "reset to the initial state at rest (method " + toString(simulation_->method()) +
+  response.message = "reset to the initial state at rest (method " +
+                     (lockstep() ? std::string("s in lockstep") : toString(primary().simulation->method())) +
                      (paused_ ? ", still paused)" : ")");
   ROS_INFO("%s", response.message.c_str());
   return true;
@@ -476,8 +730,64 @@ bool SimulationNode::pause(std_srvs::SetBool::Request& request, std_srvs::SetBoo
     ++state_changes_;
   paused_ = request.data;
   response.success = true;
-  response.message = std::string(paused_ ? "paused" : "running") + " at step " + std::to_string(simulation_->stepCount());
+  response.message = std::string(paused_ ? "paused" : "running") + " at step " + std::to_string(steps(primary()));
   ROS_INFO("%s", response.message.c_str());
+  return true;
+}
+
+bool SimulationNode::step(Step::Request& request, Step::Response& response)
+{
+  Output output;
+  {
+    ServiceLock lock(*this);
+    Simulation& simulation = *primary().simulation;
+    response.step_count = steps(primary());
+    response.sim_time = simTime(primary());
+    response.success = false;
+    if (!paused_)
+    {
+      response.message = "refused: the simulation is running; pause it first (~pause data: true)";
+      return true;
+    }
+    if (request.steps < 1 || request.steps > kMaxStepRequest)
+    {
+      response.message = "invalid steps = " + std::to_string(request.steps) + ": must be in [1, " +
+                         std::to_string(kMaxStepRequest) + "]";
+      return true;
+    }
+    if (simulation.diverged())
+    {
+      response.message = "refused: the simulation diverged (" + primary().divergence_message +
+                         "); ~reset or ~set_method recovers";
+      return true;
+    }
+    for (Track& track : tracks_)
+    {
+      track.tick_seconds = 0.0;
+      track.tick_steps = 0;
+    }
+    uint32_t taken = 0;
+    while (taken < request.steps && stepAll())
+      ++taken;
+    int stepped = 0;
+    for (Track& track : tracks_)
+    {
+      stepped = std::max(stepped, track.tick_steps);
+      if (track.tick_steps > 0)
+        track.step_seconds = track.tick_seconds / track.tick_steps;
+    }
+    clock_seconds_ += stepped * config_.simulation.time_step;
+    ++state_changes_;
+    output = snapshot(stamp());
+    response.step_count = steps(primary());
+    response.sim_time = simTime(primary());
+    response.success = !simulation.diverged();
+    response.message = simulation.diverged()
+                           ? "diverged after " + std::to_string(stepped) + " steps: " + primary().divergence_message
+                           : "advanced " + std::to_string(stepped) + " steps to step " +
+                                 std::to_string(response.step_count);
+  }
+  send(output);
   return true;
 }
 

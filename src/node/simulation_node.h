@@ -1,11 +1,16 @@
-// The ROS wrapper of a Simulation: parameters, timer, markers, TF, status, diagnostics, services.
+// The ROS wrapper of a Simulation: parameters, timer, markers, point cloud, TF, status, clock,
+// diagnostics, services; or of several, stepped in lockstep for a live comparison of methods.
 #pragma once
 
 #include "modal_mass_spring/SetMethod.h"
+#include "modal_mass_spring/SimulationConfig.h"
+#include "modal_mass_spring/Step.h"
 #include "modal_mass_spring/simulation.h"
 #include "node_params.h"
 
+#include <boost/thread/recursive_mutex.hpp>
 #include <diagnostic_updater/diagnostic_updater.h>
+#include <dynamic_reconfigure/server.h>
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
@@ -17,7 +22,9 @@
 #include <atomic>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace modal_mass_spring
@@ -36,33 +43,82 @@ public:
 private:
   // Holds the simulation for a service callback; the timer's step loop lets it in between two steps.
   class ServiceLock;
+  // One simulated grid: a method of the comparison, the single method, or the shadow full.
+  struct Track
+  {
+    std::string name;    // the method's name; "shadow_full" for the shadow
+    bool shadow = false; // the unreduced reference beside a single method: no topics of its own
+    std::unique_ptr<Simulation> simulation;
+    Eigen::Vector3d offset = Eigen::Vector3d::Zero();
+    std::string grid_frame;
+    std::string ns_prefix;  // of its marker namespaces
+    ros::Publisher markers_pub, status_pub, points_pub;  // none for the shadow
+    Eigen::Matrix3Xd last_points;  // the last finite positions
+    double last_energy = 0.0;
+    std::string divergence_message;
+    double tick_seconds = 0.0;      // this tick's stepping of this method
+    int tick_steps = 0;
+    double step_seconds = 0.0;      // the last tick's mean step
+    double rms_distance = 0.0, max_distance = 0.0;  // to the reference, m
+    long step_offset = 0;  // steps of the models a rebuild replaced: the count goes on across a swap
+  };
 
-  void buildSimulation();
-  void onTick(const ros::TimerEvent& event);
-  void publishStaticFrame();
+  // What one tick publishes, built under the lock and sent after it.
+  struct Output;
+
+  std::unique_ptr<Simulation> buildSimulation(const GridParams& grid, const SimulationParams& params,
+                                              bool report) const;
+  void buildTracks();
+  // Puts every full track at the state of the first reduced one (the same state, the same time), so
+  // that the distances measure the methods, not their start.
+  void synchronise();
+  // One step of every track that has not diverged; false when stepping must stop (the single method
+  // diverged, or every method of the comparison).
+  bool stepAll();
+  void onTick();
+  Output snapshot(const ros::Time& stamp);  // with mutex_ held
+  void send(const Output& output);
+  ros::Time stamp() const;  // with mutex_ held: the simulated clock under use_sim_time, else now
+  void publishStaticFrames();
   void diagnose(diagnostic_updater::DiagnosticStatusWrapper& status);
-  uint8_t state() const;  // with mutex_ held
-  std::string stateName() const;
+  uint8_t state(const Track& track) const;  // with mutex_ held
+  std::string stateName(const Track& track) const;
+  Track& primary() { return tracks_.front(); }
+  const Track* reference() const;  // the full track the others are measured against, or null
+  bool lockstep() const { return !config_.node.methods.empty(); }
+  long steps(const Track& track) const { return track.step_offset + track.simulation->stepCount(); }
+  double simTime(const Track& track) const { return steps(track) * config_.simulation.time_step; }
+
+  // Live tuning with dynamic_reconfigure (live_tuning.cpp). A change is checked as the start-up
+  // parameters are (loadNodeConfiguration) and refused whole, or applied: node parameters at the next
+  // tick, the ones that need a new basis by a rebuild in the background, swapped in at a tick boundary
+  // with the motion carried over.
+  void startLiveTuning();
+  void reconfigure(SimulationConfig& config, uint32_t level);
+  SimulationConfig tuningOf(const NodeConfiguration& configuration) const;
+  void rebuildLoop();
+  void swapRebuilt();  // with mutex_ held, at a tick boundary
+  bool rebuilding() const { return rebuilding_ || !rebuilt_.empty(); }
 
   bool setMethod(SetMethod::Request& request, SetMethod::Response& response);
   bool reset(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   bool pause(std_srvs::SetBool::Request& request, std_srvs::SetBool::Response& response);
+  bool step(Step::Request& request, Step::Response& response);
 
   ros::NodeHandle nh_, private_nh_;
   NodeConfiguration config_;
-  const NodeParams& params_ = config_.node;
 
-  // The simulation and the state around it, shared by the timer and the service thread.
+  // The simulations and the state around them, shared by the timer and the service thread.
   std::mutex mutex_;
   std::atomic<int> services_waiting_{0};
   long state_changes_ = 0;  // by a service: pause, reset, set_method; ends the tick's stepping
-  std::unique_ptr<Simulation> simulation_;
-  double steps_per_tick_ = 0.0;  // real_time_factor / (publish_rate * time_step), not whole
-  double owed_steps_ = 0.0;      // the fraction of a step carried to the next tick
+  std::vector<Track> tracks_;  // the first is the one a single-method node shows
+  double owed_steps_ = 0.0;    // the fraction of a step carried to the next tick
   bool paused_ = false;
-  std::string divergence_message_;
-  Eigen::Matrix3Xd last_points_;  // the last published (finite) positions
-  double last_energy_ = 0.0;      // and the last finite total energy
+  bool use_sim_time_ = false;
+  double clock_seconds_ = 0.0;  // simulated seconds stepped since start-up: /clock, never reset
+  double achieved_factor_ = 0.0;
+  ros::WallTime last_tick_;
 
   // This tick's steps and cost; the counters behind the diagnostics since their last update (timer
   // thread only).
@@ -73,14 +129,27 @@ private:
   ros::Time last_tf_stamp_;
   ros::WallTime last_status_log_;
 
-  ros::Publisher markers_pub_, status_pub_;
+  ros::Publisher clock_pub_;
   tf2_ros::TransformBroadcaster tf_broadcaster_;
   tf2_ros::StaticTransformBroadcaster static_broadcaster_;
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
   ros::CallbackQueue service_queue_;
   std::unique_ptr<ros::AsyncSpinner> service_spinner_;
-  ros::ServiceServer set_method_srv_, reset_srv_, pause_srv_;
+  ros::ServiceServer set_method_srv_, reset_srv_, pause_srv_, step_srv_;
+  // Live tuning: the private parameters as last accepted, the configuration they give, the rebuild.
+  XmlRpc::XmlRpcValue private_params_;
+  NodeConfiguration accepted_;
+  boost::recursive_mutex tuning_mutex_;
+  std::unique_ptr<dynamic_reconfigure::Server<SimulationConfig>> tuning_server_;
+  std::optional<NodeConfiguration> pending_rebuild_;        // the latest change waiting to be built
+  std::vector<std::unique_ptr<Simulation>> rebuilt_;        // built, one per track, waiting for a tick
+  NodeConfiguration rebuilt_config_;
+  bool rebuilding_ = false;
+  bool stopping_ = false;
+  std::thread rebuild_thread_;
+
   ros::Timer timer_;
+  ros::WallTimer wall_timer_;  // under use_sim_time: the node makes the clock, so it cannot wait on it
 };
 
 }  // namespace modal_mass_spring

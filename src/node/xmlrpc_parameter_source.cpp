@@ -194,4 +194,17 @@ std::optional<std::vector<double>> XmlRpcParameterSource::getDoubleList(const st
   return toList<double>(key, *value, "a list of numbers", "[0.0, 0.0, -9.81]", toDouble);
 }
 
+std::optional<std::vector<std::string>> XmlRpcParameterSource::getStringList(const std::string& key) const
+{
+  const XmlRpcValue* value = find(key);
+  if (!value)
+    return std::nullopt;
+  return toList<std::string>(key, *value, "a list of names", "[linear, full, physical]",
+                             [](const XmlRpcValue& item) -> std::optional<std::string> {
+                               if (item.getType() != XmlRpcValue::TypeString)
+                                 return std::nullopt;
+                               return asString(item);
+                             });
+}
+
 }  // namespace modal_mass_spring

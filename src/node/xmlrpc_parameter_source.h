@@ -2,7 +2,7 @@
 // names as the tools and its conversions can be tested without a ROS master.
 #pragma once
 
-#include "modal_mass_spring/parameters.h"
+#include "node_params.h"
 
 #include <xmlrpcpp/XmlRpcValue.h>
 
@@ -18,7 +18,7 @@ namespace modal_mass_spring
 // ("3.0e6", which YAML 1.1 reads as a string), and a string that is a YAML list where a list is
 // expected (`_gravity:=[0,0,-9.81]`). Any other type mismatch throws std::invalid_argument naming the
 // key, the expected type and the value found.
-class XmlRpcParameterSource : public ParameterSource
+class XmlRpcParameterSource : public NodeParameterSource
 {
 public:
   explicit XmlRpcParameterSource(const XmlRpc::XmlRpcValue& params);
@@ -29,6 +29,7 @@ public:
   std::optional<std::string> getString(const std::string& key) const override;
   std::optional<std::vector<int>> getIntList(const std::string& key) const override;
   std::optional<std::vector<double>> getDoubleList(const std::string& key) const override;
+  std::optional<std::vector<std::string>> getStringList(const std::string& key) const override;
 
   // Every key present (the first level below the namespace).
   std::vector<std::string> keys() const;

@@ -2,10 +2,14 @@
 // file runs the node on one config and picks the cases that fit it with --gtest_filter.
 #include "modal_mass_spring/SetMethod.h"
 #include "modal_mass_spring/Status.h"
+#include "modal_mass_spring/Step.h"
 
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
+#include <rosgraph_msgs/Clock.h>
+#include <sensor_msgs/PointCloud2.h>
+#include <sensor_msgs/point_cloud2_iterator.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
 #include <tf2_ros/buffer.h>
@@ -15,6 +19,7 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <map>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -50,13 +55,21 @@ typename Msg::ConstPtr waitFor(const std::string& topic, const std::function<boo
   return found;
 }
 
-// Particle positions of a marker array (the SPHERE_LIST).
-std::vector<geometry_msgs::Point> particles(const MarkerArray& array)
+// The marker of namespace `ns` in an array, or null.
+const visualization_msgs::Marker* findMarker(const MarkerArray& array, const std::string& ns)
 {
   for (const auto& marker : array.markers)
-    if (marker.ns == "particles")
-      return marker.points;
-  ADD_FAILURE() << "no particles marker";
+    if (marker.ns == ns)
+      return &marker;
+  return nullptr;
+}
+
+// Particle positions of a marker array (the SPHERE_LIST).
+std::vector<geometry_msgs::Point> particles(const MarkerArray& array, const std::string& ns = "particles")
+{
+  if (const auto* marker = findMarker(array, ns))
+    return marker->points;
+  ADD_FAILURE() << "no " << ns << " marker";
   return {};
 }
 
@@ -135,6 +148,27 @@ std::vector<std::string> nodeNames()
   return param<std::vector<std::string>>("~nodes", {"/modal_mass_spring"});
 }
 
+// Where a node's parameters are: its own name, or, for a method of a lockstep comparison
+// (/compare_methods/linear), the comparison node (~config_node).
+std::string configNode(const std::string& name)
+{
+  return param<std::string>("~config_node", name);
+}
+
+// The prefix of a node's marker namespaces: <method>/ for a method of a comparison.
+std::string markerPrefix(const std::string& name)
+{
+  return configNode(name) == name ? "" : name.substr(name.rfind('/') + 1) + "/";
+}
+
+// The grid frame of a node, or of a method of a comparison: <method>/<grid_frame>.
+std::string gridFrame(const std::string& name)
+{
+  const std::string config = configNode(name);
+  const std::string frame = param<std::string>(config + "/grid_frame", "grid");
+  return config == name ? frame : name.substr(name.rfind('/') + 1) + "/" + frame;
+}
+
 // ---------------------------------------------------------------- topology and frames, any config
 
 TEST(Topology, MarkersHaveTheGridsParticlesAndSprings)
@@ -149,14 +183,21 @@ TEST(Topology, MarkersHaveTheGridsParticlesAndSprings)
     SCOPED_TRACE(name);
     const auto array = NodeUnderTest(name).markers();
     ASSERT_TRUE(array);
-    ASSERT_EQ(array->markers.size(), 2u);
-    const auto& spheres = array->markers[0];
-    const auto& lines = array->markers[1];
-    EXPECT_EQ(spheres.ns, "particles");
+    const std::string prefix = markerPrefix(name);
+    ASSERT_TRUE(findMarker(*array, prefix + "particles"));
+    ASSERT_TRUE(findMarker(*array, prefix + "springs"));
+    ASSERT_TRUE(findMarker(*array, prefix + "surface"));
+    const auto& spheres = *findMarker(*array, prefix + "particles");
+    const auto& lines = *findMarker(*array, prefix + "springs");
+    const auto& surface = *findMarker(*array, prefix + "surface");
     EXPECT_EQ(spheres.id, 0);
     EXPECT_EQ(spheres.type, visualization_msgs::Marker::SPHERE_LIST);
-    EXPECT_EQ(lines.ns, "springs");
     EXPECT_EQ(lines.id, 0);
+    EXPECT_EQ(surface.type, visualization_msgs::Marker::TRIANGLE_LIST);
+    EXPECT_EQ(surface.colors.size(), surface.points.size()) << "a strain colour per vertex";
+    // Two triangles per cell, both windings, at every size a shipped config has.
+    const int rows = param(configNode(name) + "/rows", 0), cols = param(configNode(name) + "/cols", 0);
+    EXPECT_EQ(static_cast<int>(surface.points.size()), 12 * (rows - 1) * (cols - 1));
     EXPECT_EQ(lines.type, visualization_msgs::Marker::LINE_LIST);
     EXPECT_EQ(spheres.header.frame_id, fixed_frame);
     EXPECT_EQ(lines.header.frame_id, fixed_frame);
@@ -171,7 +212,7 @@ TEST(Topology, MarkersHaveTheGridsParticlesAndSprings)
     {
       EXPECT_EQ(fixed, expected_fixed);
     }
-    for (const auto* marker : {&spheres, &lines})
+    for (const auto* marker : {&spheres, &lines, &surface})
     {
       for (const auto& p : marker->points)
       {
@@ -189,10 +230,10 @@ TEST(Topology, ConfiguredFramesAreBroadcastWhereTheParticlesAre)
   for (const auto& name : nodeNames())
   {
     SCOPED_TRACE(name);
-    const std::string grid_frame = param<std::string>(name + "/grid_frame", "grid");
+    const std::string grid_frame = gridFrame(name);
     // From the .test file when it names them (paper_3d relies on the default, the bottom corners).
-    const auto tf_particles =
-        param<std::vector<int>>("~expected_tf_particles", param<std::vector<int>>(name + "/tf_particles", {}));
+    const auto tf_particles = param<std::vector<int>>(
+        "~expected_tf_particles", param<std::vector<int>>(configNode(name) + "/tf_particles", {}));
     ASSERT_FALSE(tf_particles.empty()) << "set ~expected_tf_particles or the node's tf_particles";
     std::string error;
     EXPECT_TRUE(buffer.canTransform(fixed_frame, grid_frame, ros::Time(0), ros::Duration(10.0), &error)) << error;
@@ -205,7 +246,7 @@ TEST(Topology, ConfiguredFramesAreBroadcastWhereTheParticlesAre)
     // The transform at a marker's stamp puts the particle frame on the particle drawn.
     const auto array = NodeUnderTest(name).markers();
     ASSERT_TRUE(array);
-    const auto& spheres = array->markers[0];
+    const auto& spheres = *findMarker(*array, markerPrefix(name) + "particles");
     for (int particle : tf_particles)
     {
       const std::string frame = grid_frame + "/particle_" + std::to_string(particle);
@@ -557,6 +598,300 @@ TEST(Divergence, HoldsTheLastGoodStateReportsErrorAndRecovers)
   for (const auto& s : statuses)
     running_again |= s->header.stamp > called && s->state == Status::RUNNING && s->step_count < 100;
   EXPECT_TRUE(running_again) << "no RUNNING status from the start after the reset";
+}
+
+// ---------------------------------------------------------------- the point cloud, any config
+
+// Collects messages of one type on a topic from a background subscription.
+template <typename Msg>
+class Recorder
+{
+public:
+  explicit Recorder(const std::string& topic)
+  {
+    ros::NodeHandle nh;
+    sub_ = nh.subscribe<Msg>(topic, 1000, [this](const typename Msg::ConstPtr& msg) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      messages_.push_back(msg);
+    });
+  }
+  std::vector<typename Msg::ConstPtr> messages() const
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return messages_;
+  }
+  // Waits until `count` messages are in, or fails.
+  std::vector<typename Msg::ConstPtr> wait(size_t count, double timeout = 30.0) const
+  {
+    const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(timeout);
+    while (messages().size() < count && ros::ok() && ros::WallTime::now() < end)
+      ros::WallDuration(0.01).sleep();
+    EXPECT_GE(messages().size(), count) << sub_.getTopic();
+    return messages();
+  }
+  void clear()
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    messages_.clear();
+  }
+
+private:
+  mutable std::mutex mutex_;
+  std::vector<typename Msg::ConstPtr> messages_;
+  ros::Subscriber sub_;
+};
+
+TEST(PointCloud, OnePointPerParticleFiniteWhereTheMarkersAre)
+{
+  const std::string fixed_frame = param<std::string>("~fixed_frame", "world");
+  for (const auto& name : nodeNames())
+  {
+    SCOPED_TRACE(name);
+    NodeUnderTest node(name);
+    Recorder<sensor_msgs::PointCloud2> clouds(node.topic("points"));
+    Recorder<MarkerArray> markers(node.topic("markers"));
+    clouds.wait(5);
+    markers.wait(5);
+    // A cloud and markers of the same tick (same stamp).
+    sensor_msgs::PointCloud2::ConstPtr cloud;
+    std::vector<geometry_msgs::Point> drawn;
+    for (const auto& c : clouds.messages())
+      for (const auto& m : markers.messages())
+        if (!m->markers.empty() && m->markers[0].header.stamp == c->header.stamp)
+        {
+          cloud = c;
+          drawn = particles(*m, markerPrefix(name) + "particles");
+        }
+    ASSERT_TRUE(cloud) << "no cloud with the stamp of a marker array";
+    EXPECT_EQ(cloud->header.frame_id, fixed_frame);
+    EXPECT_GT(cloud->header.stamp, ros::Time(0));
+    ASSERT_EQ(cloud->width * cloud->height, drawn.size());
+    ASSERT_EQ(cloud->fields.size(), 4u);
+    EXPECT_EQ(cloud->fields[3].name, "strain");
+    sensor_msgs::PointCloud2ConstIterator<float> x(*cloud, "x"), y(*cloud, "y"), z(*cloud, "z"), strain(*cloud, "strain");
+    for (size_t k = 0; k < drawn.size(); ++k, ++x, ++y, ++z, ++strain)
+    {
+      ASSERT_TRUE(std::isfinite(*x) && std::isfinite(*y) && std::isfinite(*z) && std::isfinite(*strain)) << k;
+      // float32 of the same positions
+      EXPECT_NEAR(*x, drawn[k].x, 1e-6 * (1.0 + std::abs(drawn[k].x))) << k;
+      EXPECT_NEAR(*y, drawn[k].y, 1e-6 * (1.0 + std::abs(drawn[k].y))) << k;
+      EXPECT_NEAR(*z, drawn[k].z, 1e-6 * (1.0 + std::abs(drawn[k].z))) << k;
+    }
+  }
+}
+
+// ---------------------------------------------------------------- simulated time and ~step (use_sim_time)
+
+modal_mass_spring::Step::Response stepBy(const NodeUnderTest& node, uint32_t steps)
+{
+  modal_mass_spring::Step::Request request;
+  request.steps = steps;
+  return node.call<modal_mass_spring::Step>("step", request).response;
+}
+
+// The node is the clock: every status is stamped with /clock, which advances by the simulated time of
+// each tick's steps and stops while paused.
+TEST(SimTime, ClockFollowsSimulatedTimeAndStopsWhenPaused)
+{
+  NodeUnderTest node(nodeNames().front());
+  const double dt = param(node.name + "/time_step", 0.0);
+  ASSERT_GT(dt, 0.0);
+  ASSERT_TRUE(param("/use_sim_time", false)) << "sim_time.test sets /use_sim_time";
+  ASSERT_TRUE(node.pause(false));
+  Recorder<rosgraph_msgs::Clock> clocks("/clock");
+  Recorder<Status> statuses(node.topic("status"));
+  statuses.wait(20);
+  const auto running = statuses.messages();
+  const auto seen = clocks.messages();
+  ASSERT_GE(seen.size(), 10u);
+  std::vector<ros::Time> clock_values;
+  for (const auto& c : seen)
+    clock_values.push_back(c->clock);
+  for (size_t k = 1; k < clock_values.size(); ++k)
+    EXPECT_GE(clock_values[k], clock_values[k - 1]) << "the clock never goes back";
+  EXPECT_GT(clock_values.back(), clock_values.front());
+  int checked = 0;
+  for (size_t k = 1; k < running.size(); ++k)
+  {
+    const auto &a = *running[k - 1], &b = *running[k];
+    if (a.state != Status::RUNNING || b.state != Status::RUNNING)
+      continue;
+    // Stamped with the simulated time: the stamps differ by the tick's steps, exactly.
+    EXPECT_NEAR((b.header.stamp - a.header.stamp).toSec(), b.tick_steps * dt, 1e-8);
+    EXPECT_NEAR((b.header.stamp - a.header.stamp).toSec(), b.sim_time - a.sim_time, 1e-8);
+    EXPECT_TRUE(std::find(clock_values.begin(), clock_values.end(), b.header.stamp) != clock_values.end() ||
+                b.header.stamp > clock_values.back())
+        << "a status stamp that was never on /clock";
+    ++checked;
+  }
+  EXPECT_GT(checked, 5);
+
+  // Paused: the clock stops, the status goes on with the same stamp.
+  ASSERT_TRUE(node.pause(true));
+  ros::WallDuration(0.3).sleep();
+  clocks.clear();
+  statuses.clear();
+  statuses.wait(10);
+  const auto held = clocks.messages();
+  ASSERT_GE(held.size(), 5u) << "the clock is still published while paused";
+  for (const auto& c : held)
+    EXPECT_EQ(c->clock, held.front()->clock);
+  for (const auto& s : statuses.messages())
+  {
+    EXPECT_EQ(s->state, Status::PAUSED);
+    EXPECT_EQ(s->header.stamp, held.front()->clock);
+  }
+  ASSERT_TRUE(node.pause(false));
+}
+
+TEST(SimTime, StepAdvancesExactlyNStepsAndIsRefusedWhileRunning)
+{
+  NodeUnderTest node(nodeNames().front());
+  const double dt = param(node.name + "/time_step", 0.0);
+  ASSERT_TRUE(node.pause(false));
+  ASSERT_TRUE(node.status([](const Status& s) { return s.state == Status::RUNNING && s.tick_steps > 0; }));
+  const auto refused = stepBy(node, 10);
+  EXPECT_FALSE(refused.success);
+  EXPECT_NE(refused.message.find("running"), std::string::npos) << refused.message;
+
+  ASSERT_TRUE(node.pause(true));
+  const auto before = node.status([](const Status& s) { return s.state == Status::PAUSED; });
+  ASSERT_TRUE(before);
+  Recorder<rosgraph_msgs::Clock> clocks("/clock");
+  ros::WallDuration(0.3).sleep();
+  const auto response = stepBy(node, 10);
+  EXPECT_TRUE(response.success) << response.message;
+  EXPECT_EQ(response.step_count, before->step_count + 10);
+  EXPECT_NEAR(response.sim_time, before->sim_time + 10 * dt, 1e-9);
+  const auto after = node.status([](const Status& s) { return s.state == Status::PAUSED; });
+  ASSERT_TRUE(after);
+  EXPECT_EQ(after->step_count, before->step_count + 10) << "exactly 10 steps, and none while paused";
+  EXPECT_NEAR((after->header.stamp - before->header.stamp).toSec(), 10 * dt, 1e-8) << "the clock moved by 10 steps";
+  bool clock_moved = false;
+  for (const auto& c : clocks.messages())
+    clock_moved |= std::abs((c->clock - before->header.stamp).toSec() - 10 * dt) < 1e-8;
+  EXPECT_TRUE(clock_moved);
+
+  for (uint32_t bad : {0u, 10001u})
+  {
+    const auto out_of_range = stepBy(node, bad);
+    EXPECT_FALSE(out_of_range.success) << bad;
+    EXPECT_NE(out_of_range.message.find("must be in [1, 10000]"), std::string::npos) << out_of_range.message;
+    EXPECT_EQ(out_of_range.step_count, after->step_count) << "nothing changed";
+  }
+  ASSERT_TRUE(node.pause(false));
+}
+
+// ---------------------------------------------------------------- shadow_full (paper_2d, method full)
+
+TEST(Shadow, DistancesAreZeroForFullPositiveForLinearAndResynchroniseOnReset)
+{
+  NodeUnderTest node(nodeNames().front());
+  ASSERT_TRUE(node.pause(false));
+  ASSERT_TRUE(node.setMethod("full").success);
+  const auto full = node.status([](const Status& s) { return s.method == "full" && s.step_count > 200; });
+  ASSERT_TRUE(full);
+  EXPECT_EQ(full->reference, "full");
+  EXPECT_EQ(full->rms_distance, 0.0) << "the same method from the same state";
+  EXPECT_EQ(full->max_distance, 0.0);
+  const auto markers = node.markers();
+  ASSERT_TRUE(markers);
+  ASSERT_TRUE(findMarker(*markers, "shadow_full/surface")) << "the ghost of the reference";
+  EXPECT_LT(findMarker(*markers, "shadow_full/surface")->color.a, 0.5f) << "faint";
+
+  const auto switched = node.setMethod("linear");
+  ASSERT_TRUE(switched.success) << switched.message;
+  const auto linear = node.status([](const Status& s) { return s.method == "linear"; });
+  ASSERT_TRUE(linear);
+  const auto moved = node.status([&](const Status& s) { return s.step_count > linear->step_count + 500; });
+  ASSERT_TRUE(moved);
+  EXPECT_EQ(moved->reference, "full");
+  EXPECT_GT(moved->rms_distance, 1e-6) << "linear leaves full as the grid moves";
+  EXPECT_GE(moved->max_distance, moved->rms_distance);
+  EXPECT_LT(moved->max_distance, 1.0) << "a distance, not a divergence";
+
+  ASSERT_TRUE(node.pause(true));
+  ASSERT_TRUE(node.reset().success);
+  const auto reset = node.status([](const Status& s) { return s.step_count == 0; });
+  ASSERT_TRUE(reset);
+  EXPECT_LT(reset->rms_distance, 1e-12) << "the shadow starts again from the method's state";
+  EXPECT_LT(reset->max_distance, 1e-12);
+  ASSERT_TRUE(node.pause(false));
+}
+
+// ---------------------------------------------------------------- the comparison in lockstep
+
+// Every method of the comparison reports the same step count and simulated time at every tick,
+// also when full falls behind and the ticks are cut (lockstep.test runs cloth.yaml faster than full
+// can follow).
+TEST(Lockstep, MethodsAreAtTheSameMomentAtEveryTick)
+{
+  const auto names = nodeNames();
+  ASSERT_GE(names.size(), 2u);
+  const std::string config = configNode(names.front());
+  const double dt = param(config + "/time_step", 0.0);
+  const double per_tick = param(config + "/real_time_factor", 1.0) / (param(config + "/publish_rate", 0.0) * dt);
+  std::vector<std::unique_ptr<Recorder<Status>>> recorders;
+  for (const auto& name : names)
+    recorders.push_back(std::make_unique<Recorder<Status>>(name + "/status"));
+  for (auto& recorder : recorders)
+    recorder->wait(40, 120.0);
+  std::map<ros::Time, std::vector<Status::ConstPtr>> ticks;
+  for (auto& recorder : recorders)
+    for (const auto& s : recorder->messages())
+      ticks[s->header.stamp].push_back(s);
+  int compared = 0, cut = 0;
+  for (const auto& [stamp, statuses] : ticks)
+  {
+    if (statuses.size() != names.size())
+      continue;  // the recording started or ended inside this tick
+    ++compared;
+    uint64_t low = statuses[0]->step_count, high = low;
+    for (const auto& s : statuses)
+    {
+      low = std::min(low, s->step_count);
+      high = std::max(high, s->step_count);
+      EXPECT_NEAR(s->sim_time, statuses[0]->sim_time, 1.001 * dt) << s->method;
+      EXPECT_EQ(s->real_time_factor, statuses[0]->real_time_factor) << "one pace for all";
+    }
+    EXPECT_LE(high - low, 1u) << "at " << stamp;
+    cut += statuses[0]->state == Status::RUNNING && statuses[0]->tick_steps + 1 < per_tick;
+  }
+  EXPECT_GE(compared, 30);
+  EXPECT_GT(cut, 0) << "full kept up with real time here, so this run did not test falling behind";
+  std::printf("%d ticks compared, %d cut short (full behind real time)\n", compared, cut);
+}
+
+TEST(Lockstep, EachGridHasALabelAndReducedMethodsTheirDistanceToFull)
+{
+  for (const auto& name : nodeNames())
+  {
+    SCOPED_TRACE(name);
+    const std::string method = name.substr(name.rfind('/') + 1);
+    NodeUnderTest node(name);
+    const auto status = node.status([](const Status& s) { return s.step_count > 100; }, 60.0);
+    ASSERT_TRUE(status);
+    EXPECT_EQ(status->method, method);
+    const auto markers = node.markers();
+    ASSERT_TRUE(markers);
+    const auto* label = findMarker(*markers, method + "/label");
+    ASSERT_TRUE(label);
+    EXPECT_EQ(label->type, visualization_msgs::Marker::TEXT_VIEW_FACING);
+    EXPECT_EQ(label->text.rfind(method, 0), 0u) << label->text;
+    EXPECT_NE(label->text.find("/step"), std::string::npos) << "its cost per step: " << label->text;
+    if (method == "full")
+    {
+      EXPECT_EQ(status->reference, "");
+      EXPECT_EQ(status->rms_distance, 0.0);
+    }
+    else
+    {
+      EXPECT_EQ(status->reference, "full");
+      EXPECT_GT(status->rms_distance, 0.0);
+      EXPECT_GE(status->max_distance, status->rms_distance);
+      EXPECT_NE(label->text.find("to full"), std::string::npos) << label->text;
+    }
+  }
 }
 
 }  // namespace

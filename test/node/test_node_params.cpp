@@ -25,10 +25,10 @@ namespace
 
 using namespace modal_mass_spring;
 
-using Value = std::variant<int, double, bool, std::string, std::vector<int>, std::vector<double>>;
+using Value = std::variant<int, double, bool, std::string, std::vector<int>, std::vector<double>, std::vector<std::string>>;
 
 // Parameters as the parameter server would hold them, without one.
-class FakeSource : public ParameterSource
+class FakeSource : public NodeParameterSource
 {
 public:
   FakeSource(std::map<std::string, Value> values = {}) : values_(std::move(values)) {}
@@ -50,6 +50,11 @@ public:
   std::optional<std::vector<double>> getDoubleList(const std::string& key) const override
   {
     return get<std::vector<double>>(key, "a list of numbers");
+  }
+
+  std::optional<std::vector<std::string>> getStringList(const std::string& key) const override
+  {
+    return get<std::vector<std::string>>(key, "a list of names");
   }
 
   std::vector<std::string> keys() const
@@ -104,6 +109,38 @@ TEST(NodeParams, DefaultsOnThePaperGrid)
   EXPECT_EQ(c.node.fixed_frame, "world");
   EXPECT_EQ(c.node.grid_frame, "grid");
   EXPECT_TRUE(c.unknown_keys.empty());
+}
+
+// Particles and springs are sent up to detail_max_particles particles, and above unless told not to.
+TEST(NodeParams, ParticlesAndSpringsAreOffByDefaultAboveTheDetailSize)
+{
+  const FakeSource small({{"rows", 50}, {"cols", 50}});
+  const NodeParams a = loadNodeConfiguration(small, small.keys()).node;
+  EXPECT_TRUE(a.show_particles && a.show_springs && a.show_surface);
+  const FakeSource large({{"rows", 50}, {"cols", 51}});
+  const NodeParams b = loadNodeConfiguration(large, large.keys()).node;
+  EXPECT_FALSE(b.show_particles || b.show_springs);
+  EXPECT_TRUE(b.show_surface);
+  const FakeSource asked({{"rows", 50}, {"cols", 51}, {"show_springs", true}, {"detail_max_particles", 0}});
+  const NodeParams c = loadNodeConfiguration(asked, asked.keys()).node;
+  EXPECT_TRUE(c.show_springs);
+  EXPECT_FALSE(c.show_particles);
+}
+
+// A comparison is centred on offset, method_spacing apart along x, in the order listed.
+TEST(NodeParams, ComparedMethodsAreDrawnSideBySide)
+{
+  const FakeSource source({{"methods", std::vector<std::string>{"linear", "full", "physical"}},
+                           {"offset", std::vector<double>{0.0, 1.0, 2.0}}});
+  const NodeParams p = loadNodeConfiguration(source, source.keys()).node;
+  ASSERT_EQ(p.methods, (std::vector<Method>{Method::Linear, Method::Full, Method::Physical}));
+  EXPECT_DOUBLE_EQ(p.method_spacing, 0.7) << "paper grid: its width 0.4 m plus three spacings";
+  EXPECT_TRUE(methodOffset(p, 0).isApprox(Eigen::Vector3d(-0.7, 1.0, 2.0)));
+  EXPECT_TRUE(methodOffset(p, 1).isApprox(Eigen::Vector3d(0.0, 1.0, 2.0)));
+  EXPECT_TRUE(methodOffset(p, 2).isApprox(Eigen::Vector3d(0.7, 1.0, 2.0)));
+  // Every method the core names can be compared.
+  const FakeSource all({{"methods", methodNames()}});
+  EXPECT_EQ(loadNodeConfiguration(all, all.keys()).node.methods.size(), methodNames().size());
 }
 
 TEST(NodeParams, ValuesAtTheEndsOfTheirRangesLoad)
@@ -166,6 +203,20 @@ TEST(NodeParams, EveryNodeParameterHasARangeCheck)
       {{{"status_log_period", kInf}}, "invalid parameter 'status_log_period' = inf"},
       {{{"diagnostic_period", -1.0}}, "invalid parameter 'diagnostic_period' = -1: must be a number > 0 and <= 3600 s"},
       {{{"diagnostic_period", 0}}, "invalid parameter 'diagnostic_period' = 0"},
+      {{{"detail_max_particles", -1}}, "invalid parameter 'detail_max_particles' = -1: must be an integer in [0, 10000000]"},
+      {{{"surface_max_cells", 0}}, "invalid parameter 'surface_max_cells' = 0: must be an integer in [1, 1000000]"},
+      {{{"surface_max_cells", 2000000}}, "invalid parameter 'surface_max_cells' = 2000000"},
+      {{{"show_surface", 1}}, "invalid parameter 'show_surface': wrong type, must be true or false"},
+      {{{"show_springs", std::string("no")}}, "invalid parameter 'show_springs': wrong type"},
+      {{{"methods", std::vector<std::string>{}}}, "invalid parameter 'methods' = 0 names: must list 1 to"},
+      {{{"methods", std::vector<std::string>{"linear", "bogus"}}}, "invalid parameter 'methods' = 'bogus': each must be one of full, linear, physical"},
+      {{{"methods", std::vector<std::string>{"full", "full"}}}, "invalid parameter 'methods' = 'full': each method must be listed once"},
+      {{{"method_spacing", 0.0}}, "invalid parameter 'method_spacing' = 0: must be a number > 0"},
+      {{{"method_spacing", kNaN}}, "invalid parameter 'method_spacing' = nan"},
+      {{{"methods", std::vector<std::string>{"linear", "full"}}, {"shadow_full", true}}, "invalid parameter 'shadow_full' = true: must be false when methods is set"},
+      {{{"show_labels", 1}}, "invalid parameter 'show_labels': wrong type"},
+      {{{"show_shadow", std::string("yes")}}, "invalid parameter 'show_shadow': wrong type"},
+      {{{"methods", std::string("full")}}, "invalid parameter 'methods': wrong type, must be a list of names"},
       // Wrong types: the source names the key.
       {{{"color_by_strain", 1}}, "invalid parameter 'color_by_strain': wrong type, must be true or false"},
       {{{"fixed_frame", 3}}, "invalid parameter 'fixed_frame': wrong type, must be a string"},
