@@ -17,6 +17,7 @@ namespace modal_mass_spring
 class AppliedForces
 {
 public:
+  // Keeps a copy of the grid: the simulations it serves may be rebuilt.
   explicit AppliedForces(const Grid& grid) : grid_(grid) {}
 
   // Adds a force on `particles` (one vector per particle, or one for all, in the grid's frame, N)
@@ -38,7 +39,7 @@ private:
     Eigen::VectorXd force;  // over every dof
     double until;           // simulated time it ends; infinity: until cleared
   };
-  const Grid& grid_;
+  Grid grid_;
   std::vector<Applied> forces_;
   bool changed_ = true;
 };

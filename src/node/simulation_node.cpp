@@ -6,6 +6,7 @@
 #include "startup_report.h"
 #include "xmlrpc_parameter_source.h"
 
+#include <Eigen/Geometry>
 #include <geometry_msgs/TransformStamped.h>
 #include <rosgraph_msgs/Clock.h>
 #include <sensor_msgs/PointCloud2.h>
@@ -177,6 +178,11 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
   reset_srv_ = service_nh.advertiseService("reset", &SimulationNode::reset, this);
   pause_srv_ = service_nh.advertiseService("pause", &SimulationNode::pause, this);
   step_srv_ = service_nh.advertiseService("step", &SimulationNode::step, this);
+  clear_forces_srv_ = service_nh.advertiseService("clear_forces", &SimulationNode::clearForces, this);
+  applied_forces_ = std::make_unique<AppliedForces>(primary().simulation->grid());
+  external_force_ = Eigen::VectorXd::Zero(primary().simulation->positions().size());
+  tf_listener_ = std::make_unique<tf2_ros::TransformListener>(tf_buffer_);
+  apply_force_sub_ = private_nh_.subscribe("apply_force", 10, &SimulationNode::applyForce, this);
   service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
   service_spinner_->start();
 
@@ -367,6 +373,7 @@ void SimulationNode::onTick()
   {
     std::unique_lock<std::mutex> lock(mutex_);
     swapRebuilt();
+    updateExternalForces();
     const NodeParams& params = config_.node;
     const double dt = config_.simulation.time_step;
     period = 1.0 / params.publish_rate;
@@ -789,6 +796,61 @@ bool SimulationNode::step(Step::Request& request, Step::Response& response)
   }
   send(output);
   return true;
+}
+
+void SimulationNode::applyForce(const ApplyForce::ConstPtr& message)
+{
+  // The vectors are turned into the fixed frame, whose axes are the grid's (its frame is only
+  // translated); an unknown frame drops the message.
+  const std::string& fixed_frame = config_.node.fixed_frame;
+  const std::string frame = message->header.frame_id.empty() ? fixed_frame : message->header.frame_id;
+  Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();
+  if (frame != fixed_frame)
+  {
+    try
+    {
+      const geometry_msgs::TransformStamped t = tf_buffer_.lookupTransform(fixed_frame, frame, ros::Time(0));
+      rotation = Eigen::Quaterniond(t.transform.rotation.w, t.transform.rotation.x, t.transform.rotation.y,
+                                    t.transform.rotation.z);
+    }
+    catch (const tf2::TransformException& e)
+    {
+      ROS_WARN_THROTTLE(1.0, "~apply_force: message dropped: frame '%s' cannot be turned into '%s': %s", frame.c_str(),
+                        fixed_frame.c_str(), e.what());
+      return;
+    }
+  }
+  std::vector<Eigen::Vector3d> forces;
+  for (const geometry_msgs::Vector3& f : message->forces)
+    forces.push_back(frame == fixed_frame ? Eigen::Vector3d(f.x, f.y, f.z) : rotation * Eigen::Vector3d(f.x, f.y, f.z));
+  std::string why;
+  {
+    ServiceLock lock(*this);
+    why = applied_forces_->add(message->particles, forces, message->duration, simTime(primary()));
+    if (why.empty())
+      updateExternalForces();
+  }
+  if (!why.empty())
+    ROS_WARN_THROTTLE(1.0, "~apply_force: message dropped: %s", why.c_str());
+}
+
+bool SimulationNode::clearForces(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response)
+{
+  ServiceLock lock(*this);
+  const size_t count = applied_forces_->clear();
+  updateExternalForces();
+  response.success = true;
+  response.message = "cleared " + std::to_string(count) + (count == 1 ? " force" : " forces");
+  return true;
+}
+
+void SimulationNode::updateExternalForces()
+{
+  applied_forces_->update(simTime(primary()), external_force_);
+  // A rebuilt simulation starts without them: every track is brought to the current total.
+  for (Track& track : tracks_)
+    if (track.simulation->externalForce() != external_force_)
+      track.simulation->setExternalForce(external_force_);
 }
 
 }  // namespace modal_mass_spring

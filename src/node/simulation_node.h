@@ -2,6 +2,8 @@
 // diagnostics, services; or of several, stepped in lockstep for a live comparison of methods.
 #pragma once
 
+#include "applied_forces.h"
+#include "modal_mass_spring/ApplyForce.h"
 #include "modal_mass_spring/SetMethod.h"
 #include "modal_mass_spring/SimulationConfig.h"
 #include "modal_mass_spring/Step.h"
@@ -15,8 +17,10 @@
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
+#include <tf2_ros/buffer.h>
 #include <tf2_ros/static_transform_broadcaster.h>
 #include <tf2_ros/transform_broadcaster.h>
+#include <tf2_ros/transform_listener.h>
 #include <visualization_msgs/MarkerArray.h>
 
 #include <atomic>
@@ -105,6 +109,12 @@ private:
   bool pause(std_srvs::SetBool::Request& request, std_srvs::SetBool::Response& response);
   bool step(Step::Request& request, Step::Response& response);
 
+  // External forces: ~apply_force messages (checked, turned into the fixed frame with tf2, summed)
+  // and ~clear_forces; every track gets the same total.
+  void applyForce(const ApplyForce::ConstPtr& message);
+  bool clearForces(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
+  void updateExternalForces();  // with mutex_ held: drops the forces whose time is up, sets the rest
+
   ros::NodeHandle nh_, private_nh_;
   NodeConfiguration config_;
 
@@ -135,7 +145,12 @@ private:
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
   ros::CallbackQueue service_queue_;
   std::unique_ptr<ros::AsyncSpinner> service_spinner_;
-  ros::ServiceServer set_method_srv_, reset_srv_, pause_srv_, step_srv_;
+  ros::ServiceServer set_method_srv_, reset_srv_, pause_srv_, step_srv_, clear_forces_srv_;
+  ros::Subscriber apply_force_sub_;
+  std::unique_ptr<AppliedForces> applied_forces_;  // with mutex_
+  Eigen::VectorXd external_force_;                  // their sum, on every dof
+  tf2_ros::Buffer tf_buffer_;
+  std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   // Live tuning: the private parameters as last accepted, the configuration they give, the rebuild.
   XmlRpc::XmlRpcValue private_params_;
   NodeConfiguration accepted_;

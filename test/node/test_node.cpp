@@ -1,5 +1,6 @@
 // Rostest checks of a running modal_mass_spring_node: markers, TF, services, divergence. Each .test
 // file runs the node on one config and picks the cases that fit it with --gtest_filter.
+#include "modal_mass_spring/ApplyForce.h"
 #include "modal_mass_spring/SetMethod.h"
 #include "modal_mass_spring/Status.h"
 #include "modal_mass_spring/Step.h"
@@ -8,17 +9,21 @@
 #include <gtest/gtest.h>
 #include <ros/ros.h>
 #include <rosgraph_msgs/Clock.h>
+#include <rosgraph_msgs/Log.h>
 #include <sensor_msgs/PointCloud2.h>
 #include <sensor_msgs/point_cloud2_iterator.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
 #include <tf2_ros/buffer.h>
+#include <tf2_ros/static_transform_broadcaster.h>
 #include <tf2_ros/transform_listener.h>
 #include <visualization_msgs/MarkerArray.h>
 
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <limits>
 #include <map>
 #include <mutex>
 #include <string>
@@ -895,6 +900,140 @@ TEST(Lockstep, EachGridHasALabelAndReducedMethodsTheirDistanceToFull)
 }
 
 }  // namespace
+
+// ---------------------------------------------------------------- external forces (paper_2d)
+
+// Particle positions after `steps` steps from the reset state, with whatever forces are applied,
+// taken with ~step on the paused node: deterministic, so two runs can be compared exactly.
+std::vector<geometry_msgs::Point> afterSteps(const NodeUnderTest& node, uint32_t steps)
+{
+  EXPECT_TRUE(node.pause(true));
+  EXPECT_TRUE(node.reset().success);
+  const auto response = stepBy(node, steps);
+  EXPECT_TRUE(response.success) << response.message;
+  const auto tick = node.tick([&](const Status& s) { return s.state == Status::PAUSED && s.step_count == steps; });
+  return tick.first ? particles(*tick.first) : std::vector<geometry_msgs::Point>{};
+}
+
+modal_mass_spring::ApplyForce force(const std::string& frame, std::vector<uint32_t> particles,
+                                    std::vector<std::array<double, 3>> vectors)
+{
+  modal_mass_spring::ApplyForce message;
+  message.header.frame_id = frame;
+  message.particles = std::move(particles);
+  for (const auto& v : vectors)
+  {
+    geometry_msgs::Vector3 f;
+    f.x = v[0];
+    f.y = v[1];
+    f.z = v[2];
+    message.forces.push_back(f);
+  }
+  return message;
+}
+
+class ExternalForces : public ::testing::Test
+{
+protected:
+  void SetUp() override
+  {
+    ros::NodeHandle nh;
+    publisher = nh.advertise<modal_mass_spring::ApplyForce>(node.topic("apply_force"), 10);
+    const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(10.0);
+    while (publisher.getNumSubscribers() == 0 && ros::WallTime::now() < end)
+      ros::WallDuration(0.02).sleep();
+    ASSERT_GT(publisher.getNumSubscribers(), 0u);
+    clear();
+  }
+  void TearDown() override
+  {
+    clear();
+    node.pause(false);
+  }
+  void clear() const { ASSERT_TRUE(node.call<std_srvs::Trigger>("clear_forces", {}).response.success); }
+  // Publishes and waits for the node to have taken it (the next tick).
+  void apply(const modal_mass_spring::ApplyForce& message) const
+  {
+    publisher.publish(message);
+    ros::WallDuration(0.3).sleep();
+  }
+
+  NodeUnderTest node{"/modal_mass_spring"};
+  ros::Publisher publisher;
+  const uint32_t corner = 24;  // the bottom-right corner of the 5 x 5 grid
+};
+
+TEST_F(ExternalForces, ApplyForceMovesTheParticleAlongItWithEveryMethod)
+{
+  for (const std::string method : {"full", "linear", "physical", "cubature"})
+  {
+    ASSERT_TRUE(node.setMethod(method).success) << method;
+    clear();
+    const auto free = afterSteps(node, 300);
+    apply(force("", {corner}, {{0.05, 0.0, 0.0}}));
+    const auto pushed = afterSteps(node, 300);
+    ASSERT_EQ(free.size(), 25u);
+    ASSERT_EQ(pushed.size(), 25u);
+    EXPECT_GT(pushed[corner].x - free[corner].x, 1e-3) << method << ": the corner moves along +x";
+    EXPECT_LT(std::abs(pushed[corner].z - free[corner].z), pushed[corner].x - free[corner].x) << method;
+    // Cleared, the run is the unforced one again.
+    clear();
+    EXPECT_LT(maxDistance(afterSteps(node, 300), free), 1e-12) << method;
+  }
+}
+
+TEST_F(ExternalForces, ForcesAreTurnedIntoTheGridsFrameWithTf)
+{
+  // A frame turned 90 degrees about y: its x axis is the world's -z.
+  tf2_ros::StaticTransformBroadcaster broadcaster;
+  geometry_msgs::TransformStamped turned;
+  turned.header.stamp = ros::Time::now();
+  turned.header.frame_id = param<std::string>(node.name + "/fixed_frame", "world");
+  turned.child_frame_id = "turned";
+  turned.transform.rotation.y = std::sin(M_PI / 4);
+  turned.transform.rotation.w = std::cos(M_PI / 4);
+  broadcaster.sendTransform(turned);
+  ros::WallDuration(0.5).sleep();
+  ASSERT_TRUE(node.setMethod("physical").success);
+  apply(force("", {corner}, {{0.0, 0.0, -0.05}}));
+  const auto in_world = afterSteps(node, 300);
+  clear();
+  apply(force("turned", {corner}, {{0.05, 0.0, 0.0}}));
+  const auto in_turned = afterSteps(node, 300);
+  ASSERT_EQ(in_turned.size(), 25u);
+  EXPECT_LT(maxDistance(in_turned, in_world), 1e-9);
+  clear();
+  EXPECT_GT(maxDistance(afterSteps(node, 300), in_world), 1e-4) << "the force did something";
+}
+
+TEST_F(ExternalForces, BadMessagesAreDroppedWithAWarningNamingTheProblem)
+{
+  ASSERT_TRUE(node.setMethod("physical").success);
+  const auto free = afterSteps(node, 100);
+  Recorder<rosgraph_msgs::Log> log("/rosout");
+  ros::WallDuration(0.3).sleep();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const std::vector<std::pair<modal_mass_spring::ApplyForce, std::string>> cases{
+      {force("no_such_frame", {corner}, {{1, 0, 0}}), "frame 'no_such_frame'"},
+      {force("", {999}, {{1, 0, 0}}), "particle 999 is out of range"},
+      {force("", {corner}, {{nan, 0, 0}}), "is not finite"},
+      {force("", {20, 21, corner}, {{1, 0, 0}, {1, 0, 0}}), "3 particles but 2 forces"},
+      {force("", {2}, {{1, 0, 0}}), "particle 2 is fixed"},
+  };
+  for (const auto& [message, expected] : cases)
+  {
+    apply(message);
+    ros::WallDuration(1.1).sleep();  // the warning is throttled to one a second
+    bool warned = false;
+    for (const auto& entry : log.messages())
+      warned |= entry->level == rosgraph_msgs::Log::WARN && entry->msg.find(expected) != std::string::npos;
+    EXPECT_TRUE(warned) << "no warning naming: " << expected;
+  }
+  // Nothing of them was taken, and the node runs on.
+  EXPECT_LT(maxDistance(afterSteps(node, 100), free), 1e-12);
+  ASSERT_TRUE(node.pause(false));
+  EXPECT_TRUE(node.status([](const Status& s) { return s.state == Status::RUNNING && s.tick_steps > 0; }));
+}
 
 int main(int argc, char** argv)
 {
