@@ -68,7 +68,8 @@ public:
   virtual void setAnchor(const Eigen::VectorXd& u_anchor) = 0;
   virtual double anchorDistanceSquared(const Eigen::VectorXd& q) const = 0;
   // Kinetic plus potential energy in this method's own measure, the one its dynamics conserve
-  // without damping: the physical energy for `full` and `physical`, the quadratic model's for `linear`.
+  // without damping: the physical energy for `full` and `physical`, the quadratic model's for
+  // `linear`, the weighted springs' for `cubature`.
   double energy(const State& s) { return kineticEnergy(s) + force_->energy(s.q); }
 
   // Takes one step from state() into next(); false when the integrator refuses it. commit() makes
