@@ -95,7 +95,8 @@ public:
   virtual void setAnchor(const Eigen::VectorXd& u_anchor) = 0;
   virtual double anchorDistanceSquared(const Eigen::VectorXd& q) const = 0;
   // Kinetic plus potential energy in this method's own measure, the one its dynamics conserve
-  // without damping: the physical energy for `full` and `physical`, the quadratic model's for `linear`.
+  // without damping: the physical energy for `full` and `physical`, the quadratic model's for
+  // `linear`, the weighted springs' for `cubature`; with an external force, plus its potential.
   double energy(const State& s) { return kineticEnergy(s) + loaded_.energy(s.q); }
   // Sets the external force on the free dofs (N, physical coordinates; empty or zero: none), which
   // then acts like the springs and gravity; the state keeps q and v, its acceleration follows.

@@ -21,17 +21,18 @@ using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 3, 1>;
 using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 3, 3>;
 
 // D_s = Phi_j - Phi_i: the spring's vector from i to j changes by D_s X (dim x r; fixed rows are 0).
-Eigen::MatrixXd springRows(const Grid& grid, const Eigen::MatrixXd& phi, const Spring& s)
+// Read from Phi^T, where a dof's row of Phi is contiguous (Phi's rows are strided by n).
+Eigen::MatrixXd springRows(const Grid& grid, const Eigen::MatrixXd& phi_t, const Spring& s)
 {
   const int dim = grid.dimension();
-  Eigen::MatrixXd rows = Eigen::MatrixXd::Zero(dim, phi.cols());
+  Eigen::MatrixXd rows = Eigen::MatrixXd::Zero(dim, phi_t.rows());
   for (int a = 0; a < dim; ++a)
   {
     const int fi = grid.freeIndex(dim * s.i + a), fj = grid.freeIndex(dim * s.j + a);
     if (fj >= 0)
-      rows.row(a) += phi.row(fj);
+      rows.row(a) += phi_t.col(fj).transpose();
     if (fi >= 0)
-      rows.row(a) -= phi.row(fi);
+      rows.row(a) -= phi_t.col(fi).transpose();
   }
   return rows;
 }
@@ -99,7 +100,7 @@ class TrainingSet
 {
 public:
   TrainingSet(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref, Eigen::MatrixXd poses)
-    : grid_(grid), phi_(basis.phi), x_ref_(x_ref), poses_(std::move(poses))
+    : grid_(grid), phi_(basis.phi), phi_t_(basis.phi.transpose()), x_ref_(x_ref), poses_(std::move(poses))
   {
     const Eigen::Index r = phi_.cols(), count = poses_.cols();
     const Eigen::VectorXd base = reducedSpringForce(grid, phi_, x_ref, Eigen::VectorXd::Zero(r));
@@ -120,7 +121,7 @@ public:
   Eigen::VectorXd column(int spring) const
   {
     const Spring& s = grid_.springs()[spring];
-    const Eigen::MatrixXd rows = springRows(grid_, phi_, s);
+    const Eigen::MatrixXd rows = springRows(grid_, phi_t_, s);
     const SmallVector d0 = restDiff(grid_, x_ref_, s);
     const SmallVector f0 = springForce(s, d0);
     const Eigen::MatrixXd d = (rows * poses_).colwise() + Eigen::VectorXd(d0);
@@ -134,6 +135,7 @@ public:
 private:
   const Grid& grid_;
   const Eigen::MatrixXd& phi_;
+  const Eigen::MatrixXd phi_t_;
   const Eigen::VectorXd& x_ref_;
   Eigen::MatrixXd poses_;
   Eigen::VectorXd scale_, b_;
@@ -173,14 +175,15 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
   for (size_t k = 0; k < pool.size(); ++k)
     pool[k] = static_cast<int>(k);
   Eigen::MatrixXd a(b.size(), std::min(max_springs, 64));  // the selected springs' columns
-  Eigen::MatrixXd gram(0, 0);
-  Eigen::VectorXd atb(0), w(0), residual = b;
+  NnlsNormal weights_fit;
+  Eigen::VectorXd residual = b;
   double error = b_norm > 0.0 ? 1.0 : 0.0;
   while (error > params.tolerance && static_cast<int>(selected.size()) < max_springs && !pool.empty())
   {
-    // The candidate, among a random subset, whose column points most along the residual.
+    // The candidate, among a random subset, whose column points most along the residual. (Adding
+    // batches of the best candidates per refit was tried: it needed far more springs for the same error.)
     const size_t candidates = std::min<size_t>(kCubatureCandidates, pool.size());
-    int best = -1;
+    size_t best = candidates;
     double best_score = 0.0;
     Eigen::VectorXd best_column;
     for (size_t c = 0; c < candidates; ++c)
@@ -191,30 +194,24 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
       const double score = norm > 0.0 ? column.dot(residual) / norm : 0.0;
       if (score > best_score)
       {
-        best = static_cast<int>(c);
+        best = c;
         best_score = score;
         best_column = std::move(column);
       }
     }
-    if (best < 0)
+    if (best == candidates)
       break;  // no spring reduces the residual
+    const Eigen::Index k = static_cast<Eigen::Index>(selected.size());
     selected.push_back(pool[best]);
     pool[best] = pool.back();
     pool.pop_back();
-
-    const Eigen::Index k = static_cast<Eigen::Index>(selected.size()) - 1;
     if (k >= a.cols())
       a.conservativeResize(Eigen::NoChange, std::min<Eigen::Index>(2 * a.cols(), max_springs));
     a.col(k) = best_column;
-    gram.conservativeResize(k + 1, k + 1);
-    gram.row(k).head(k + 1) = best_column.transpose() * a.leftCols(k + 1);
-    gram.col(k).head(k) = gram.row(k).head(k).transpose();
-    atb.conservativeResize(k + 1);
-    atb[k] = best_column.dot(b);
-    w.conservativeResize(k + 1);
-    w[k] = 0.0;
-    solveNnlsNormal(gram, atb, w);
-    residual = b - a.leftCols(k + 1) * w;
+    // The refit: the new column's Gram entries, then NNLS from the previous weights.
+    weights_fit.addVariable(a.leftCols(k + 1).transpose() * best_column, best_column.dot(b));
+    weights_fit.solve();
+    residual = b - a.leftCols(k + 1) * weights_fit.weights();
     error = residual.norm() / b_norm;
   }
 
@@ -222,6 +219,7 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
   cubature.training_poses = params.training_poses;
   cubature.training_error = error;
   std::vector<double> weights;
+  const Eigen::VectorXd& w = weights_fit.weights();
   for (size_t k = 0; k < selected.size(); ++k)
     if (w[static_cast<Eigen::Index>(k)] > 0.0)
     {
@@ -245,11 +243,12 @@ CubatureForceModel::CubatureForceModel(const Grid& grid, const ModalBasis& basis
   : grid_(grid), basis_(basis), dim_(grid.dimension()), weights_(cubature.weights)
 {
   const Eigen::Index count = static_cast<Eigen::Index>(cubature.springs.size());
+  const Eigen::MatrixXd phi_t = basis.phi.transpose();
   diff_.resize(count * dim_, basis.phi.cols());
   for (Eigen::Index t = 0; t < count; ++t)
   {
     springs_.push_back(grid.springs()[cubature.springs[t]]);
-    diff_.middleRows(t * dim_, dim_) = springRows(grid, basis.phi, springs_.back());
+    diff_.middleRows(t * dim_, dim_) = springRows(grid, phi_t, springs_.back());
   }
   // The exact force at the reference is part of F: it carries the round-off of every spring.
   roundoff_ = modalRoundoff(grid, basis, x_ref);

@@ -1,118 +1,165 @@
-// Lawson-Hanson non-negative least squares on the normal equations.
+// Lawson-Hanson non-negative least squares on the normal equations, with a growing Cholesky factor.
 #include "modal_mass_spring/nnls.h"
 
 #include <Eigen/Cholesky>
-#include <Eigen/QR>
 
 #include <algorithm>
-#include <vector>
+#include <cmath>
 
 namespace modal_mass_spring
 {
 namespace
 {
 
-// The unconstrained least-squares solution on the passive variables (zero elsewhere): G_PP z_P = c_P.
-Eigen::VectorXd solvePassive(const Eigen::MatrixXd& gram, const Eigen::VectorXd& atb, const std::vector<bool>& passive)
-{
-  std::vector<Eigen::Index> index;
-  for (size_t k = 0; k < passive.size(); ++k)
-    if (passive[k])
-      index.push_back(static_cast<Eigen::Index>(k));
-  Eigen::VectorXd z = Eigen::VectorXd::Zero(atb.size());
-  if (index.empty())
-    return z;
-  const Eigen::MatrixXd g = gram(index, index);
-  const Eigen::VectorXd c = atb(index);
-  Eigen::VectorXd zp;
-  Eigen::LLT<Eigen::MatrixXd> llt(g);
-  if (llt.info() == Eigen::Success)
-    zp = llt.solve(c);
-  else  // singular to round-off: the minimum-norm solution
-    zp = g.completeOrthogonalDecomposition().solve(c);
-  for (size_t k = 0; k < index.size(); ++k)
-    z[index[k]] = zp[static_cast<Eigen::Index>(k)];
-  return z;
-}
+// A column whose part independent of the passive ones is below this fraction of its norm (squared)
+// does not enter: round-off would make its weight meaningless.
+constexpr double kDependent = 1e-20;
 
 }  // namespace
 
-NnlsResult solveNnlsNormal(const Eigen::MatrixXd& gram, const Eigen::VectorXd& atb, Eigen::VectorXd& w,
-                           double tolerance, int max_iterations)
+void NnlsNormal::addVariable(const Eigen::VectorXd& gram_column, double atb)
 {
-  const Eigen::Index n = atb.size();
-  if (w.size() != n)
-    w.setZero(n);
-  w = w.cwiseMax(0.0);
+  const Eigen::Index n = size();
+  if (n + 1 > gram_.rows())  // room doubles: appending stays O(n) on average
+  {
+    const Eigen::Index capacity = std::max<Eigen::Index>(16, 2 * gram_.rows());
+    Eigen::MatrixXd grown(capacity, capacity), factor(capacity, capacity);
+    grown.topLeftCorner(n, n) = gram_.topLeftCorner(n, n);
+    factor.topLeftCorner(order_.size(), order_.size()) = factor_.topLeftCorner(order_.size(), order_.size());
+    gram_.swap(grown);
+    factor_.swap(factor);
+  }
+  gram_.row(n).head(n + 1) = gram_column.head(n + 1).transpose();
+  gram_.col(n).head(n) = gram_column.head(n);
+  atb_.conservativeResize(n + 1);
+  atb_[n] = atb;
+  w_.conservativeResize(n + 1);
+  w_[n] = 0.0;
+  passive_.push_back(false);
+}
+
+bool NnlsNormal::appendToFactor(Eigen::Index j)
+{
+  const Eigen::Index k = static_cast<Eigen::Index>(order_.size());
+  Eigen::VectorXd y(k);
+  for (Eigen::Index i = 0; i < k; ++i)
+    y[i] = gram_(order_[i], j);
+  factor_.topLeftCorner(k, k).triangularView<Eigen::Lower>().solveInPlace(y);
+  const double d = gram_(j, j) - y.squaredNorm();
+  if (!(d > kDependent * gram_(j, j)))
+    return false;
+  factor_.row(k).head(k) = y.transpose();
+  factor_(k, k) = std::sqrt(d);
+  order_.push_back(j);
+  return true;
+}
+
+void NnlsNormal::rebuildFactor()
+{
+  std::vector<Eigen::Index> previous;
+  previous.swap(order_);
+  for (Eigen::Index j : previous)
+    if (passive_[j] && !appendToFactor(j))
+    {
+      passive_[j] = false;
+      w_[j] = 0.0;
+    }
+}
+
+Eigen::VectorXd NnlsNormal::passiveSolution() const
+{
+  const Eigen::Index k = static_cast<Eigen::Index>(order_.size());
+  Eigen::VectorXd c(k);
+  for (Eigen::Index i = 0; i < k; ++i)
+    c[i] = atb_[order_[i]];
+  const auto l = factor_.topLeftCorner(k, k);
+  l.triangularView<Eigen::Lower>().solveInPlace(c);
+  l.transpose().triangularView<Eigen::Upper>().solveInPlace(c);
+  Eigen::VectorXd z = Eigen::VectorXd::Zero(size());
+  for (Eigen::Index i = 0; i < k; ++i)
+    z[order_[i]] = c[i];
+  return z;
+}
+
+NnlsResult NnlsNormal::solve(double tolerance, int max_iterations)
+{
+  const Eigen::Index n = size();
   if (max_iterations < 0)
     max_iterations = static_cast<int>(3 * n + 10);
-  const double threshold = tolerance * std::max(atb.cwiseAbs().maxCoeff(), 1e-300);
-  std::vector<bool> passive(n), rejected(n, false);
-  bool any_passive = false;
-  for (Eigen::Index k = 0; k < n; ++k)
-    any_passive |= (passive[k] = w[k] > 0.0);
-
+  const double threshold = n > 0 ? tolerance * std::max(atb_.cwiseAbs().maxCoeff(), 1e-300) : 0.0;
+  std::vector<bool> rejected(n, false);
   NnlsResult result;
-  Eigen::Index entered = -1;
-  bool check_warm_start = any_passive;  // a warm start's passive set is solved first
   while (true)
   {
-    if (!check_warm_start)
+    const Eigen::VectorXd gradient = atb_ - gram() * w_;  // -d/dw of 1/2 |A w - b|^2
+    Eigen::Index entered = -1;
+    for (Eigen::Index k = 0; k < n; ++k)
+      if (!passive_[k] && !rejected[k] && gradient[k] > threshold && (entered < 0 || gradient[k] > gradient[entered]))
+        entered = k;
+    if (entered < 0)
     {
-      const Eigen::VectorXd gradient = atb - gram * w;  // -d/dw of 1/2 |A w - b|^2
-      entered = -1;
-      for (Eigen::Index k = 0; k < n; ++k)
-        if (!passive[k] && !rejected[k] && gradient[k] > threshold && (entered < 0 || gradient[k] > gradient[entered]))
-          entered = k;
-      if (entered < 0)
-      {
-        result.converged = true;
-        break;
-      }
-      if (result.iterations >= max_iterations)
-        break;
-      passive[entered] = true;
-      ++result.iterations;
+      result.converged = true;
+      break;
     }
-    check_warm_start = false;
+    if (result.iterations >= max_iterations)
+      break;
+    ++result.iterations;
+    if (!appendToFactor(entered))
+    {
+      rejected[entered] = true;
+      continue;
+    }
+    passive_[entered] = true;
     // Move towards the passive set's least-squares solution until every passive weight is positive.
     while (true)
     {
-      const Eigen::VectorXd z = solvePassive(gram, atb, passive);
+      const Eigen::VectorXd z = passiveSolution();
       double step = 1.0;
+      Eigen::Index blocking = -1;  // the variable that reaches 0 first
       for (Eigen::Index k = 0; k < n; ++k)
-        if (passive[k] && z[k] <= 0.0)
-          step = std::min(step, w[k] > 0.0 ? w[k] / (w[k] - z[k]) : 0.0);
-      if (step >= 1.0)
+        if (passive_[k] && z[k] <= 0.0)
+        {
+          const double to_zero = w_[k] > 0.0 ? w_[k] / (w_[k] - z[k]) : 0.0;
+          if (blocking < 0 || to_zero < step)
+          {
+            step = std::min(step, to_zero);
+            blocking = k;
+          }
+        }
+      if (blocking < 0)
       {
-        w = z;
+        w_ = z;
         break;
       }
-      w += step * (z - w);
+      w_ += step * (z - w_);
+      w_[blocking] = 0.0;  // exactly: round-off must not leave it passive at a tiny weight forever
       for (Eigen::Index k = 0; k < n; ++k)
-        if (passive[k] && w[k] <= 0.0)
+        if (passive_[k] && w_[k] <= 0.0)
         {
-          passive[k] = false;
-          w[k] = 0.0;
+          passive_[k] = false;
+          w_[k] = 0.0;
         }
+      rebuildFactor();
     }
     // A variable whose gradient is positive but whose least-squares weight is not (round-off in a
     // nearly dependent column) would enter and leave forever: skip it until another one enters.
-    if (entered >= 0 && !passive[entered])
-      rejected[entered] = true;
-    else
+    if (passive_[entered])
       std::fill(rejected.begin(), rejected.end(), false);
+    else
+      rejected[entered] = true;
   }
   return result;
 }
 
 Eigen::VectorXd nnls(const Eigen::MatrixXd& a, const Eigen::VectorXd& b, NnlsResult* result)
 {
-  Eigen::VectorXd w;
-  const NnlsResult r = solveNnlsNormal(a.transpose() * a, a.transpose() * b, w);
+  NnlsNormal solver;
+  for (Eigen::Index j = 0; j < a.cols(); ++j)
+    solver.addVariable(a.leftCols(j + 1).transpose() * a.col(j), a.col(j).dot(b));
+  const NnlsResult r = solver.solve();
   if (result)
     *result = r;
-  return w;
+  return solver.weights();
 }
 
 }  // namespace modal_mass_spring

@@ -126,17 +126,38 @@ TEST(Nnls, RankDeficientProblemReachesTheMinimumResidual)
   EXPECT_EQ(none.cwiseAbs().maxCoeff(), 0.0);
 }
 
-TEST(Nnls, WarmStartGivesTheColdStartSolution)
+TEST(Nnls, GrownProblemMatchesOneSolvedAtOnceAndSatisfiesKkt)
 {
+  // Variables added in two batches with a solve between (the greedy selection's use) give the
+  // solution of the whole problem, which has active constraints.
   std::srand(7);
-  const Eigen::MatrixXd a = Eigen::MatrixXd::Random(25, 10);
+  const Eigen::MatrixXd a = Eigen::MatrixXd::Random(25, 40);  // more columns than rows
   const Eigen::VectorXd b = Eigen::VectorXd::Random(25);
-  const Eigen::VectorXd cold = nnls(a, b);
-  Eigen::VectorXd warm = Eigen::VectorXd::Constant(10, 0.3);  // every variable passive at first
-  const NnlsResult result = solveNnlsNormal(a.transpose() * a, a.transpose() * b, warm);
-  EXPECT_TRUE(result.converged);
-  EXPECT_LT((warm - cold).cwiseAbs().maxCoeff(), 1e-10);
-  EXPECT_GT((cold.array() == 0.0).count(), 0);  // the problem has active constraints
+  NnlsNormal grown;
+  for (int j = 0; j < 40; ++j)
+  {
+    grown.addVariable(a.leftCols(j + 1).transpose() * a.col(j), a.col(j).dot(b));
+    if (j == 4 || j == 39)
+    {
+      EXPECT_TRUE(grown.solve().converged);
+    }
+  }
+  const Eigen::VectorXd w = grown.weights();
+  EXPECT_LT((w - nnls(a, b)).cwiseAbs().maxCoeff(), 1e-9);
+  EXPECT_GE(w.minCoeff(), 0.0);
+  EXPECT_GT((w.array() == 0.0).count(), 0);
+  const Eigen::VectorXd gradient = a.transpose() * (b - a * w);
+  for (int j = 0; j < 40; ++j)
+  {
+    if (w[j] > 0.0)
+    {
+      EXPECT_NEAR(gradient[j], 0.0, 1e-10) << j;
+    }
+    else
+    {
+      EXPECT_LT(gradient[j], 1e-10) << j;
+    }
+  }
 }
 
 TEST(Cubature, EverySpringAtWeightOneReproducesPhysical)
