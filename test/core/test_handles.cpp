@@ -284,3 +284,36 @@ TEST(Handles, RigidMotionFollowsTheSlerpedFrame)
       (Eigen::AngleAxisd(M_PI / 4, Eigen::Vector3d::UnitZ()) * from.rotation).toRotationMatrix();
   EXPECT_LT((half.position - ((half_turn * offsets).colwise() + 0.5 * (from.translation + to.translation))).norm(), 1e-14);
 }
+
+TEST(Handles, ModalDerivativesAndCubatureFollowMovingHandles)
+{
+  const GridParams g = heldGrid({{24}, {22}});
+  Eigen::VectorXd acceleration(4);
+  acceleration << 5.0, -3.0, -2.0, 4.0;
+  SimulationParams full_params = simParams(Method::Full, 8, 0.5);
+  Simulation full(g, full_params);
+  shakeHandles(full, acceleration, 400);
+  // Fixed-interface modes and their derivatives spanning the 36 interior dofs: `physical` is `full`.
+  SimulationParams spanning = simParams(Method::Physical, 8, 0.5);
+  spanning.basis = BasisKind::ModalDerivatives;
+  spanning.num_derivative_modes = 28;
+  Simulation derivatives(g, spanning);
+  shakeHandles(derivatives, acceleration, 400);
+  EXPECT_LT(largestDifference(derivatives.positions(), full.positions()), 1e-9);
+  // Cubature with 8 modes: the handles held exactly, the interior near `physical` with the same basis
+  // (whose forces it approximates), far from where it would hang with the handles still.
+  Simulation cubature(g, simParams(Method::Cubature, 8, 0.5));
+  shakeHandles(cubature, acceleration, 400);
+  Simulation still(g, simParams(Method::Cubature, 8, 0.5));
+  still.step(400);
+  for (int k = 0; k < 4; ++k)
+  {
+    const int dof = cubature.grid().handleDofs()[k];
+    EXPECT_EQ(cubature.positions()[dof], full.positions()[dof]);
+  }
+  Simulation physical(g, simParams(Method::Physical, 8, 0.5));
+  shakeHandles(physical, acceleration, 400);
+  const double error = largestDifference(cubature.positions(), physical.positions());
+  // Measured: 2.4 mm, against 13 cm between the shaken and the still grid.
+  EXPECT_LT(error, 0.05 * largestDifference(still.positions(), full.positions()));
+}
