@@ -193,7 +193,12 @@ private:
   ModalForceModel* modal_force_;  // owned by the base
   Eigen::VectorXd offset_;        // free-dof displacement the modes cannot hold, frozen
   HandleMotion handle_motion_;
-  Eigen::VectorXd psi_dx_, psi_v_;  // Psi dx_b and Psi v_b: the interior's part carried by the handles
+  // Psi dx_b and Psi v_b, the interior's part carried by the handles: O(interior x handle dofs),
+  // so computed when asked for (every step for the nonlinear forces, only on output for `linear`).
+  const Eigen::VectorXd& psiDx() const;
+  const Eigen::VectorXd& psiV() const;
+  mutable Eigen::VectorXd psi_dx_, psi_v_;  // empty without handles
+  mutable bool psi_dx_stale_ = false, psi_v_stale_ = false;
   Eigen::MatrixXd interface_mass_;  // Phi^T M Psi (r x handle dofs)
   Eigen::VectorXd anchor_;
   // |offset + Phi X - anchor|_M^2 = c + 2 b.X + X.X with b = Phi^T M (offset - anchor).

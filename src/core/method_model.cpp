@@ -135,7 +135,11 @@ ModalMethod::ModalMethod(Method method, const LinearizedGrid& linearized, const 
   // The base owns the force model makeModalForce built; keep its modal interface to move the reference.
   modal_force_ = static_cast<ModalForceModel*>(&forceModel());
   if (lin_.constraint_modes)
+  {
     interface_mass_ = lin_.basis.phi.transpose() * (lin_.mass.asDiagonal() * *lin_.constraint_modes);
+    const Eigen::VectorXd rest = Eigen::VectorXd::Zero(lin_.constraint_modes->cols());
+    handle_motion_ = HandleMotion{rest, rest, rest};
+  }
   configure(settings);
   setOffset(Eigen::VectorXd::Zero(lin_.grid.numFreeDofs()));
 }
@@ -165,12 +169,12 @@ void ModalMethod::setOffset(const Eigen::VectorXd& offset)
 void ModalMethod::updateReference()
 {
   Eigen::VectorXd reference = lin_.x_ref;
-  if (psi_dx_.size() > 0 && method() != Method::Linear)
+  if (lin_.constraint_modes && method() != Method::Linear)
   {
     const std::vector<int>& dofs = lin_.grid.handleDofs();
     for (size_t k = 0; k < dofs.size(); ++k)
       reference[dofs[k]] += handle_motion_.displacement[static_cast<Eigen::Index>(k)];
-    lin_.grid.addFree(offset_ + psi_dx_, reference);
+    lin_.grid.addFree(offset_ + psiDx(), reference);
   }
   else
   {
@@ -187,15 +191,13 @@ void ModalMethod::setHandleMotion(const HandleMotion& motion)
       throw std::logic_error("a modal method with handles needs their constraint modes");
     return;
   }
-  const Eigen::MatrixXd& psi = *lin_.constraint_modes;
-  const Eigen::Index nb = psi.cols();
+  const Eigen::Index nb = lin_.constraint_modes->cols();
   handle_motion_ = motion;
   auto orZero = [nb](const Eigen::VectorXd& v) { return v.size() > 0 ? v : Eigen::VectorXd::Zero(nb); };
   handle_motion_.displacement = orZero(motion.displacement);
   handle_motion_.velocity = orZero(motion.velocity);
   handle_motion_.acceleration = orZero(motion.acceleration);
-  psi_dx_ = psi * handle_motion_.displacement;
-  psi_v_ = psi * handle_motion_.velocity;
+  psi_dx_stale_ = psi_v_stale_ = true;
   // `linear`'s force, linearized at x_ref, is unchanged by the interface: K_ii Psi + K_ib = 0.
   if (method() != Method::Linear)
     updateReference();
@@ -209,8 +211,8 @@ double ModalMethod::assign(const Eigen::VectorXd& u, const Eigen::VectorXd& v, R
   const Eigen::MatrixXd& phi = lin_.basis.phi;
   // The handles carry Psi dx_b; the M-orthogonal projection onto span(Phi) (Phi^T M Phi = I) of the
   // rest: X = Phi^T M u.
-  const Eigen::VectorXd u_modes = psi_dx_.size() > 0 ? Eigen::VectorXd(u - psi_dx_) : u;
-  const Eigen::VectorXd v_modes = psi_v_.size() > 0 ? Eigen::VectorXd(v - psi_v_) : v;
+  const Eigen::VectorXd u_modes = lin_.constraint_modes ? Eigen::VectorXd(u - psiDx()) : u;
+  const Eigen::VectorXd v_modes = lin_.constraint_modes ? Eigen::VectorXd(v - psiV()) : v;
   const Eigen::VectorXd modal = phi.transpose() * lin_.mass.cwiseProduct(u_modes);
   const Eigen::VectorXd remainder_u = u_modes - phi * modal;
   double dropped = 0.0;
@@ -241,16 +243,32 @@ Eigen::VectorXd ModalMethod::generalizedForce(const Eigen::VectorXd& f_free) con
 
 Eigen::VectorXd ModalMethod::displacement(const State& s) const
 {
-  if (psi_dx_.size() > 0)
-    return offset_ + psi_dx_ + lin_.basis.phi * s.q;
+  if (lin_.constraint_modes)
+    return offset_ + psiDx() + lin_.basis.phi * s.q;
   return offset_ + lin_.basis.phi * s.q;
 }
 
 Eigen::VectorXd ModalMethod::velocity(const State& s) const
 {
-  if (psi_v_.size() > 0)
-    return psi_v_ + lin_.basis.phi * s.v;
+  if (lin_.constraint_modes)
+    return psiV() + lin_.basis.phi * s.v;
   return lin_.basis.phi * s.v;
+}
+
+const Eigen::VectorXd& ModalMethod::psiDx() const
+{
+  if (psi_dx_stale_ || psi_dx_.size() == 0)
+    psi_dx_ = *lin_.constraint_modes * handle_motion_.displacement;
+  psi_dx_stale_ = false;
+  return psi_dx_;
+}
+
+const Eigen::VectorXd& ModalMethod::psiV() const
+{
+  if (psi_v_stale_ || psi_v_.size() == 0)
+    psi_v_ = *lin_.constraint_modes * handle_motion_.velocity;
+  psi_v_stale_ = false;
+  return psi_v_;
 }
 
 void ModalMethod::setAnchor(const Eigen::VectorXd& u_anchor)
