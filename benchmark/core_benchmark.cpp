@@ -1,5 +1,5 @@
-// Google Benchmark of the core: basis construction (with and without modal derivatives), one step of each method, position
-// reconstruction and one evaluation of all spring forces.
+// Google Benchmark of the core: basis construction (with and without modal derivatives), one step of each method, the
+// extra cost of moving handles, position reconstruction and one evaluation of all spring forces.
 #include "modal_mass_spring/equilibrium.h"
 #include "modal_mass_spring/modal_derivatives.h"
 #include "modal_mass_spring/simulation.h"
@@ -7,6 +7,7 @@
 
 #include <benchmark/benchmark.h>
 
+#include <cmath>
 #include <map>
 #include <memory>
 #include <tuple>
@@ -141,6 +142,57 @@ const std::vector<int64_t> kCubatureSizes{20, 50, 100, 200};
 void BM_StepCubature(benchmark::State& state) { stepBenchmark(state, Method::Cubature); }
 BENCHMARK(BM_StepPhysical)->Args({200, 30})->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_StepCubature)->ArgsProduct({kCubatureSizes, {4, 30}})->Unit(benchmark::kMicrosecond);
+
+// Moving handles: a 2D sheet (top row fixed, gravity off) with 1 or 4 single-particle handles on
+// its bottom row, moved along a 1 cm, 1 Hz sine every step (setHandleMotion, then step), against the
+// same sheet with those particles fixed (handles = 0 holds the corner fixed, -4 the four): the
+// difference is the handles' cost per step (the moving references, Psi dx_b, the interface load).
+void handleBenchmark(benchmark::State& state, Method method)
+{
+  const int size = static_cast<int>(state.range(0));
+  const int count = static_cast<int>(std::abs(state.range(1)));
+  const bool moving = state.range(1) > 0;
+  GridParams g = square(size, 2);
+  g.gravity.setZero();
+  for (int c = 0; c < size; ++c)
+    g.fixed.push_back(c);
+  std::vector<int> held;
+  for (int k = 0; k < count; ++k)
+    held.push_back((size - 1) * size + k * (size - 1) / std::max(count - 1, 1));
+  if (moving)
+    for (int particle : held)
+      g.handles.push_back({particle});
+  else
+    g.fixed.insert(g.fixed.end(), held.begin(), held.end());
+  SimulationParams s;
+  s.method = method;
+  s.num_modes = 30;
+  Simulation sim(g, s);
+  const int nb = sim.grid().numHandleDofs();
+  Eigen::VectorXd x0(nb);
+  for (int k = 0; k < nb; ++k)
+    x0[k] = sim.linearizationPositions()[sim.grid().handleDofs()[k]];
+  const Eigen::VectorXd ones = Eigen::VectorXd::Ones(nb);
+  const double w = 2.0 * M_PI, amplitude = 0.01;
+  for (auto _ : state)
+  {
+    if (moving)
+    {
+      const double t = sim.time() + s.time_step;
+      sim.setHandleMotion(x0 + amplitude * std::sin(w * t) * ones, amplitude * w * std::cos(w * t) * ones,
+                          -amplitude * w * w * std::sin(w * t) * ones);
+    }
+    benchmark::DoNotOptimize(sim.step(1));
+  }
+  if (sim.diverged())
+    state.SkipWithError("diverged");
+}
+void BM_HandlesFull(benchmark::State& state) { handleBenchmark(state, Method::Full); }
+void BM_HandlesLinear(benchmark::State& state) { handleBenchmark(state, Method::Linear); }
+void BM_HandlesPhysical(benchmark::State& state) { handleBenchmark(state, Method::Physical); }
+BENCHMARK(BM_HandlesFull)->ArgsProduct({{20, 100}, {-1, 1, -4, 4}})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_HandlesLinear)->ArgsProduct({{20, 100}, {-1, 1, -4, 4}})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_HandlesPhysical)->ArgsProduct({{20, 100}, {-1, 1, -4, 4}})->Unit(benchmark::kMicrosecond);
 
 // Implicit Newmark: Newton iterations with the sparse (full) or r x r (physical) tangent.
 void implicitBenchmark(benchmark::State& state, Method method)

@@ -62,6 +62,12 @@ class FullForceModel : public ForceModel
 {
 public:
   FullForceModel(const Grid& grid, const Eigen::VectorXd& x_ref);
+  // Moves the positions of the dofs that are not free (the handles'); u still measures from x_ref.
+  void setReference(const Eigen::VectorXd& x_ref)
+  {
+    x_ref_ = x_ref;
+    cache_.clear();
+  }
   int size() const override { return grid_.numFreeDofs(); }
   void force(const Eigen::VectorXd& u, Eigen::VectorXd& f) override;
   void tangentStiffness(const Eigen::VectorXd& u, SparseMatrix& k) override;

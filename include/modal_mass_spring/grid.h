@@ -21,7 +21,10 @@ struct GridParams
   double shear_stiffness = 5.0;        // N/m, both diagonals of every cell
   bool bending = false;                // springs to the neighbour two away
   double bending_stiffness = 1.0;      // N/m
-  std::vector<int> fixed;              // particle indices held in place; empty: the top row
+  std::vector<int> fixed;              // particle indices held in place; empty: the top row (none when there are handles)
+  // Groups of particles held rigidly by handles that the caller moves (Simulation::setHandleMotion);
+  // each particle in at most one handle and not also fixed.
+  std::vector<std::vector<int>> handles;
   Eigen::Vector3d gravity{0.0, 0.0, -9.81};  // m/s^2; in 2D the y component must be 0
   double rotation_deg = 0.0;           // initial rotation of the sheet about the x axis (3D only)
 };
@@ -33,7 +36,11 @@ constexpr long long kMaxParticles = 10000000;
 // Throws std::invalid_argument (rejectParameter) for the first invalid grid parameter, naming it, its
 // value and what is allowed. Sizes are counted in 64 bits. Builds nothing.
 void validateGridParams(const GridParams& params);
-// The number of free degrees of freedom of a grid with these parameters (64 bits, not validated).
+// The particles a grid with these parameters holds fixed: `fixed`, or when it is empty the top row
+// unless there are handles (not validated).
+std::vector<int> effectiveFixed(const GridParams& params);
+// The number of free degrees of freedom of a grid with these parameters (64 bits, not validated):
+// neither fixed nor held by a handle.
 long long countFreeDofs(const GridParams& params);
 // The number of springs of a grid with these parameters (64 bits, not validated).
 long long countSprings(const GridParams& params);
@@ -69,6 +76,13 @@ public:
   const Eigen::VectorXd& initialPositions() const { return x0_; }
   bool isFixed(int particle) const { return fixed_mask_[particle]; }
   const std::vector<int>& fixedParticles() const { return fixed_; }
+  // Handle particles are neither fixed nor free: their positions are prescribed (the boundary dofs).
+  bool isHandle(int particle) const { return handle_of_[particle] >= 0; }
+  const std::vector<std::vector<int>>& handles() const { return params_.handles; }
+  // The global dofs of every handle particle, handle by handle, particle by particle, dimension
+  // values each: the order of the handle motion's vectors.
+  const std::vector<int>& handleDofs() const { return handle_dofs_; }
+  int numHandleDofs() const { return static_cast<int>(handle_dofs_.size()); }
 
   // Free degrees of freedom: free_dofs()[k] is the global dof of free dof k; freeIndex(dof) is -1 for
   // a fixed dof.
@@ -98,6 +112,8 @@ private:
   Eigen::VectorXd gravity_force_;
   std::vector<int> fixed_;
   std::vector<bool> fixed_mask_;
+  std::vector<int> handle_of_;    // per particle: its handle, -1 for none
+  std::vector<int> handle_dofs_;
   std::vector<int> free_dofs_;
   std::vector<int> free_index_;
 };

@@ -6,6 +6,7 @@
 #include "modal_mass_spring/cubature.h"
 #include "modal_mass_spring/force_model.h"
 #include "modal_mass_spring/grid.h"
+#include "modal_mass_spring/handles.h"
 #include "modal_mass_spring/integrator.h"
 #include "modal_mass_spring/modal_basis.h"
 #include "modal_mass_spring/options.h"
@@ -27,6 +28,9 @@ struct LinearizedGrid
   const SparseMatrix& stiffness;  // K(x_ref) on the free dofs
   const Eigen::VectorXd& mass;    // the diagonal of M on the free dofs
   const Cubature* cubature = nullptr;  // the trained springs and weights, for `cubature`
+  // With handles: K_ib at x_ref, and the constraint modes Psi (needed by the modal methods only).
+  const SparseMatrix* handle_coupling = nullptr;
+  const Eigen::MatrixXd* constraint_modes = nullptr;
 };
 
 // A method's force model plus a constant external load G in the same coordinates: F(q) + G, with
@@ -101,6 +105,9 @@ public:
   // Sets the external force on the free dofs (N, physical coordinates; empty or zero: none), which
   // then acts like the springs and gravity; the state keeps q and v, its acceleration follows.
   void setExternalForce(const Eigen::VectorXd& f_free);
+  // Prescribes the handle dofs' motion for the forces evaluated from now on (the end of the next
+  // step); the state, its acceleration included, is left as it is.
+  virtual void setHandleMotion(const HandleMotion& motion) = 0;
 
   // Takes one step from state() into next(); false when the integrator refuses it. commit() makes
   // next() the state.
@@ -118,13 +125,20 @@ protected:
   // Sets the state to (q, v), with the acceleration the forces give.
   void setState(const Eigen::VectorXd& q, const Eigen::VectorXd& v);
   ForceModel& forceModel() { return *force_; }
+  // The generalized load the handles' motion adds (their velocity through damping, their
+  // acceleration through inertia); empty: none.
+  void setHandleLoad(const Eigen::VectorXd& load);
 
   const LinearizedGrid lin_;
+  IntegratorSettings settings_;
 
 private:
   Method method_;
   std::unique_ptr<ForceModel> force_;
-  LoadedForceModel loaded_;  // force_ plus the external force: what the integrator sees
+  void updateLoad();
+
+  LoadedForceModel loaded_;  // force_ plus the external force and handle load: what the integrator sees
+  Eigen::VectorXd external_load_, handle_load_;  // generalized; empty: none
   std::unique_ptr<Integrator> integrator_;
   State state_, next_;
 };
@@ -140,6 +154,9 @@ public:
   double kineticEnergy(const State& s) const override;
   void setAnchor(const Eigen::VectorXd& u_anchor) override { anchor_ = u_anchor; }
   double anchorDistanceSquared(const Eigen::VectorXd& q) const override;
+  // The handle particles sit at their prescribed positions; their velocity damps the interior
+  // through the coupling of Rayleigh damping, -beta K_ib v_b.
+  void setHandleMotion(const HandleMotion& motion) override;
 
 private:
   MassDamping massDamping(double alpha, double beta) const override;
@@ -147,7 +164,11 @@ private:
   Eigen::VectorXd anchor_;
 };
 
-// `linear`, `physical` and `cubature`: q = X, u = offset + Phi X with a mass-orthonormal Phi.
+// `linear`, `physical` and `cubature`: q = X, u = offset + Phi X with a mass-orthonormal Phi. With
+// handles (Craig-Bampton), Phi are the fixed-interface modes and u = Psi dx_b + offset + Phi X:
+// `linear` keeps its force linearized at x_ref (whose static response to the handles is Psi dx_b
+// exactly), the others evaluate the forces at x_ref + Psi dx_b + offset + Phi X with the handles at
+// x_b; every method adds the inertial load -Phi^T M Psi (a_b + alpha v_b) of the moving interface.
 class ModalMethod : public MethodModel
 {
 public:
@@ -159,15 +180,27 @@ public:
   double kineticEnergy(const State& s) const override { return 0.5 * s.v.squaredNorm(); }
   void setAnchor(const Eigen::VectorXd& u_anchor) override;
   double anchorDistanceSquared(const Eigen::VectorXd& q) const override;
+  void setHandleMotion(const HandleMotion& motion) override;
 
 private:
   MassDamping massDamping(double alpha, double beta) const override;
   // Phi^T f from the rows of the dofs the force touches.
   Eigen::VectorXd generalizedForce(const Eigen::VectorXd& f_free) const override;
   void setOffset(const Eigen::VectorXd& offset);
+  // Moves the force model's reference to x_ref + offset, plus the handles' displacement (handle
+  // dofs) and its static response Psi dx_b (interior) unless the method is `linear`.
+  void updateReference();
 
   ModalForceModel* modal_force_;  // owned by the base
   Eigen::VectorXd offset_;        // free-dof displacement the modes cannot hold, frozen
+  HandleMotion handle_motion_;
+  // Psi dx_b and Psi v_b, the interior's part carried by the handles: O(interior x handle dofs),
+  // so computed when asked for (every step for the nonlinear forces, only on output for `linear`).
+  const Eigen::VectorXd& psiDx() const;
+  const Eigen::VectorXd& psiV() const;
+  mutable Eigen::VectorXd psi_dx_, psi_v_;  // empty without handles
+  mutable bool psi_dx_stale_ = false, psi_v_stale_ = false;
+  Eigen::MatrixXd interface_mass_;  // Phi^T M Psi (r x handle dofs)
   Eigen::VectorXd anchor_;
   // |offset + Phi X - anchor|_M^2 = c + 2 b.X + X.X with b = Phi^T M (offset - anchor).
   Eigen::VectorXd anchor_b_;

@@ -126,7 +126,8 @@ public:
   const Cubature* cubature() const { return cubature_ ? &*cubature_ : nullptr; }
   // Rebuilds the integrators for a new time step (validated as at construction); keeps the state.
   void setTimeStep(double dt);
-  // Back to the initial positions, at rest, time 0. The external force stays.
+  // Back to the initial positions, at rest, time 0, the handles at rest at the linearization point.
+  // The external force stays.
   void reset();
   // Sets the external force on every particle (N, a vector of dimension values per particle, as
   // positions()), replacing the previous one; zero clears it. It acts on every method in physical
@@ -135,6 +136,27 @@ public:
   // std::invalid_argument for a vector of the wrong size or with a non-finite entry, changing nothing.
   void setExternalForce(const Eigen::VectorXd& force);
   const Eigen::VectorXd& externalForce() const { return external_force_; }
+  // Prescribes the handle particles' positions (absolute, m), velocities and accelerations at the
+  // end of the next step, each vector over grid().handleDofs() (dimension values per handle
+  // particle, handle by handle); velocity and acceleration may be empty (zero). The next step()
+  // takes them; step(k) holds them for all k steps, so a moving handle is given once per step.
+  // Every method holds the handle particles there exactly: `full` simulates the interior with them,
+  // the modal methods add the constraint modes Psi (x_b - x_b,ref) and the interface's inertial load
+  // (Craig-Bampton, see ModalMethod). Once a handle has moved, handles can do work on the grid, so
+  // the energy check of a step is off until the next reset(); the state and displacement checks
+  // stay. Throws std::invalid_argument for a vector of the wrong size or with a non-finite entry,
+  // changing nothing.
+  void setHandleMotion(const Eigen::VectorXd& positions, const Eigen::VectorXd& velocities = {},
+                       const Eigen::VectorXd& accelerations = {});
+  // The handles' motion the current state was stepped to (displacements from the linearization
+  // point); empty vectors: at rest at the linearization point.
+  const HandleMotion& handleMotion() const { return handle_current_; }
+  // The constraint modes Psi = -K_ii^-1 K_ib (built when a modal method is first used with handles;
+  // empty before), and K_ib at the linearization point.
+  const Eigen::MatrixXd& constraintModes() const { return constraint_modes_; }
+  const SparseMatrix& handleCoupling() const { return handle_coupling_; }
+  // True while the energy check is off because handles moved since the start of the run.
+  bool energyCheckSuspended() const { return handles_moved_; }
   // Sets the state from free-dof displacements (from the linearization point) and velocities, with no
   // frozen offset. A
   // modal method takes their M-orthogonal projection; projectionError() then says how far (m, the
@@ -211,6 +233,12 @@ private:
   double start_energy_ = 0.0;  // the method's energy at the start of the run, carried over switches
   double projection_error_ = 0.0;
   Eigen::VectorXd external_force_;  // on every dof; zero: none
+  SparseMatrix handle_coupling_;        // K_ib at x_ref (interior x handle dofs)
+  Eigen::MatrixXd constraint_modes_;    // Psi; empty until a modal method needs it
+  HandleMotion handle_current_;         // where the handles are in the current state
+  HandleMotion handle_target_;          // where the next step takes them
+  bool handle_pending_ = false;         // the target differs from the current motion
+  bool handles_moved_ = false;          // a handle left its rest at x_ref since the start of the run
 };
 
 }  // namespace modal_mass_spring

@@ -17,6 +17,42 @@ void requirePositive(const std::string& name, double value)
     rejectParameter(name, value, "must be a finite number > 0");
 }
 
+long long countHandleParticles(const GridParams& p)
+{
+  long long count = 0;
+  for (const std::vector<int>& handle : p.handles)
+    count += static_cast<long long>(handle.size());
+  return count;
+}
+
+// Every handle names at least one particle, each in the grid, in one handle only and not fixed.
+void validateHandles(const GridParams& p, int num_particles)
+{
+  std::vector<int> owner(num_particles, -1);
+  for (int particle : effectiveFixed(p))
+    owner[particle] = -2;
+  for (size_t h = 0; h < p.handles.size(); ++h)
+  {
+    const std::string name = "handles[" + std::to_string(h) + "]";
+    if (p.handles[h].empty())
+      rejectParameter(name, "[]", "a handle must hold at least one particle");
+    for (int particle : p.handles[h])
+    {
+      if (particle < 0 || particle >= num_particles)
+        rejectParameter(name, particle,
+                        "particle indices must be in [0, " + std::to_string(num_particles - 1) + "] (row * cols + col)");
+      if (owner[particle] == -2)
+        rejectParameter(name, particle, "a handle particle may not also be fixed");
+      if (owner[particle] == static_cast<int>(h))
+        rejectParameter(name, particle, "each particle index must be listed once");
+      if (owner[particle] >= 0)
+        rejectParameter(name, particle,
+                        "a particle may be in one handle only (it is also in handles[" + std::to_string(owner[particle]) + "])");
+      owner[particle] = static_cast<int>(h);
+    }
+  }
+}
+
 }  // namespace
 
 void validateGridParams(const GridParams& p)
@@ -52,16 +88,28 @@ void validateGridParams(const GridParams& p)
     rejectParameter("rotation_deg", p.rotation_deg, "must be 0 for a 2D grid (a rotation about x leaves the x-z plane)");
 
   checkParticleIndices("fixed", p.fixed, static_cast<int>(n));
-  const long long num_fixed = p.fixed.empty() ? p.cols : static_cast<long long>(p.fixed.size());
-  if (num_fixed >= n)
-    rejectParameter("fixed", std::to_string(num_fixed) + " of " + std::to_string(n) + " particles",
+  validateHandles(p, static_cast<int>(n));
+  const long long num_fixed = static_cast<long long>(effectiveFixed(p).size());
+  const long long num_held = num_fixed + countHandleParticles(p);
+  if (num_held >= n)
+    rejectParameter(p.handles.empty() ? "fixed" : "fixed, handles",
+                    std::to_string(num_held) + " of " + std::to_string(n) + " particles",
                     "at least one particle must be free");
+}
+
+std::vector<int> effectiveFixed(const GridParams& p)
+{
+  std::vector<int> fixed = p.fixed;
+  if (fixed.empty() && p.handles.empty())
+    for (int c = 0; c < p.cols; ++c)
+      fixed.push_back(c);
+  return fixed;
 }
 
 long long countFreeDofs(const GridParams& p)
 {
-  const long long num_fixed = p.fixed.empty() ? p.cols : static_cast<long long>(p.fixed.size());
-  return p.dimension * (static_cast<long long>(p.rows) * p.cols - num_fixed);
+  const long long num_held = static_cast<long long>(effectiveFixed(p).size()) + countHandleParticles(p);
+  return p.dimension * (static_cast<long long>(p.rows) * p.cols - num_held);
 }
 
 long long countSprings(const GridParams& p)
@@ -120,17 +168,22 @@ Grid::Grid(const GridParams& params) : params_(params)
           addSpring(particleIndex(r, c), particleIndex(r + 2, c), params_.bending_stiffness), ++num_bending_;
       }
 
-  fixed_ = params_.fixed;
-  if (fixed_.empty())
-    for (int c = 0; c < params_.cols; ++c)
-      fixed_.push_back(particleIndex(0, c));
+  fixed_ = effectiveFixed(params_);
   fixed_mask_.assign(n, false);
   for (int p : fixed_)
     fixed_mask_[p] = true;
+  handle_of_.assign(n, -1);
+  for (size_t h = 0; h < params_.handles.size(); ++h)
+    for (int p : params_.handles[h])
+    {
+      handle_of_[p] = static_cast<int>(h);
+      for (int d = 0; d < dim; ++d)
+        handle_dofs_.push_back(dim * p + d);
+    }
 
   free_index_.assign(numDofs(), -1);
   for (int p = 0; p < n; ++p)
-    if (!fixed_mask_[p])
+    if (!fixed_mask_[p] && handle_of_[p] < 0)
       for (int d = 0; d < dim; ++d)
       {
         free_index_[dim * p + d] = static_cast<int>(free_dofs_.size());

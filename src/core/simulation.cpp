@@ -183,6 +183,11 @@ double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
   // matrix and the held-out columns.
   const double max_springs = effectiveMaxSprings(cubatureParams(p), static_cast<int>(std::min<long long>(countSprings(g), 1 << 30)));
   bytes += 8.0 * (3.0 * p.cubature_training_poses * r * max_springs + max_springs * max_springs);
+  // The constraint modes Psi (interior dofs x handle dofs), Phi^T M Psi, and a right-hand side.
+  long long handle_particles = 0;
+  for (const std::vector<int>& handle : g.handles)
+    handle_particles += static_cast<long long>(handle.size());
+  bytes += 8.0 * 2.0 * n * dim * static_cast<double>(handle_particles);
   // Positions, forces, states and scratch vectors over all dofs, and the springs.
   bytes += 8.0 * 40.0 * dim * particles + 24.0 * (blocks - 1.0) / 2.0 * particles;
   return bytes;
@@ -260,6 +265,8 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
     physical_basis_ = basis_;
   }
 
+  if (grid_.numHandleDofs() > 0)
+    handle_coupling_ = modal_mass_spring::handleCoupling(grid_, x_ref_);
   u_start_ = grid_.gatherFree(x_start_ - x_ref_);
   external_force_ = Eigen::VectorXd::Zero(x_ref_.size());
   double stretched = 0.0;
@@ -287,9 +294,22 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
   const ModalBasis& basis = method == Method::Linear ? basis_ : physical_basis_;
   if (method == Method::Cubature && !cubature_)
     cubature_ = trainCubature(grid_, physical_basis_, x_ref_, cubatureParams(params_));
-  const LinearizedGrid linearized{grid_, basis, x_ref_, stiffness_, mass_, cubature_ ? &*cubature_ : nullptr};
+  // The modal methods carry the handles' static influence with the constraint modes.
+  const bool handles = grid_.numHandleDofs() > 0;
+  if (handles && method != Method::Full && constraint_modes_.size() == 0)
+    constraint_modes_ = modal_mass_spring::constraintModes(stiffness_, handle_coupling_);
+  const LinearizedGrid linearized{grid_,
+                                  basis,
+                                  x_ref_,
+                                  stiffness_,
+                                  mass_,
+                                  cubature_ ? &*cubature_ : nullptr,
+                                  handles ? &handle_coupling_ : nullptr,
+                                  constraint_modes_.size() > 0 ? &constraint_modes_ : nullptr};
   model_ = makeMethod(method, linearized, integratorSettings());
   params_.method = method;
+  if (handles)
+    model_->setHandleMotion(handle_current_);
   model_->setExternalForce(grid_.gatherFree(external_force_));
   projection_error_ = model_->assign(u, v, remainder);
   model_->setAnchor(anchor_);
@@ -314,6 +334,7 @@ void Simulation::setPhysicalState(const Eigen::VectorXd& u, const Eigen::VectorX
   // start far outside its modes has not diverged by being where the projection put it.
   anchor_ = displacement();
   model_->setAnchor(anchor_);
+  handles_moved_ = !handle_current_.atRest();
   start_energy_ = methodEnergy();
   energy_scale_ = base_energy_scale_ + kineticEnergy() + springEnergy(grid_, positions());
 }
@@ -345,8 +366,38 @@ void Simulation::setExternalForce(const Eigen::VectorXd& force)
   start_energy_ = methodEnergy() - rise;
 }
 
+void Simulation::setHandleMotion(const Eigen::VectorXd& positions, const Eigen::VectorXd& velocities,
+                                 const Eigen::VectorXd& accelerations)
+{
+  const int nb = grid_.numHandleDofs();
+  const std::string allowed = "must have " + std::to_string(nb) + " values, " + std::to_string(grid_.dimension()) +
+                              " per handle particle, handle by handle";
+  auto check = [&](const std::string& name, const Eigen::VectorXd& values, bool may_be_empty) {
+    if (values.size() != nb && !(may_be_empty && values.size() == 0))
+      rejectParameter(name, std::to_string(values.size()) + " values",
+                      nb == 0 ? std::string("the grid has no handles") : allowed + (may_be_empty ? " (or none: 0)" : ""));
+    for (Eigen::Index k = 0; k < values.size(); ++k)
+      if (!std::isfinite(values[k]))
+        rejectParameter(name, "a non-finite value on handle dof " + std::to_string(k), "must be finite");
+  };
+  check("handle positions", positions, false);
+  check("handle velocities", velocities, true);
+  check("handle accelerations", accelerations, true);
+  HandleMotion target;
+  target.displacement.resize(nb);
+  for (int k = 0; k < nb; ++k)
+    target.displacement[k] = positions[k] - x_ref_[grid_.handleDofs()[k]];
+  target.velocity = velocities.size() > 0 ? velocities : Eigen::VectorXd::Zero(nb);
+  target.acceleration = accelerations.size() > 0 ? accelerations : Eigen::VectorXd::Zero(nb);
+  handle_target_ = target;
+  handle_pending_ = true;
+}
+
 void Simulation::reset()
 {
+  // The handles go back to rest at the linearization point with the grid.
+  handle_current_ = handle_target_ = HandleMotion{};
+  handle_pending_ = false;
   setPhysicalState(u_start_, Eigen::VectorXd::Zero(u_start_.size()));
   step_count_ = 0;
 }
@@ -366,7 +417,10 @@ std::string Simulation::divergence(bool integrator_ok, const State& next)
         << " m";
     return msg.str();
   }
-  // Damping only removes energy and gravity is conservative: a rise is the integrator's doing.
+  // Damping only removes energy and gravity is conservative: a rise is the integrator's doing. Moving
+  // handles do work on the grid, which this measure does not count: the check is off then.
+  if (handles_moved_)
+    return "";
   const double energy = model_->energy(next);
   if (!std::isfinite(energy) || energy > start_energy_ + params_.energy_tolerance * energy_scale_)
   {
@@ -389,10 +443,19 @@ StepResult Simulation::step(int steps)
   }
   for (int k = 0; k < steps; ++k)
   {
+    // The forces at the end of the step see the handles where the step takes them.
+    const bool moving = handle_pending_;
+    if (moving)
+    {
+      model_->setHandleMotion(handle_target_);
+      handles_moved_ = handles_moved_ || !handle_target_.atRest();
+    }
     const bool ok = model_->step();
     const std::string why = divergence(ok, model_->next());
     if (!why.empty())
     {
+      if (moving)
+        model_->setHandleMotion(handle_current_);  // the last good state, with its handles
       diverged_ = true;
       result.diverged = true;
       std::ostringstream msg;
@@ -407,6 +470,11 @@ StepResult Simulation::step(int steps)
       return result;
     }
     model_->commit();
+    if (moving)
+    {
+      handle_current_ = handle_target_;
+      handle_pending_ = false;
+    }
     ++step_count_;
     ++result.steps_taken;
   }
@@ -420,6 +488,9 @@ Eigen::VectorXd Simulation::velocity() const { return model_->velocity(model_->s
 Eigen::VectorXd Simulation::positions() const
 {
   Eigen::VectorXd x = x_ref_;
+  if (handle_current_.displacement.size() > 0)
+    for (int k = 0; k < grid_.numHandleDofs(); ++k)
+      x[grid_.handleDofs()[k]] += handle_current_.displacement[k];
   grid_.addFree(displacement(), x);
   return x;
 }

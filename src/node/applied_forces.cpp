@@ -37,9 +37,10 @@ std::string AppliedForces::add(const std::vector<uint32_t>& particles, const std
           << grid_.numParticles() - 1 << "]";
       return why.str();
     }
-    if (grid_.isFixed(static_cast<int>(p)))
+    if (grid_.isFixed(static_cast<int>(p)) || grid_.isHandle(static_cast<int>(p)))
     {
-      why << "particle " << p << " is fixed: a force on it does nothing";
+      why << "particle " << p << " is " << (grid_.isFixed(static_cast<int>(p)) ? "fixed" : "held by a handle")
+          << ": a force on it does nothing";
       return why.str();
     }
     if (seen[p])

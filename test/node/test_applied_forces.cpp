@@ -69,4 +69,12 @@ TEST(AppliedForces, BadRequestsAreRefusedByNameAndAddNothing)
   EXPECT_TRUE(contains(forces.add({9}, {f}, -1.0, 0), "duration -1"));
   EXPECT_TRUE(contains(forces.add({9}, {f}, std::numeric_limits<double>::infinity(), 0), "duration inf"));
   EXPECT_EQ(forces.size(), 0u);
+
+  GridParams held;
+  held.dimension = 3;
+  held.fixed = {0, 1, 2, 3, 4};
+  held.handles = {{22}};
+  const Grid with_handle(held);
+  AppliedForces on_handle(with_handle);
+  EXPECT_TRUE(contains(on_handle.add({22}, {f}, 0, 0), "particle 22 is held by a handle"));
 }
