@@ -52,7 +52,7 @@ TEST(StartupReport, EveryStageHasItsTime)
   cubature.heldout_error = 0.031;
   cubature.training_seconds = 1.25;
   cubature.training_poses = 100;
-  EXPECT_EQ(describeStartupTimes(lin, basis, 1.3, &cubature),
+  EXPECT_EQ(describeStartupTimes(lin, basis, 1.3, {}, &cubature),
             "start-up 1.3 s: stiffness 2.1 ms, factorisation 4.9 ms, eigensolver 28.9 ms, cubature 1.25 s");
   EXPECT_EQ(describeCubature(cubature, 72),
             "cubature: 3 of 72 springs, training error 1.95% on 100 poses, held-out 3.1%, trained in 1.25 s");
