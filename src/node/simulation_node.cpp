@@ -235,7 +235,8 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
            grid.fixedParticles().size(), toString(simulation->method()).c_str(),
            describeModes(simulation->basis().frequencies, simulation->basis().num_zero_modes).c_str(),
            describeStartupTimes(simulation->linearization(), simulation->basis(), total_seconds,
-                                simulation->derivativeInfo(), simulation->cubature())
+                                simulation->derivativeInfo(),
+                                simulation->cacheReport().cubature_loaded ? nullptr : simulation->cubature())
                .c_str(),
            sim_params.time_step, params.real_time_factor / (params.publish_rate * sim_params.time_step),
            params.publish_rate, params.real_time_factor);
