@@ -15,7 +15,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
-#include <iterator>
+#include <algorithm>
 #include <random>
 #include <sstream>
 #include <system_error>
@@ -30,16 +30,21 @@ namespace
 
 constexpr char kMagic[8] = {'M', 'M', 'S', 'C', 'A', 'C', 'H', 'E'};
 
-// FNV-1a, 64 bits: the file name's hash and the payload's checksum. Not cryptographic: it catches
+// FNV-1a, 64 bits, over 8-byte words (a byte at a time is slow on a basis of many MB), the tail
+// byte by byte: the file name's hash and the payload's checksum. Not cryptographic: it catches
 // truncation, bit flips and stray writes, not an attacker (the cache directory is the user's own).
 std::uint64_t fnv1a(const char* data, size_t size)
 {
   std::uint64_t hash = 14695981039346656037ull;
-  for (size_t k = 0; k < size; ++k)
+  size_t k = 0;
+  for (; k + 8 <= size; k += 8)
   {
-    hash ^= static_cast<unsigned char>(data[k]);
-    hash *= 1099511628211ull;
+    std::uint64_t word;
+    std::memcpy(&word, data + k, 8);
+    hash = (hash ^ word) * 1099511628211ull;
   }
+  for (; k < size; ++k)
+    hash = (hash ^ static_cast<unsigned char>(data[k])) * 1099511628211ull;
   return hash;
 }
 
@@ -176,13 +181,15 @@ std::optional<std::vector<char>> readPayload(const std::string& file, const std:
   std::error_code error;
   if (!std::filesystem::exists(file, error))
     return std::nullopt;
-  std::ifstream in(file, std::ios::binary);
-  const std::vector<char> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  std::ifstream in(file, std::ios::binary | std::ios::ate);
+  std::vector<char> bytes(in ? static_cast<size_t>(std::max<std::streamoff>(0, in.tellg())) : 0);
+  in.seekg(0);
+  in.read(bytes.data(), static_cast<std::streamsize>(bytes.size()));
   auto reject = [&](const std::string& why) -> std::optional<std::vector<char>> {
     warn(options, "cache file '" + file + "' ignored and rebuilt: " + why);
     return std::nullopt;
   };
-  if (!in.good() && !in.eof())
+  if (!in)
     return reject("it cannot be read");
   Reader r(bytes.data(), bytes.size());
   char magic[sizeof(kMagic)];
@@ -358,7 +365,7 @@ std::optional<Precomputed> loadPrecomputed(const std::string& file, const std::s
   p.equilibrium_residual = r.get<double>();
   p.equilibrium_seconds = r.get<double>();
   p.basis = getBasis(r);
-  p.physical_basis = getBasis(r);
+  p.physical_basis = r.get<std::int32_t>() != 0 ? p.basis : getBasis(r);
   DerivativeBasisInfo& d = p.derivative_info;
   d.linear_modes = r.get<std::int32_t>();
   d.derivative_directions = r.get<std::int32_t>();
@@ -390,7 +397,12 @@ bool storePrecomputed(const std::string& file, const std::string& key, const Pre
   w.put(p.equilibrium_residual);
   w.put(p.equilibrium_seconds);
   putBasis(w, p.basis);
-  putBasis(w, p.physical_basis);
+  // Without derivative directions the physical basis is the eigenbasis: written once.
+  const bool same = p.physical_basis.phi.cols() == p.basis.phi.cols() && p.physical_basis.phi == p.basis.phi &&
+                    p.physical_basis.reduced_stiffness.size() == p.basis.reduced_stiffness.size();
+  w.put<std::int32_t>(same ? 1 : 0);
+  if (!same)
+    putBasis(w, p.physical_basis);
   const DerivativeBasisInfo& d = p.derivative_info;
   w.put<std::int32_t>(d.linear_modes);
   w.put<std::int32_t>(d.derivative_directions);

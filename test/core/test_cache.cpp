@@ -139,6 +139,21 @@ TEST_F(CacheTest, CachedBasisAndCubatureEqualRecomputedOnes)
   EXPECT_EQ(computed->positions(), second->positions());
 }
 
+TEST_F(CacheTest, AnEigenbasisIsStoredOnceAndLoadsAsBothBases)
+{
+  SimulationParams params;
+  params.method = Method::Cubature;
+  params.num_modes = 4;
+  const auto computed = build(GridParams{}, params, CacheOptions{});
+  build(GridParams{}, params, options());
+  const auto loaded = build(GridParams{}, params, options());
+  EXPECT_TRUE(loaded->cacheReport().basis_loaded);
+  EXPECT_TRUE(loaded->cacheReport().cubature_loaded);
+  EXPECT_EQ(loaded->physicalBasis().phi, loaded->basis().phi);
+  expectSamePrecomputation(*computed, *loaded);
+  EXPECT_TRUE(warnings_.empty());
+}
+
 TEST_F(CacheTest, LazilyTrainedCubatureIsCachedAtTheFirstSwitch)
 {
   const auto physical = build(sheet(), sheetParams(Method::Physical), options());
