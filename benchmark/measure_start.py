@@ -7,7 +7,7 @@ node --runs times: each time it measures from the moment the process is spawned 
 the Simulation's build or cache load, the first tick), and stops it. The first run uses an empty
 cache directory unless --keep-cache (a cold start that fills it); the others load from it.
 
-  benchmark/measure_start.py --config config/cloth_large.yaml --runs 4
+  benchmark/measure_start.py --config config/cloth_large.yaml --runs 4 [--cpu-seconds 20]
 Needs the workspace's setup.bash sourced (rosrun finds the node).
 """
 import argparse
@@ -37,6 +37,9 @@ def main():
     parser.add_argument("--cache-dir", help="cache folder (default: a new temporary one)")
     parser.add_argument("--keep-cache", action="store_true", help="do not empty the cache before the first run")
     parser.add_argument("--timeout", type=float, default=600.0, help="s to wait for one start's markers")
+    parser.add_argument("--cpu-seconds", type=float, default=0.0,
+                        help="after the last start's first markers, measure the node's share of one core over this "
+                             "many seconds of wall time (default 0: not measured)")
     args = parser.parse_args()
     if args.runs < 1:
         parser.error("--runs must be at least 1")
@@ -79,6 +82,16 @@ def main():
             reader.start()
             got = received.wait(args.timeout)
             elapsed = time.monotonic() - start
+            share = None
+            if got and run == args.runs - 1 and args.cpu_seconds > 0:
+                # rosrun execs the node: its pid is the node's. utime + stime in clock ticks.
+                def cpu():
+                    with open("/proc/%d/stat" % node.pid) as stat:
+                        fields = stat.read().rsplit(")", 1)[1].split()
+                    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+                before, wall = cpu(), time.monotonic()
+                time.sleep(args.cpu_seconds)
+                share = (cpu() - before) / (time.monotonic() - wall)
             node.send_signal(signal.SIGINT)
             try:
                 node.wait(30)
@@ -93,6 +106,13 @@ def main():
                 return 1
             times.append(elapsed)
             print("run %d: %.3f s to the first markers; %s" % (run + 1, elapsed, cache_line))
+            if share is not None:
+                print("run %d: the node used %.1f%% of one core over %g s of running" % (run + 1, 100 * share,
+                                                                                        args.cpu_seconds))
+                # Its last status line (status_log_period) and any warning: did it run, at what cost?
+                clean = [re.sub(r"\x1b\[[0-9;]*m", "", l).strip() for l in log]
+                for line in [l for l in clean if "WARN" in l or "ERROR" in l][:3] + clean[-1:]:
+                    print("  " + line)
         if len(times) > 1:
             print("cached starts (runs 2 to %d): median %.3f s, min %.3f s, max %.3f s"
                   % (len(times), statistics.median(times[1:]), min(times[1:]), max(times[1:])))
