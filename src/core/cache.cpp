@@ -71,6 +71,8 @@ public:
   {
     put<std::int64_t>(m.rows());
     put<std::int64_t>(m.cols());
+    if (m.size() == 0)
+      return;
     const char* p = reinterpret_cast<const char*>(m.data());
     bytes.insert(bytes.end(), p, p + sizeof(double) * m.size());
   }
@@ -103,7 +105,7 @@ public:
       return {};
     }
     Eigen::MatrixXd m(rows, cols);
-    if (take(sizeof(double) * m.size()))
+    if (take(sizeof(double) * m.size()) && m.size() > 0)  // an empty matrix has no data pointer
       std::memcpy(m.data(), data_ + pos_ - sizeof(double) * m.size(), sizeof(double) * m.size());
     return m;
   }

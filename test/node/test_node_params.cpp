@@ -456,7 +456,7 @@ TEST(NodeParams, EveryShippedNodeConfigLoads)
     loaded.push_back(entry.path().filename().string());
   }
   std::sort(loaded.begin(), loaded.end());
-  EXPECT_EQ(loaded, (std::vector<std::string>{"cloth.yaml", "paper_2d.yaml", "paper_3d.yaml"}));
+  EXPECT_EQ(loaded, (std::vector<std::string>{"cloth.yaml", "cloth_large.yaml", "paper_2d.yaml", "paper_3d.yaml"}));
 }
 
 }  // namespace
