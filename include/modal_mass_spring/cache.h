@@ -75,9 +75,10 @@ std::string cacheFile(const std::string& directory, const std::string& kind, con
 
 // Reads the file of `key`. A missing file gives nothing silently; one that is truncated, corrupt
 // (checksum), of another format version or made for other parameters, or whose sizes do not fit
-// `free_dofs`, gives nothing and a warning naming the file and why.
+// `free_dofs` and `equilibrium_dofs` (all dofs when the equilibrium is needed, else 0), gives nothing
+// and a warning naming the file and why.
 std::optional<Precomputed> loadPrecomputed(const std::string& file, const std::string& key, int free_dofs,
-                                           const CacheOptions& options);
+                                           int equilibrium_dofs, const CacheOptions& options);
 std::optional<Cubature> loadCubature(const std::string& file, const std::string& key, int num_springs,
                                      const CacheOptions& options);
 

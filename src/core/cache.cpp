@@ -355,7 +355,7 @@ std::string describeCache(const CacheReport& report)
 }
 
 std::optional<Precomputed> loadPrecomputed(const std::string& file, const std::string& key, int free_dofs,
-                                           const CacheOptions& options)
+                                           int equilibrium_dofs, const CacheOptions& options)
 {
   const auto payload = readPayload(file, key, options);
   if (!payload)
@@ -380,6 +380,9 @@ std::optional<Precomputed> loadPrecomputed(const std::string& file, const std::s
     why = basisMismatch(p.basis, free_dofs);
   if (why.empty())
     why = basisMismatch(p.physical_basis, free_dofs);
+  if (why.empty() && p.equilibrium.size() != equilibrium_dofs)
+    why = "its equilibrium has " + std::to_string(p.equilibrium.size()) + " values where " +
+          std::to_string(equilibrium_dofs) + " are needed";
   if (why.empty() && !p.equilibrium.allFinite())
     why = "its equilibrium is not finite";
   if (!why.empty())

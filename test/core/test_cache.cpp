@@ -255,6 +255,29 @@ TEST_F(CacheTest, AnUnwritableDirectoryIsAWarningNotAFailure)
   EXPECT_NE(describeCache(sim->cacheReport()).find("NOT stored"), std::string::npos);
 }
 
+TEST_F(CacheTest, AWellFormedFileWhoseContentDoesNotFitTheGridIsRejected)
+{
+  // Checksum and key right, content wrong: no equilibrium where one is needed, then a basis too short.
+  const std::string key = basisKey(sheet(), sheetParams());
+  const std::string file = cacheFile(dir_.string(), "basis", key);
+  const auto reference = build(sheet(), sheetParams(), CacheOptions{});
+  Precomputed bad;
+  bad.basis = bad.physical_basis = reference->basis();
+  ASSERT_TRUE(storePrecomputed(file, key, bad, options()));
+  auto rebuilt = build(sheet(), sheetParams(), options());
+  EXPECT_FALSE(rebuilt->cacheReport().basis_loaded);
+  EXPECT_TRUE(mentions(warnings_, file, "its equilibrium has 0 values"));
+  expectSamePrecomputation(*reference, *rebuilt);
+
+  warnings_.clear();
+  bad.equilibrium = reference->linearizationPositions();
+  bad.basis.phi = bad.basis.phi.topRows(10).eval();
+  ASSERT_TRUE(storePrecomputed(file, key, bad, options()));
+  rebuilt = build(sheet(), sheetParams(), options());
+  EXPECT_FALSE(rebuilt->cacheReport().basis_loaded);
+  EXPECT_TRUE(mentions(warnings_, file, "wrong size")) << warnings_.front();
+}
+
 TEST(CacheKey, EveryParameterOfThePrecomputationChangesTheKey)
 {
   const GridParams g = sheet();
