@@ -23,8 +23,8 @@ data="$REPO_DIR/docs/data"
 configs="$REPO_DIR/config/compare"
 mkdir -p "$data"
 only="${COMPARE_ONLY:-}"
-if [ -n "$only" ] && [ "$only" != stability ] && [ "$only" != derivatives ]; then
-  echo "compare.sh: COMPARE_ONLY must be empty, 'stability' or 'derivatives', not '$only'" >&2
+if [ -n "$only" ] && [ "$only" != stability ] && [ "$only" != derivatives ] && [ "$only" != error_cost ]; then
+  echo "compare.sh: COMPARE_ONLY must be empty, 'stability', 'derivatives' or 'error_cost', not '$only'" >&2
   exit 2
 fi
 # Modal derivatives against linear modes (docs/results.md, "Modal derivatives"): physical with R linear
@@ -61,6 +61,30 @@ if [ "$only" = derivatives ]; then
     echo "# load average $(cut -d' ' -f1-3 /proc/loadavg) at the end"
   } | tee "$data/derivatives/summary.txt"
   /usr/bin/python3 "$REPO_DIR/scripts/plot_comparison.py" --data "$data/derivatives" --out "$REPO_DIR/docs"
+  exit 0
+fi
+# Error against cost (docs/error_cost.png, which leads docs/results.md): every method x linearization x
+# integrator at 1, 10 and 50 ms on the paper's 2D and 3D setups against the converged reference, as
+# the combinations below but with `cubature` too, each time step's methods timed in one run.
+if [ "$only" = error_cost ]; then
+  out="$data/error_cost"
+  mkdir -p "$out"
+  rm -f "$out"/*.csv
+  {
+    echo "# modal_compare, error against cost, $(date -u +%Y-%m-%dT%H:%MZ), commit $(git -C "$REPO_DIR" describe --always --dirty)"
+    echo "# load average $(cut -d' ' -f1-3 /proc/loadavg) at the start"
+    for config in paper_2d paper_3d; do
+      for dt_ms in 1 10 50; do
+        steps=$((5000 / dt_ms)); sample=$(( (50 + dt_ms - 1) / dt_ms ))
+        "$tool" --config "$configs/$config.yaml" --tag "error_cost_${config}_dt${dt_ms}ms" --experiment accuracy \
+          --vary linearization=rest,equilibrium --vary integrator=explicit,implicit \
+          --set time_step="$(awk "BEGIN{print $dt_ms / 1000}")" --steps "$steps" --interval "$steps" --sample "$sample" \
+          --reference-time-step 0.0001 --no-snapshots --output "$out" "$@"
+      done
+    done
+    echo "# load average $(cut -d' ' -f1-3 /proc/loadavg) at the end"
+  } | tee "$out/summary.txt"
+  /usr/bin/python3 "$REPO_DIR/scripts/plot_comparison.py" --data "$out" --out "$REPO_DIR/docs"
   exit 0
 fi
 if [ "$only" = stability ]; then

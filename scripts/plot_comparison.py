@@ -12,6 +12,9 @@ Reads, from DIR, every file the tool writes and draws:
   accuracy_combinations_<config>_dt<N>ms_error.csv (runs with --reference-time-step, one per time
       step) -> combinations.png (error against the converged reference and wall time per simulated
       second, against the time step, for every method x linearization x integrator)
+  accuracy_error_cost_<config>_dt<N>ms_error.csv (the same runs with every method) -> error_cost.png
+      (mean RMS distance to the converged reference against the median wall time of one step, log-log,
+      one panel per config: which method to pick for an error and a budget)
   accuracy_derivatives_<config>_linear_modes_error.csv with
   accuracy_derivatives_<config>_modal_derivatives_error.csv -> derivatives_<config>.png (RMS distance
       to `full` over time and the swing, the sheet's mean y, of `linear` and `physical` with R + D
@@ -400,6 +403,80 @@ def plot_combinations(found, out):
     return [target]
 
 
+def error_cost_files(data):
+    """{config: {time step (s): path}} of the error-against-cost runs."""
+    found = {}
+    for path in sorted(data.glob("accuracy_error_cost_*_dt*ms_error.csv")):
+        config, _, dt = tag_of(path, "accuracy_error_cost_", "_error.csv").rpartition("_dt")
+        found.setdefault(config, {})[float(dt[:-2]) / 1e3] = path
+    return found
+
+
+def plot_error_cost(found, out):
+    """One point per method x linearization x integrator x time step: cost per step against error."""
+    configs = sorted(found)
+    fig, axes = plt.subplots(1, len(configs), figsize=(6.5 * len(configs), 6.2), squeeze=False)
+    markers = {"explicit": "o", "implicit": "s"}
+    dt_sizes = {}
+    diverged = []
+    for c, config in enumerate(configs):
+        ax = axes[0][c]
+        by_dt = {dt: summarize(read_csv(path, "error")) for dt, path in sorted(found[config].items())}
+        dts = sorted(by_dt)
+        dt_sizes = {dt: 16 + 30 * k for k, dt in enumerate(dts)}
+        keys = ordered(k for dt in dts for k in by_dt[dt] if k[1] not in REFERENCES)
+        for variant, method in keys:
+            parts = dict(p.split("=", 1) for p in variant.split() if "=" in p)
+            integrator, linearization = parts.get("integrator"), parts.get("linearization")
+            points = []
+            for dt in dts:
+                s = by_dt[dt].get((variant, method))
+                if s is None:
+                    continue
+                if s["diverged"]:
+                    diverged.append(f"{config} {method}, {linearization}, {integrator}, {dt * 1e3:g} ms")
+                    continue
+                points.append((s["step_seconds"], s["mean_rms"], dt))
+            if not points:
+                continue
+            color = METHOD_COLORS.get(method)
+            ax.plot([p[0] for p in points], [p[1] for p in points], color=color, lw=0.6,
+                    ls="-" if linearization == "equilibrium" else "--", alpha=0.6)
+            for cost, error, dt in points:
+                ax.scatter([cost], [error], s=dt_sizes[dt], marker=markers.get(integrator, "^"),
+                           facecolors=color if linearization == "equilibrium" else "none", edgecolors=color, lw=1.1)
+        floor = max((s["max_rms"] for dt in dts for k, s in by_dt[dt].items() if k[1] == "reference_half_step"),
+                    default=math.nan)
+        if not math.isnan(floor) and floor > 0:
+            ax.axhline(floor, color="black", lw=0.8, ls=":")
+            ax.annotate("reference vs. itself at half its step", (0.01, floor), xycoords=("axes fraction", "data"),
+                        va="bottom", fontsize=7)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("median wall time of one step (s)")
+        ax.set_ylabel("mean RMS distance to the converged reference over 5 s (m)")
+        ax.set_title(f"{config}: error against cost per step", fontsize=10)
+        ax.grid(True, which="both", alpha=0.3)
+    from matplotlib.lines import Line2D
+    handles = [Line2D([], [], color=METHOD_COLORS[m], lw=3, label=m) for m in ("full", "linear", "physical", "cubature")]
+    handles += [Line2D([], [], color="0.3", marker="o", ls="none", label="explicit"),
+                Line2D([], [], color="0.3", marker="s", ls="none", label="implicit"),
+                Line2D([], [], color="0.3", marker="o", mfc="0.3", ls="-", label="equilibrium (filled, solid)"),
+                Line2D([], [], color="0.3", marker="o", mfc="none", ls="--", label="rest (open, dashed)")]
+    handles += [Line2D([], [], color="0.3", marker="o", mfc="none", ls="none", ms=math.sqrt(size),
+                       label=f"time step {dt * 1e3:g} ms") for dt, size in dt_sizes.items()]
+    fig.legend(handles=handles, loc="lower center", ncol=6, fontsize=8)
+    note = "Down and left is better; a time step's cost per simulated second is the step's cost / dt."
+    if diverged:
+        note += " Diverged (not drawn): " + "; ".join(diverged) + "."
+    fig.text(0.5, 0.995, note, ha="center", va="top", fontsize=7, wrap=True)
+    fig.tight_layout(rect=(0, 0.11, 1, 0.95))
+    target = out / "error_cost.png"
+    fig.savefig(target, dpi=100)
+    plt.close(fig)
+    return [target]
+
+
 def combination_tables(found):
     parts = []
     for config in sorted(found):
@@ -617,6 +694,8 @@ def main(argv=None):
         skip = {p for steps in combination_files(data).values() for dt, p in steps.items() if dt != min(steps)}
         # The modal-derivative runs are drawn in pairs (derivatives_<config>.png), not one by one.
         skip |= {p for pair in derivative_files(data).values() for p in pair}
+        # The error-against-cost runs are drawn together (error_cost.png).
+        skip |= {p for steps in error_cost_files(data).values() for p in steps.values()}
         for path in sorted(data.glob("accuracy_*_error.csv")):
             if path not in skip:
                 written += plot_error(path, out)
@@ -626,6 +705,9 @@ def main(argv=None):
         combinations = combination_files(data)
         if combinations:
             written += plot_combinations(combinations, out)
+        error_cost = error_cost_files(data)
+        if error_cost:
+            written += plot_error_cost(error_cost, out)
         derivatives = derivative_files(data)
         if derivatives:
             written += plot_derivatives(derivatives, out)

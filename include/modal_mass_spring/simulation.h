@@ -1,6 +1,7 @@
 // A simulation: a grid, its modal basis and the chosen method, stepped by an integrator.
 #pragma once
 
+#include "modal_mass_spring/cache.h"
 #include "modal_mass_spring/cubature.h"
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/method_model.h"
@@ -96,7 +97,12 @@ public:
   // "stiffness", "factorisation", "eigensolver", "modal derivatives" with that basis, and "cubature"
   // when the method is `cubature`). Throws std::invalid_argument naming the offending
   // parameter, std::runtime_error when a stage fails.
-  Simulation(const GridParams& grid_params, const SimulationParams& params, const StageFn& on_stage = {});
+  // With a cache directory (CacheOptions), the equilibrium, the bases and the cubature are loaded
+  // from it when it holds them for these parameters, and written to it when they are computed
+  // (including a cubature trained at a later switch); a file that is unusable or cannot be written
+  // is a warning, never an error (see cache.h).
+  Simulation(const GridParams& grid_params, const SimulationParams& params, const StageFn& on_stage = {},
+             const CacheOptions& cache = {});
 
   // The force models and integrators refer to the grid, basis and matrices held here: a Simulation
   // stays where it was built.
@@ -124,6 +130,8 @@ public:
   void setMethod(Method method);
   // The trained cubature (springs, weights, training report), or null before `cubature` was first used.
   const Cubature* cubature() const { return cubature_ ? &*cubature_ : nullptr; }
+  // What the cache did: whether the basis and the cubature were loaded or stored, and where.
+  const CacheReport& cacheReport() const { return cache_report_; }
   // Rebuilds the integrators for a new time step (validated as at construction); keeps the state.
   void setTimeStep(double dt);
   // Back to the initial positions, at rest, time 0, the handles at rest at the linearization point.
@@ -206,6 +214,10 @@ private:
   IntegratorSettings integratorSettings() const;
   // Replaces the method object, carrying (u, v) over; Keep: no particle moves (a switch).
   void install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder);
+  // The equilibrium and the bases: from the cache when it holds them, else computed (and stored).
+  void precompute(const StageFn& on_stage);
+  // Loads, or trains and stores, the cubature on the physical basis.
+  void prepareCubature();
   // Why `next` may not be taken, or empty.
   std::string divergence(bool integrator_ok, const State& next);
 
@@ -222,6 +234,8 @@ private:
   SparseMatrix stiffness_;  // K at x_ref on the free dofs
   Eigen::VectorXd mass_;    // diagonal of M on the free dofs
   std::optional<Cubature> cubature_;  // trained at the linearization point when first needed
+  CacheOptions cache_;
+  CacheReport cache_report_;
   double total_mass_ = 0.0;  // weighs the divergence check into an RMS displacement in metres
   std::unique_ptr<MethodModel> model_;
   long step_count_ = 0;

@@ -204,66 +204,14 @@ CubatureParams cubatureParams(const SimulationParams& p)
   return c;
 }
 
-Simulation::Simulation(const GridParams& grid_params, const SimulationParams& params, const StageFn& on_stage)
-  : grid_((validateParameters(grid_params, params), grid_params)), params_(params)
+Simulation::Simulation(const GridParams& grid_params, const SimulationParams& params, const StageFn& on_stage,
+                       const CacheOptions& cache)
+  : grid_((validateParameters(grid_params, params), grid_params)), params_(params), cache_(cache)
 {
-  auto stage = [&](const std::string& name) {
-    if (on_stage)
-      on_stage(name);
-  };
-  using Clock = std::chrono::steady_clock;
-  auto since = [](Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); };
-  const int n = grid_.numFreeDofs();
   const GridParams& g = grid_.params();
   limit_ = params_.divergence_limit > 0.0 ? params_.divergence_limit
                                           : 100.0 * g.spacing * std::max(g.rows, g.cols);
-
-  x_ref_ = x_start_ = grid_.initialPositions();
-  if (params_.linearization == Linearization::Equilibrium || params_.initial_state == InitialState::Equilibrium)
-  {
-    stage("equilibrium");
-    const auto start = Clock::now();
-    const Equilibrium equilibrium = solveEquilibrium(grid_, grid_.initialPositions());
-    linearization_.equilibrium_seconds = since(start);
-    linearization_.equilibrium_solved = true;
-    linearization_.equilibrium_iterations = equilibrium.iterations;
-    linearization_.equilibrium_residual = equilibrium.residual;
-    if (params_.linearization == Linearization::Equilibrium)
-      x_ref_ = equilibrium.positions;
-    if (params_.initial_state == InitialState::Equilibrium)
-      x_start_ = equilibrium.positions;
-  }
-  // At a hanging equilibrium compressed springs would make K indefinite: their geometric part is
-  // dropped so that no mode has a negative lambda^2. At rest no spring is compressed.
-  stage("stiffness");
-  const auto stiffness_start = Clock::now();
-  stiffness_ = tangentStiffness(grid_, x_ref_, CompressedSprings::Drop, &linearization_.dropped_compressed_springs);
-  linearization_.stiffness_seconds = since(stiffness_start);
-  mass_ = Eigen::VectorXd::Constant(n, grid_.particleMass());
-  total_mass_ = mass_.sum();
-  basis_ = computeModalBasis(stiffness_, mass_, params_.num_modes, on_stage);
-
-  if (!basis_.phi.allFinite() || !basis_.eigenvalues.allFinite() || !basis_.frequencies.allFinite())
-  {
-    std::ostringstream value;
-    value << "mass = " << g.mass << ", structural_stiffness = " << g.structural_stiffness
-          << ", shear_stiffness = " << g.shear_stiffness << ", spacing = " << g.spacing;
-    rejectParameter("mass, stiffnesses, spacing", value.str(),
-                    "give a modal basis that is not finite; keep stiffness / mass and spacing in a range where "
-                    "frequencies and lengths are representable");
-  }
-  if (params_.basis == BasisKind::ModalDerivatives)
-  {
-    stage("modal derivatives");
-    physical_basis_ = buildDerivativeBasis(grid_, x_ref_, stiffness_, mass_, basis_, params_.num_derivative_modes,
-                                           &derivative_info_);
-    if (!physical_basis_.phi.allFinite() || !physical_basis_.reduced_stiffness.allFinite())
-      throw std::runtime_error("modal derivatives: the basis is not finite");
-  }
-  else
-  {
-    physical_basis_ = basis_;
-  }
+  precompute(on_stage);
 
   if (grid_.numHandleDofs() > 0)
     handle_coupling_ = modal_mass_spring::handleCoupling(grid_, x_ref_);
@@ -275,10 +223,125 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
   base_energy_scale_ = total_mass_ * g.gravity.norm() * g.spacing * std::max(g.rows, g.cols) + stretched;
   if (params_.method == Method::Cubature)
   {
-    stage("cubature");
-    cubature_ = trainCubature(grid_, physical_basis_, x_ref_, cubatureParams(params_));
+    if (on_stage)
+      on_stage("cubature");
+    prepareCubature();
   }
   reset();
+}
+
+void Simulation::precompute(const StageFn& on_stage)
+{
+  auto stage = [&](const std::string& name) {
+    if (on_stage)
+      on_stage(name);
+  };
+  using Clock = std::chrono::steady_clock;
+  auto since = [](Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); };
+  const int n = grid_.numFreeDofs();
+  const GridParams& g = grid_.params();
+
+  // The cache holds everything here but the stiffness, which is assembled again from x_ref.
+  const std::string key = basisKey(g, params_);
+  const bool needs_equilibrium =
+      params_.linearization == Linearization::Equilibrium || params_.initial_state == InitialState::Equilibrium;
+  std::optional<Precomputed> cached;
+  if (!cache_.directory.empty())
+  {
+    const auto start = Clock::now();
+    cache_report_.basis_file = cacheFile(cache_.directory, "basis", key);
+    cached = loadPrecomputed(cache_report_.basis_file, key, n, needs_equilibrium ? grid_.numDofs() : 0, cache_);
+    cache_report_.basis_loaded = cached.has_value();
+    cache_report_.basis_load_seconds = since(start);
+  }
+  Precomputed data = cached ? std::move(*cached) : Precomputed{};
+
+  x_ref_ = x_start_ = grid_.initialPositions();
+  if (needs_equilibrium)
+  {
+    if (!cached)
+    {
+      stage("equilibrium");
+      const auto start = Clock::now();
+      Equilibrium equilibrium = solveEquilibrium(grid_, grid_.initialPositions());
+      data.equilibrium_seconds = since(start);
+      data.equilibrium_iterations = equilibrium.iterations;
+      data.equilibrium_residual = equilibrium.residual;
+      data.equilibrium = std::move(equilibrium.positions);
+    }
+    linearization_.equilibrium_solved = true;
+    linearization_.equilibrium_seconds = cached ? 0.0 : data.equilibrium_seconds;
+    linearization_.equilibrium_iterations = data.equilibrium_iterations;
+    linearization_.equilibrium_residual = data.equilibrium_residual;
+    if (params_.linearization == Linearization::Equilibrium)
+      x_ref_ = data.equilibrium;
+    if (params_.initial_state == InitialState::Equilibrium)
+      x_start_ = data.equilibrium;
+  }
+  // At a hanging equilibrium compressed springs would make K indefinite: their geometric part is
+  // dropped so that no mode has a negative lambda^2. At rest no spring is compressed.
+  stage("stiffness");
+  const auto stiffness_start = Clock::now();
+  stiffness_ = tangentStiffness(grid_, x_ref_, CompressedSprings::Drop, &linearization_.dropped_compressed_springs);
+  linearization_.stiffness_seconds = since(stiffness_start);
+  mass_ = Eigen::VectorXd::Constant(n, grid_.particleMass());
+  total_mass_ = mass_.sum();
+  if (!cached)
+  {
+    data.basis = computeModalBasis(stiffness_, mass_, params_.num_modes, on_stage);
+    if (!data.basis.phi.allFinite() || !data.basis.eigenvalues.allFinite() || !data.basis.frequencies.allFinite())
+    {
+      std::ostringstream value;
+      value << "mass = " << g.mass << ", structural_stiffness = " << g.structural_stiffness
+            << ", shear_stiffness = " << g.shear_stiffness << ", spacing = " << g.spacing;
+      rejectParameter("mass, stiffnesses, spacing", value.str(),
+                      "give a modal basis that is not finite; keep stiffness / mass and spacing in a range where "
+                      "frequencies and lengths are representable");
+    }
+    if (params_.basis == BasisKind::ModalDerivatives)
+    {
+      stage("modal derivatives");
+      data.physical_basis = buildDerivativeBasis(grid_, x_ref_, stiffness_, mass_, data.basis,
+                                                 params_.num_derivative_modes, &data.derivative_info);
+      if (!data.physical_basis.phi.allFinite() || !data.physical_basis.reduced_stiffness.allFinite())
+        throw std::runtime_error("modal derivatives: the basis is not finite");
+    }
+    else
+    {
+      data.physical_basis = data.basis;
+    }
+    if (!cache_report_.basis_file.empty())
+      cache_report_.basis_stored = storePrecomputed(cache_report_.basis_file, key, data, cache_);
+  }
+  else
+  {
+    // The start-up's times are this start's: loading took the place of the solves.
+    data.basis.build_seconds = data.basis.factorization_seconds = 0.0;
+    data.physical_basis.build_seconds = data.physical_basis.factorization_seconds = 0.0;
+    data.derivative_info.seconds = 0.0;
+  }
+  basis_ = std::move(data.basis);
+  physical_basis_ = std::move(data.physical_basis);
+  derivative_info_ = data.derivative_info;
+}
+
+void Simulation::prepareCubature()
+{
+  if (cubature_)
+    return;
+  const std::string key = cubatureKey(grid_.params(), params_);
+  const int num_springs = static_cast<int>(grid_.springs().size());
+  if (!cache_.directory.empty())
+  {
+    cache_report_.cubature_file = cacheFile(cache_.directory, "cubature", key);
+    cubature_ = loadCubature(cache_report_.cubature_file, key, num_springs, cache_);
+    cache_report_.cubature_loaded = cubature_.has_value();
+  }
+  if (cubature_)
+    return;
+  cubature_ = trainCubature(grid_, physical_basis_, x_ref_, cubatureParams(params_));
+  if (!cache_report_.cubature_file.empty())
+    cache_report_.cubature_stored = storeCubature(cache_report_.cubature_file, key, *cubature_, cache_);
 }
 
 IntegratorSettings Simulation::integratorSettings() const
@@ -292,8 +355,8 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
   // `linear` needs the eigenbasis (F = -Lambda X); every other modal method uses the physical basis,
   // and the cubature is trained on it.
   const ModalBasis& basis = method == Method::Linear ? basis_ : physical_basis_;
-  if (method == Method::Cubature && !cubature_)
-    cubature_ = trainCubature(grid_, physical_basis_, x_ref_, cubatureParams(params_));
+  if (method == Method::Cubature)
+    prepareCubature();
   // The modal methods carry the handles' static influence with the constraint modes.
   const bool handles = grid_.numHandleDofs() > 0;
   if (handles && method != Method::Full && constraint_modes_.size() == 0)

@@ -1,6 +1,7 @@
 // Every node parameter, its default and its range, in one place.
 #include "node_params.h"
 
+#include "modal_mass_spring/cache.h"
 #include "modal_mass_spring/validation.h"
 
 #include <algorithm>
@@ -188,6 +189,8 @@ NodeParams loadNodeParams(const NodeParameterSource& s, const GridParams& grid, 
                     "must be false when methods is set (list full among the methods to compare with it)");
   p.status_log_period = nonNegative(s, "status_log_period", p.status_log_period, 86400.0, " s (0: no status lines)");
   p.diagnostic_period = positive(s, "diagnostic_period", p.diagnostic_period, 3600.0, " s");
+  // Any path: one that cannot be written is a warning at start-up, not an error.
+  p.cache_dir = s.getString("cache_dir").value_or(defaultCacheDirectory());
   return p;
 }
 

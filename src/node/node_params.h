@@ -51,6 +51,9 @@ struct NodeParams
   bool shadow_full = false;
   double status_log_period = 5.0; // s of wall time between status lines in the log; 0: never
   double diagnostic_period = 1.0; // s between /diagnostics messages (diagnostic_updater reads it too)
+  // Where the equilibrium, bases and cubature are cached between starts (see cache.h); empty: off.
+  // Default: $ROS_HOME/modal_mass_spring, else ~/.ros/modal_mass_spring.
+  std::string cache_dir;
 };
 
 // Reads and validates the node's own parameters, each named once here with its range; defaults that

@@ -220,8 +220,9 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
   std::unique_ptr<Simulation> simulation;
   {
     ProgressWatcher watcher(progress);
+    CacheOptions cache{config_.node.cache_dir, [](const std::string& warning) { ROS_WARN("%s", warning.c_str()); }};
     simulation = std::make_unique<Simulation>(grid_params, sim_params,
-                                              [&progress](const std::string& stage) { progress.onStage(stage); });
+                                              [&progress](const std::string& stage) { progress.onStage(stage); }, cache);
   }
   if (!report)
     return simulation;
@@ -234,7 +235,8 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
            grid.fixedParticles().size(), toString(simulation->method()).c_str(),
            describeModes(simulation->basis().frequencies, simulation->basis().num_zero_modes).c_str(),
            describeStartupTimes(simulation->linearization(), simulation->basis(), total_seconds,
-                                simulation->derivativeInfo(), simulation->cubature())
+                                simulation->derivativeInfo(),
+                                simulation->cacheReport().cubature_loaded ? nullptr : simulation->cubature())
                .c_str(),
            sim_params.time_step, params.real_time_factor / (params.publish_rate * sim_params.time_step),
            params.publish_rate, params.real_time_factor);
@@ -249,6 +251,7 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
                      .c_str()
                : "");
   ROS_INFO("%s", describeBasis(sim_params, simulation->derivativeInfo(), simulation->physicalBasis()).c_str());
+  ROS_INFO("%s", describeCache(simulation->cacheReport()).c_str());
   if (const Cubature* cubature = simulation->cubature())
     ROS_INFO("%s", describeCubature(*cubature, static_cast<int>(grid.springs().size())).c_str());
   return simulation;

@@ -257,14 +257,14 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
   };
   std::vector<AccuracyRun> runs;
   if (divisor == 0)
-    runs.push_back({"full", std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, Method::Full)),
+    runs.push_back({"full", std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, Method::Full), StageFn{}, options.cache),
                     options.sample, true});
   else
   {
-    runs.push_back({"reference", std::make_unique<Simulation>(setup.grid, referenceParams(divisor)),
+    runs.push_back({"reference", std::make_unique<Simulation>(setup.grid, referenceParams(divisor), StageFn{}, options.cache),
                     options.sample * divisor, false});
     check.reset(new AccuracyRun{"reference at half its step",
-                                std::make_unique<Simulation>(setup.grid, referenceParams(2 * divisor)),
+                                std::make_unique<Simulation>(setup.grid, referenceParams(2 * divisor), StageFn{}, options.cache),
                                 2 * options.sample * divisor, false});
   }
   std::vector<Method> compared;
@@ -272,7 +272,8 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
     if ((divisor > 0 || m != Method::Full) && std::find(compared.begin(), compared.end(), m) == compared.end())
       compared.push_back(m);
   for (Method m : compared)
-    runs.push_back({toString(m), std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, m)), options.sample,
+    runs.push_back({toString(m), std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, m), StageFn{}, options.cache),
+                    options.sample,
                     true});
   return runs;
 }
@@ -588,7 +589,7 @@ std::vector<StabilityRow> runStability(const ExperimentSetup& setup, const Stabi
   for (size_t m = 0; m < options.methods.size(); ++m)
   {
     const Method method = options.methods[m];
-    Simulation sim(setup.grid, withMethod(setup.sim, method));
+    Simulation sim(setup.grid, withMethod(setup.sim, method), StageFn{}, options.cache);
     StabilityRow row;
     row.variant = setup.variant;
     row.method = toString(method);

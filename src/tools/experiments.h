@@ -72,6 +72,9 @@ struct AccuracyOptions
   // converged (`reference_check`).
   double reference_time_step = 0.0;
   bool snapshots = true;  // keep the particle positions every `interval` steps
+  // Where the bases and cubatures are cached between runs (directory empty: off). The cost
+  // experiment never uses it: it measures the build.
+  CacheOptions cache;
 };
 
 // One method at one step, against `full` at the same step. Distances are per particle, between the
@@ -149,6 +152,7 @@ struct StabilityOptions
   // Stable windows are looked for by the same scan from the boundary up to this multiple of it (and
   // at most max_time_step).
   double window_factor = 2.0;
+  CacheOptions cache;  // as AccuracyOptions::cache
 };
 
 // The smallest and largest step of a run of consecutive stable scan steps above the boundary.

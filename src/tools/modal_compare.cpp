@@ -50,6 +50,10 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
   --vary KEY=V1,V2,...  run every experiment for each value; several --vary give every combination,
                         e.g. --vary integrator=explicit,implicit --vary linearization=rest,equilibrium
   --quiet               no progress line on stderr
+  --cache-dir DIR       where the equilibrium, bases and cubatures are cached between runs (default:
+                        the node's, $ROS_HOME/modal_mass_spring, else ~/.ros/modal_mass_spring)
+  --no-cache            compute them every time, reading and writing no cache (the cost experiment,
+                        which times the build, never uses it)
 
   accuracy:   --steps N (5000)  --interval N (1000, snapshots)  --sample N (10, error samples; divides
                 --interval, at most --steps)
@@ -176,6 +180,8 @@ struct Options
   std::vector<std::pair<std::string, std::string>> sets;
   std::vector<std::pair<std::string, std::vector<std::string>>> varies;
   bool quiet = false;
+  std::string cache_dir = defaultCacheDirectory();
+  bool no_cache = false;
   double check_factor = 0.0;
   AccuracyOptions accuracy;
   StabilityOptions stability;
@@ -260,6 +266,12 @@ const std::map<std::string, Setter>& valueOptions()
 {
   static const std::map<std::string, Setter> options{
       {"--config", [](Options& o, const std::string& v) { o.config = v; }},
+      {"--cache-dir",
+       [](Options& o, const std::string& v) {
+         if (v.empty())
+           rejectParameter("--cache-dir", "''", "must be a folder (use --no-cache to run without a cache)");
+         o.cache_dir = v;
+       }},
       {"--experiment", setExperiments},
       {"--output", [](Options& o, const std::string& v) { o.output = v; }},
       {"--tag", setTag},
@@ -344,6 +356,8 @@ Options parseArguments(int argc, char** argv)
       o.quiet = true;
     else if (arg == "--no-snapshots")
       o.accuracy.snapshots = false;
+    else if (arg == "--no-cache")
+      o.no_cache = true;
     else if (const auto option = valueOptions().find(arg); option != valueOptions().end())
     {
       if (i + 1 >= argc)
@@ -353,6 +367,9 @@ Options parseArguments(int argc, char** argv)
     else
       rejectParameter("option", "'" + arg + "'", "not an option of modal_compare (see --help)");
   }
+  if (o.no_cache && given.count("--cache-dir"))
+    rejectParameter("--cache-dir", "'" + o.cache_dir + "'", "must not be given with --no-cache");
+  o.accuracy.cache.directory = o.stability.cache.directory = o.no_cache ? "" : o.cache_dir;
   finishOptions(o);
   return o;
 }

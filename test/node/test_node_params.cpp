@@ -16,6 +16,7 @@
 #include <limits>
 #include <map>
 #include <stdexcept>
+#include <cstdlib>
 #include <string>
 #include <variant>
 #include <vector>
@@ -109,6 +110,25 @@ TEST(NodeParams, DefaultsOnThePaperGrid)
   EXPECT_EQ(c.node.fixed_frame, "world");
   EXPECT_EQ(c.node.grid_frame, "grid");
   EXPECT_TRUE(c.unknown_keys.empty());
+}
+
+// The cache is under $ROS_HOME, else ~/.ros, and off when cache_dir is empty.
+TEST(NodeParams, CacheDirDefaultsUnderRosHomeAndEmptyTurnsItOff)
+{
+  const char* saved = std::getenv("ROS_HOME");
+  const std::string saved_value = saved ? saved : "";
+  setenv("ROS_HOME", "/tmp/some_ros_home", 1);
+  const FakeSource defaults;
+  EXPECT_EQ(loadNodeConfiguration(defaults, defaults.keys()).node.cache_dir, "/tmp/some_ros_home/modal_mass_spring");
+  unsetenv("ROS_HOME");
+  EXPECT_EQ(loadNodeConfiguration(defaults, defaults.keys()).node.cache_dir,
+            std::string(std::getenv("HOME")) + "/.ros/modal_mass_spring");
+  if (saved)
+    setenv("ROS_HOME", saved_value.c_str(), 1);
+  const FakeSource off({{"cache_dir", std::string()}});
+  EXPECT_EQ(loadNodeConfiguration(off, off.keys()).node.cache_dir, "");
+  const FakeSource elsewhere({{"cache_dir", std::string("/var/cache/cloth")}});
+  EXPECT_EQ(loadNodeConfiguration(elsewhere, elsewhere.keys()).node.cache_dir, "/var/cache/cloth");
 }
 
 // Particles and springs are sent up to detail_max_particles particles, and above unless told not to.
@@ -436,7 +456,7 @@ TEST(NodeParams, EveryShippedNodeConfigLoads)
     loaded.push_back(entry.path().filename().string());
   }
   std::sort(loaded.begin(), loaded.end());
-  EXPECT_EQ(loaded, (std::vector<std::string>{"cloth.yaml", "paper_2d.yaml", "paper_3d.yaml"}));
+  EXPECT_EQ(loaded, (std::vector<std::string>{"cloth.yaml", "cloth_large.yaml", "paper_2d.yaml", "paper_3d.yaml"}));
 }
 
 }  // namespace

@@ -9,6 +9,9 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
+#include <sstream>
+#include <cstdlib>
 #include <string>
 
 namespace fs = std::filesystem;
@@ -53,6 +56,8 @@ protected:
     dir_ = fs::temp_directory_path() / ("modal_compare_test_" + std::to_string(getpid()));
     fs::remove_all(dir_);
     fs::create_directories(dir_);
+    // The tool's default cache is under $ROS_HOME: keep it inside this test's folder.
+    setenv("ROS_HOME", dir_.c_str(), 1);
   }
   void TearDown() override { fs::remove_all(dir_); }
 
@@ -120,6 +125,42 @@ TEST_F(ModalCompareTool, SmallRunEndToEndToPngs)
     ASSERT_TRUE(fs::exists(figures / name)) << name << "\n" << plot.output;
     EXPECT_GT(fs::file_size(figures / name), 5000u) << name;
   }
+}
+
+// The accuracy experiment reads the bases and cubature it wrote: the same errors with or without the
+// cache, and --no-cache writes none.
+TEST_F(ModalCompareTool, CachedRunGivesTheSameResultsAndNoCacheWritesNone)
+{
+  const std::string args = "--config " + config("paper_3d.yaml") +
+                           " --set rows=5 --set cols=5 --set num_modes=6 --experiment accuracy --steps 100"
+                           " --interval 50 --sample 10 --no-snapshots";
+  const fs::path cache = dir_ / "cache";
+  auto errors = [&](const std::string& tag) {
+    std::ifstream in(dir_ / "data" / ("accuracy_" + tag + "_error.csv"));
+    std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    // Drop the wall time per step, which differs between runs, and the column after it.
+    std::string kept;
+    std::istringstream lines(text);
+    for (std::string line; std::getline(lines, line);)
+      kept += line.substr(0, line.rfind(',', line.rfind(',') - 1)) + "\n";
+    return kept;
+  };
+  const CommandResult uncached = run(tool(args + " --no-cache --tag uncached"));
+  ASSERT_EQ(uncached.status, 0) << uncached.output;
+  EXPECT_FALSE(fs::exists(dir_ / "modal_mass_spring")) << "--no-cache wrote the default cache";
+  EXPECT_FALSE(fs::exists(cache));
+  const CommandResult first = run(tool(args + " --cache-dir " + cache.string() + " --tag first"));
+  ASSERT_EQ(first.status, 0) << first.output;
+  int files = 0;
+  for (const auto& entry : fs::directory_iterator(cache))
+    files += entry.path().extension() == ".bin";
+  EXPECT_EQ(files, 2);  // the basis (every method's: the method is not part of the key) and the cubature
+  const CommandResult second = run(tool(args + " --cache-dir " + cache.string() + " --tag second"));
+  ASSERT_EQ(second.status, 0) << second.output;
+  EXPECT_EQ(second.output.find("warning"), std::string::npos) << second.output;
+  EXPECT_EQ(errors("uncached"), errors("first"));
+  EXPECT_EQ(errors("uncached"), errors("second"));
+  EXPECT_GT(errors("second").size(), 100u);
 }
 
 // Item 9: a diverged sample and the bound of a basis of zero modes are empty fields, which the
@@ -222,6 +263,8 @@ TEST_F(ModalCompareTool, BadInputStopsBeforeAnyWorkWithAMessageNamingIt)
                         Case{paper + " --check-factor zero", "--check-factor"},
                         Case{paper + " --max-time-step 0", "--max-time-step"},
                         Case{paper + " --frobnicate", "--frobnicate"},
+                        Case{paper + " --no-cache --cache-dir /tmp/x", "--cache-dir"},
+                        Case{paper + " --cache-dir ''", "--cache-dir"},
                         Case{"--experiment accuracy", "--config"}})
   {
     const CommandResult r = run(tool(c.args));
