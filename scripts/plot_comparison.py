@@ -417,13 +417,13 @@ def plot_error_cost(found, out):
     configs = sorted(found)
     fig, axes = plt.subplots(1, len(configs), figsize=(6.5 * len(configs), 6.2), squeeze=False)
     markers = {"explicit": "o", "implicit": "s"}
-    dt_sizes = {}
+    # One marker size per time step, the same in every panel and in the legend.
+    dt_sizes = {dt: 16 + 30 * k for k, dt in enumerate(sorted({dt for config in configs for dt in found[config]}))}
     diverged = []
     for c, config in enumerate(configs):
         ax = axes[0][c]
         by_dt = {dt: summarize(read_csv(path, "error")) for dt, path in sorted(found[config].items())}
         dts = sorted(by_dt)
-        dt_sizes = {dt: 16 + 30 * k for k, dt in enumerate(dts)}
         keys = ordered(k for dt in dts for k in by_dt[dt] if k[1] not in REFERENCES)
         for variant, method in keys:
             parts = dict(p.split("=", 1) for p in variant.split() if "=" in p)
