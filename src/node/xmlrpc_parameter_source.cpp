@@ -282,7 +282,17 @@ std::optional<std::vector<HandleParam>> XmlRpcParameterSource::getHandleList(con
       throwWrongType(name + ".frame", "a string (a tf frame id)", item["frame"]);
     HandleParam handle;
     handle.frame = asString(item["frame"]);
-    handle.particles = toList<int>(name + ".particles", item["particles"], "a list of integers", "[0, 4]", toInt);
+    XmlRpcValue& particles = item["particles"];
+    if (particles.getType() != XmlRpcValue::TypeArray)
+      throwWrongType(name + ".particles", "a list of integers (row * cols + col)", particles);
+    for (int k = 0; k < particles.size(); ++k)
+    {
+      const auto index = toInt(particles[k]);
+      if (!index)
+        throw std::invalid_argument(wrongType(name + ".particles", "a list of integers (row * cols + col)") +
+                                    ", element " + std::to_string(k) + " is " + describe(particles[k]));
+      handle.particles.push_back(*index);
+    }
     handles.push_back(handle);
   }
   return handles;
