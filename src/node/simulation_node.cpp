@@ -190,9 +190,9 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
     for (size_t h = 0; h < params.handles.size(); ++h)
       frames += (h ? ", '" : "'") + params.handles[h].frame + "' (" +
                 std::to_string(params.handles[h].particles.size()) + " particles)";
-    ROS_INFO("%zu handles following the TF frames %s relative to '%s', offsets taken at each frame's first lookup; "
+    ROS_INFO("handles following the TF frames %s relative to '%s', offsets taken at each frame's first lookup; "
              "formulation: Craig-Bampton constraint modes for the modal methods, prescribed positions for full",
-             params.handles.size(), frames.c_str(), params.fixed_frame.c_str());
+             frames.c_str(), params.fixed_frame.c_str());
   }
   apply_force_sub_ = private_nh_.subscribe("apply_force", 10, &SimulationNode::applyForce, this);
   service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
