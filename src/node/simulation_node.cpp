@@ -334,27 +334,28 @@ const SimulationNode::Track* SimulationNode::reference() const
 void SimulationNode::updateHandleTargets()
 {
   std::vector<std::optional<FramePose>> poses(handle_frames_->size());
+  std::string missing;  // every frame not available, so one throttled warning names them all
   for (size_t h = 0; h < poses.size(); ++h)
   {
+    const std::string& frame = handle_frames_->frame(h);
     try
     {
-      const auto t = tf_buffer_.lookupTransform(config_.node.fixed_frame, handle_frames_->frame(h), ros::Time(0))
-                         .transform;
+      const auto t = tf_buffer_.lookupTransform(config_.node.fixed_frame, frame, ros::Time(0)).transform;
       FramePose pose;
       pose.translation = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);
       pose.rotation = Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z).normalized();
       if (pose.translation.allFinite() && pose.rotation.coeffs().allFinite())
         poses[h] = pose;
       else
-        ROS_WARN_THROTTLE(5.0, "handle frame '%s' has a non-finite pose: its particles hold where they are",
-                          handle_frames_->frame(h).c_str());
+        missing += (missing.empty() ? "" : "; ") + ("'" + frame + "' has a non-finite pose");
     }
     catch (const tf2::TransformException& error)
     {
-      ROS_WARN_THROTTLE(5.0, "handle frame '%s' not available (%s): its particles hold where they are",
-                        handle_frames_->frame(h).c_str(), error.what());
+      missing += (missing.empty() ? "" : "; ") + ("'" + frame + "' not available (" + error.what() + ")");
     }
   }
+  if (!missing.empty())
+    ROS_WARN_THROTTLE(5.0, "handle frame %s: its particles hold where they are", missing.c_str());
   handle_frames_->setTargets(poses);
 }
 
