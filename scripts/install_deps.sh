@@ -14,7 +14,7 @@ packages=(
   libeigen3-dev libspectra-dev libgtest-dev googletest libbenchmark-dev libyaml-cpp-dev
   python3-rosservice python3-rostopic python3-rosbag python3-rosnode python3-rosparam rosbash
   python3-std-srvs python3-std-msgs python3-visualization-msgs python3-geometry-msgs
-  python3-tf2-msgs python3-diagnostic-msgs python3-rosgraph-msgs python3-genmsg python3-gencpp python3-genpy
+  python3-tf2-msgs python3-tf2-ros python3-diagnostic-msgs python3-rosgraph-msgs python3-genmsg python3-gencpp python3-genpy
   python3-matplotlib python3-numpy
   python3-rospy python3-roslib python3-rosgraph python3-rosunit
 )

@@ -45,6 +45,10 @@ public:
   {
     return note(key), source_.getStringList(key);
   }
+  std::optional<std::vector<HandleParam>> getHandleList(const std::string& key) const override
+  {
+    return note(key), source_.getHandleList(key);
+  }
   const std::set<std::string>& queried() const { return queried_; }
 
 private:
@@ -194,15 +198,44 @@ NodeParams loadNodeParams(const NodeParameterSource& s, const GridParams& grid, 
   return p;
 }
 
+namespace
+{
+
+// The frames are checked here, the particle groups by the core.
+std::vector<HandleParam> loadHandles(const NodeParameterSource& s)
+{
+  const std::vector<HandleParam> handles = s.getHandleList("handles").value_or(std::vector<HandleParam>{});
+  for (size_t h = 0; h < handles.size(); ++h)
+  {
+    const std::string name = "handles[" + std::to_string(h) + "].frame";
+    const std::string& frame = handles[h].frame;
+    if (frame.empty() || frame.front() == '/' || frame.find_first_of(" \t\n\r") != std::string::npos)
+      rejectParameter(name, "'" + frame + "'", "must be a non-empty frame id without a leading '/' or spaces");
+  }
+  return handles;
+}
+
+}  // namespace
+
 NodeConfiguration loadNodeConfiguration(const NodeParameterSource& source, const std::vector<std::string>& present_keys)
 {
   const RecordingSource recording(source);
   NodeConfiguration c;
   c.grid = loadGridParams(recording);
   c.simulation = loadSimulationParams(recording);
+  // The handles' particle groups are the core's to check (range, one handle each, not fixed).
+  const std::vector<HandleParam> handles = loadHandles(recording);
+  for (const auto& handle : handles)
+    c.grid.handles.push_back(handle.particles);
   // The node's own checks (tf_particles, steps per tick) rely on a valid grid and time step.
   validateParameters(c.grid, c.simulation);
   c.node = loadNodeParams(recording, c.grid, c.simulation);
+  c.node.handles = handles;
+  for (const auto& handle : handles)
+    if (handle.frame == c.node.fixed_frame || handle.frame == c.node.grid_frame)
+      rejectParameter("handles", "'" + handle.frame + "'",
+                      "a handle's frame must differ from fixed_frame and grid_frame (use `fixed` for particles "
+                      "that never move)");
   for (const auto& key : present_keys)
     if (!recording.queried().count(key))
       c.unknown_keys.push_back(key);

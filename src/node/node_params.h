@@ -13,11 +13,21 @@
 namespace modal_mass_spring
 {
 
-// The node's sources also read lists of names (methods).
+// A handle as the parameter `handles` gives it: a TF frame and the particles it holds rigidly.
+struct HandleParam
+{
+  std::string frame;
+  std::vector<int> particles;  // row * cols + col
+};
+
+// The node's sources also read lists of names (methods) and of handles.
 class NodeParameterSource : public ParameterSource
 {
 public:
   virtual std::optional<std::vector<std::string>> getStringList(const std::string& key) const = 0;
+  // A list of maps {frame: <string>, particles: [indices]}; throws std::invalid_argument naming the
+  // element (`handles[1].particles`) when the value has another shape.
+  virtual std::optional<std::vector<HandleParam>> getHandleList(const std::string& key) const = 0;
 };
 
 // Parameters of the node itself, on top of the core's GridParams and SimulationParams.
@@ -54,6 +64,8 @@ struct NodeParams
   // Where the equilibrium, bases and cubature are cached between starts (see cache.h); empty: off.
   // Default: $ROS_HOME/modal_mass_spring, else ~/.ros/modal_mass_spring.
   std::string cache_dir;
+  // Particles held rigidly by TF frames (their groups also go to GridParams::handles).
+  std::vector<HandleParam> handles;
 };
 
 // Reads and validates the node's own parameters, each named once here with its range; defaults that

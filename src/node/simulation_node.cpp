@@ -182,6 +182,18 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
   applied_forces_ = std::make_unique<AppliedForces>(primary().simulation->grid());
   external_force_ = Eigen::VectorXd::Zero(primary().simulation->positions().size());
   tf_listener_ = std::make_unique<tf2_ros::TransformListener>(tf_buffer_);
+  handle_frames_ = std::make_unique<HandleFrames>(params.handles, primary().simulation->grid(),
+                                                  primary().simulation->linearizationPositions(), params.offset);
+  if (!params.handles.empty())
+  {
+    std::string frames;
+    for (size_t h = 0; h < params.handles.size(); ++h)
+      frames += (h ? ", '" : "'") + params.handles[h].frame + "' (" +
+                std::to_string(params.handles[h].particles.size()) + " particles)";
+    ROS_INFO("handles following the TF frames %s relative to '%s', offsets taken at each frame's first lookup; "
+             "formulation: Craig-Bampton constraint modes for the modal methods, prescribed positions for full",
+             frames.c_str(), params.fixed_frame.c_str());
+  }
   apply_force_sub_ = private_nh_.subscribe("apply_force", 10, &SimulationNode::applyForce, this);
   service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
   service_spinner_->start();
@@ -322,6 +334,45 @@ const SimulationNode::Track* SimulationNode::reference() const
   return nullptr;
 }
 
+void SimulationNode::updateHandleTargets()
+{
+  std::vector<std::optional<FramePose>> poses(handle_frames_->size());
+  std::string missing;  // every frame not available, so one throttled warning names them all
+  for (size_t h = 0; h < poses.size(); ++h)
+  {
+    const std::string& frame = handle_frames_->frame(h);
+    try
+    {
+      const auto t = tf_buffer_.lookupTransform(config_.node.fixed_frame, frame, ros::Time(0)).transform;
+      FramePose pose;
+      pose.translation = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);
+      pose.rotation = Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z).normalized();
+      if (pose.translation.allFinite() && pose.rotation.coeffs().allFinite())
+        poses[h] = pose;
+      else
+        missing += (missing.empty() ? "" : "; ") + ("'" + frame + "' has a non-finite pose");
+    }
+    catch (const tf2::TransformException& error)
+    {
+      missing += (missing.empty() ? "" : "; ") + ("'" + frame + "' not available (" + error.what() + ")");
+    }
+  }
+  if (!missing.empty())
+    ROS_WARN_THROTTLE(5.0, "handle frame %s: its particles hold where they are", missing.c_str());
+  handle_frames_->setTargets(poses);
+}
+
+void SimulationNode::setHandleMotion(double duration, double s)
+{
+  if (handle_frames_->empty())
+    return;
+  Eigen::VectorXd x, v, a;
+  handle_frames_->motion(duration, s, x, v, a);
+  for (Track& track : tracks_)
+    if (!track.simulation->diverged())
+      track.simulation->setHandleMotion(x, v, a);
+}
+
 bool SimulationNode::stepAll()
 {
   bool any_running = false;
@@ -377,6 +428,7 @@ void SimulationNode::onTick()
     std::unique_lock<std::mutex> lock(mutex_);
     swapRebuilt();
     updateExternalForces();
+    updateHandleTargets();
     const NodeParams& params = config_.node;
     const double dt = config_.simulation.time_step;
     period = 1.0 / params.publish_rate;
@@ -402,6 +454,7 @@ void SimulationNode::onTick()
       const long changes = state_changes_;
       const auto tick_start = Clock::now();
       auto start = tick_start;
+      int stepped = 0;  // how far along the tick the handles have moved
       for (int k = 0; k < steps; ++k)
       {
         if (services_waiting_.load() > 0)
@@ -424,10 +477,14 @@ void SimulationNode::onTick()
           owed_steps_ = 0.0;
           break;
         }
+        setHandleMotion(steps * dt, static_cast<double>(k + 1) / steps);
+        stepped = k + 1;
         if (!stepAll())
           break;
       }
       tick_step_seconds_ += secondsSince(start);
+      if (steps > 0)
+        handle_frames_->finishTick(static_cast<double>(stepped) / steps);
     }
     for (Track& track : tracks_)
     {
@@ -557,6 +614,7 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     status.total_energy = track.last_energy;
     status.state = state(track);
     status.message = simulation.diverged() ? track.divergence_message : "";
+    status.handles = handle_frames_->status();
     status.reference = measured ? "full" : "";
     status.rms_distance = track.rms_distance;
     status.max_distance = track.max_distance;
@@ -722,6 +780,7 @@ bool SimulationNode::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Respo
     track.step_offset = 0;
     track.divergence_message.clear();
   }
+  handle_frames_->reset();
   synchronise();
   owed_steps_ = 0.0;
   ++state_changes_;

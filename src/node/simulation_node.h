@@ -3,6 +3,7 @@
 #pragma once
 
 #include "applied_forces.h"
+#include "handle_frames.h"
 #include "modal_mass_spring/ApplyForce.h"
 #include "modal_mass_spring/SetMethod.h"
 #include "modal_mass_spring/SimulationConfig.h"
@@ -114,6 +115,10 @@ private:
   void applyForce(const ApplyForce::ConstPtr& message);
   bool clearForces(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   void updateExternalForces();  // with mutex_ held: drops the forces whose time is up, sets the rest
+  // Handles: looks every handle frame up (the latest pose in tf_buffer_), warns for the missing ones.
+  void updateHandleTargets();   // with mutex_ held
+  // Prescribes the handles' motion at the fraction s of a tick of `duration` s on every track.
+  void setHandleMotion(double duration, double s);  // with mutex_ held
 
   ros::NodeHandle nh_, private_nh_;
   NodeConfiguration config_;
@@ -151,6 +156,7 @@ private:
   Eigen::VectorXd external_force_;                  // their sum, on every dof
   tf2_ros::Buffer tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
+  std::unique_ptr<HandleFrames> handle_frames_;     // with mutex_
   // Live tuning: the private parameters as last accepted, the configuration they give, the rebuild.
   XmlRpc::XmlRpcValue private_params_;
   NodeConfiguration accepted_;

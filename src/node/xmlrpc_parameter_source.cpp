@@ -3,6 +3,9 @@
 
 #include "parameter_values.h"
 
+#include <yaml-cpp/yaml.h>
+
+#include <functional>
 #include <sstream>
 #include <stdexcept>
 
@@ -112,6 +115,42 @@ std::vector<T> toList(const std::string& key, const XmlRpcValue& value, const st
   return list;
 }
 
+// YAML text as the XmlRpc value rosparam would have made of it, scalars as strings (the getters
+// read numbers from strings); nothing when the text is not YAML.
+std::optional<XmlRpcValue> fromYamlText(const std::string& text)
+{
+  YAML::Node node;
+  try
+  {
+    node = YAML::Load(text);
+  }
+  catch (const YAML::Exception&)
+  {
+    return std::nullopt;
+  }
+  std::function<XmlRpcValue(const YAML::Node&)> convert = [&](const YAML::Node& n) {
+    XmlRpcValue value;
+    if (n.IsSequence())
+    {
+      value.setSize(static_cast<int>(n.size()));
+      for (size_t k = 0; k < n.size(); ++k)
+        value[static_cast<int>(k)] = convert(n[k]);
+    }
+    else if (n.IsMap())
+    {
+      value.begin();  // makes it an empty struct
+      for (const auto& entry : n)
+        value[entry.first.as<std::string>()] = convert(entry.second);
+    }
+    else if (n.IsScalar())
+    {
+      value = n.Scalar();
+    }
+    return value;
+  };
+  return convert(node);
+}
+
 }  // namespace
 
 XmlRpcParameterSource::XmlRpcParameterSource(const XmlRpc::XmlRpcValue& params) : params_(params)
@@ -205,6 +244,58 @@ std::optional<std::vector<std::string>> XmlRpcParameterSource::getStringList(con
                                  return std::nullopt;
                                return asString(item);
                              });
+}
+
+std::optional<std::vector<HandleParam>> XmlRpcParameterSource::getHandleList(const std::string& key) const
+{
+  const XmlRpcValue* found = find(key);
+  if (!found)
+    return std::nullopt;
+  const std::string example = "[{frame: gripper, particles: [0, 4]}]";
+  const std::string expected = "a list of maps {frame: <tf frame>, particles: [indices]}, e.g. " + example +
+                               " (on the rosrun command line: _" + key + ":='" + example + "')";
+  XmlRpcValue value = *found;
+  if (value.getType() == XmlRpcValue::TypeString)
+  {
+    const auto parsed = fromYamlText(asString(value));
+    if (!parsed || parsed->getType() != XmlRpcValue::TypeArray)
+      throwWrongType(key, expected, value);
+    value = *parsed;
+  }
+  if (value.getType() != XmlRpcValue::TypeArray)
+    throwWrongType(key, expected, value);
+  std::vector<HandleParam> handles;
+  for (int h = 0; h < value.size(); ++h)
+  {
+    const std::string name = key + "[" + std::to_string(h) + "]";
+    XmlRpcValue& item = value[h];
+    if (item.getType() != XmlRpcValue::TypeStruct)
+      throwWrongType(name, "a map {frame: <tf frame>, particles: [indices]}", item);
+    for (auto it = item.begin(); it != item.end(); ++it)
+      if (it->first != "frame" && it->first != "particles")
+        throw std::invalid_argument(wrongType(name, "a map with the keys frame and particles only") +
+                                    ", got the key '" + it->first + "'");
+    if (!item.hasMember("frame") || !item.hasMember("particles"))
+      throw std::invalid_argument(wrongType(name, "a map with both keys frame and particles") + ", got " +
+                                  (item.hasMember("frame") ? "no particles" : "no frame"));
+    if (item["frame"].getType() != XmlRpcValue::TypeString)
+      throwWrongType(name + ".frame", "a string (a tf frame id)", item["frame"]);
+    HandleParam handle;
+    handle.frame = asString(item["frame"]);
+    XmlRpcValue& particles = item["particles"];
+    if (particles.getType() != XmlRpcValue::TypeArray)
+      throwWrongType(name + ".particles", "a list of integers (row * cols + col)", particles);
+    for (int k = 0; k < particles.size(); ++k)
+    {
+      const auto index = toInt(particles[k]);
+      if (!index)
+        throw std::invalid_argument(wrongType(name + ".particles", "a list of integers (row * cols + col)") +
+                                    ", element " + std::to_string(k) + " is " + describe(particles[k]));
+      handle.particles.push_back(*index);
+    }
+    handles.push_back(handle);
+  }
+  return handles;
 }
 
 }  // namespace modal_mass_spring

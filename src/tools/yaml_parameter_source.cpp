@@ -15,7 +15,8 @@ namespace modal_mass_spring
 const std::set<std::string> kNodeParameters{
     "real_time_factor", "publish_rate",    "fixed_frame",  "grid_frame",        "tf_particles",      "offset",
     "color_by_strain",  "strain_scale",    "particle_diameter", "spring_width", "status_log_period", "diagnostic_period",
-    "cache_dir"};
+    "cache_dir",
+    "handles"};  // the node moves their particles with TF frames; the tool does not read them
 
 YamlParameterSource::YamlParameterSource(YAML::Node root, std::string origin)
   : root_(std::move(root)), origin_(std::move(origin))

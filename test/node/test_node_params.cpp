@@ -1,6 +1,7 @@
 // The node's parameters without a ROS master: every range check of loadNodeParams, the order of the
 // checks (all of them before anything is built), the unknown-key report, and the conversions of
 // the XmlRpc source (numbers and lists given as text).
+#include "handle_frames.h"
 #include "node_params.h"
 #include "parameter_values.h"
 #include "xmlrpc_parameter_source.h"
@@ -26,7 +27,8 @@ namespace
 
 using namespace modal_mass_spring;
 
-using Value = std::variant<int, double, bool, std::string, std::vector<int>, std::vector<double>, std::vector<std::string>>;
+using Value = std::variant<int, double, bool, std::string, std::vector<int>, std::vector<double>, std::vector<std::string>,
+                           std::vector<HandleParam>>;
 
 // Parameters as the parameter server would hold them, without one.
 class FakeSource : public NodeParameterSource
@@ -56,6 +58,10 @@ public:
   std::optional<std::vector<std::string>> getStringList(const std::string& key) const override
   {
     return get<std::vector<std::string>>(key, "a list of names");
+  }
+  std::optional<std::vector<HandleParam>> getHandleList(const std::string& key) const override
+  {
+    return get<std::vector<HandleParam>>(key, "a list of maps");
   }
 
   std::vector<std::string> keys() const
@@ -416,9 +422,165 @@ TEST(XmlRpcParameterSource, FeedsTheNodeConfiguration)
   EXPECT_EQ(c.unknown_keys, std::vector<std::string>{"publsh_rate"});
 }
 
+// Handles: the frames are checked by the node, the particle groups by the core, each message naming
+// the handle; a good list reaches GridParams::handles (and no top row is fixed by default then).
+TEST(NodeParams, HandlesAreCheckedAndReachTheGrid)
+{
+  const auto handles = [](std::vector<HandleParam> list) {
+    return std::map<std::string, Value>{{"handles", Value(list)}};
+  };
+  const FakeSource good(handles({{"gripper", {0, 4}}, {"finger", {2}}}));
+  const NodeConfiguration c = loadNodeConfiguration(good, good.keys());
+  EXPECT_EQ(c.grid.handles, (std::vector<std::vector<int>>{{0, 4}, {2}}));
+  ASSERT_EQ(c.node.handles.size(), 2u);
+  EXPECT_EQ(c.node.handles[1].frame, "finger");
+  EXPECT_TRUE(c.unknown_keys.empty());
+
+  EXPECT_EQ(refusal(handles({{"gripper", {0}}, {"finger", {25}}})),
+            "invalid parameter 'handles[1]' = 25: particle indices must be in [0, 24] (row * cols + col)");
+  EXPECT_EQ(refusal(handles({{"gripper", {0, 1}}, {"finger", {1}}})),
+            "invalid parameter 'handles[1]' = 1: a particle may be in one handle only (it is also in handles[0])");
+  auto fixed = handles({{"gripper", {0, 1}}});
+  fixed["fixed"] = std::vector<int>{1};
+  EXPECT_EQ(refusal(fixed), "invalid parameter 'handles[0]' = 1: a handle particle may not also be fixed");
+  EXPECT_EQ(refusal(handles({{"gripper", {0}}, {"", {1}}})),
+            "invalid parameter 'handles[1].frame' = '': must be a non-empty frame id without a leading '/' or spaces");
+  EXPECT_EQ(refusal(handles({{"/gripper", {0}}})),
+            "invalid parameter 'handles[0].frame' = '/gripper': must be a non-empty frame id without a leading '/' or "
+            "spaces");
+  EXPECT_EQ(refusal(handles({{"gripper", {}}})), "invalid parameter 'handles[0]' = []: a handle must hold at least one particle");
+  EXPECT_NE(refusal(handles({{"world", {0}}})).find("invalid parameter 'handles' = 'world': a handle's frame must differ"),
+            std::string::npos);
+}
+
+// `handles` from the parameter server (a list of structs) or from the command line (YAML text),
+// and every other shape refused naming the element.
+TEST(XmlRpcParameterSource, HandlesAsListsOfMapsOrTheirText)
+{
+  XmlRpc::XmlRpcValue handle;
+  handle["frame"] = "gripper";
+  handle["particles"] = array({XmlRpc::XmlRpcValue(0), XmlRpc::XmlRpcValue(4)});
+  XmlRpc::XmlRpcValue no_frame;
+  no_frame["particles"] = array({XmlRpc::XmlRpcValue(1)});
+  XmlRpc::XmlRpcValue extra = handle;
+  extra["pose"] = 1;
+  XmlRpc::XmlRpcValue numeric_frame = handle;
+  numeric_frame["frame"] = 3;
+  const XmlRpcParameterSource source(
+      params({{"list", array({handle})},
+              {"text", XmlRpc::XmlRpcValue("[{frame: gripper, particles: [0, 4]}, {frame: finger, particles: [2]}]")},
+              {"not_a_list", XmlRpc::XmlRpcValue(3)},
+              {"not_maps", array({XmlRpc::XmlRpcValue(0), XmlRpc::XmlRpcValue(4)})},
+              {"bad_text", XmlRpc::XmlRpcValue("[{frame: gripper, particles: [0, 4]")},
+              {"no_frame", array({handle, no_frame})},
+              {"extra", array({extra})},
+              {"numeric_frame", array({numeric_frame})},
+              {"bad_particles", XmlRpc::XmlRpcValue("[{frame: f, particles: [0, x]}]")}}));
+  const auto list = source.getHandleList("list");
+  ASSERT_TRUE(list && list->size() == 1u);
+  EXPECT_EQ((*list)[0].frame, "gripper");
+  EXPECT_EQ((*list)[0].particles, (std::vector<int>{0, 4}));
+  const auto text = source.getHandleList("text");
+  ASSERT_TRUE(text && text->size() == 2u);
+  EXPECT_EQ((*text)[1].frame, "finger");
+  EXPECT_EQ((*text)[1].particles, std::vector<int>{2});
+  EXPECT_FALSE(source.getHandleList("absent"));
+
+  const std::string expected = "wrong type, must be a list of maps {frame: <tf frame>, particles: [indices]}";
+  EXPECT_EQ(thrown([&] { source.getHandleList("not_a_list"); }).rfind("invalid parameter 'not_a_list': " + expected, 0), 0u);
+  EXPECT_EQ(thrown([&] { source.getHandleList("bad_text"); }).rfind("invalid parameter 'bad_text': " + expected, 0), 0u);
+  EXPECT_EQ(thrown([&] { source.getHandleList("not_maps"); }),
+            "invalid parameter 'not_maps[0]': wrong type, must be a map {frame: <tf frame>, particles: [indices]}, got 0 "
+            "(an integer)");
+  EXPECT_EQ(thrown([&] { source.getHandleList("no_frame"); }),
+            "invalid parameter 'no_frame[1]': wrong type, must be a map with both keys frame and particles, got no frame");
+  EXPECT_EQ(thrown([&] { source.getHandleList("extra"); }),
+            "invalid parameter 'extra[0]': wrong type, must be a map with the keys frame and particles only, got the key "
+            "'pose'");
+  EXPECT_EQ(thrown([&] { source.getHandleList("numeric_frame"); }),
+            "invalid parameter 'numeric_frame[0].frame': wrong type, must be a string (a tf frame id), got 3 (an integer)");
+  EXPECT_NE(thrown([&] { source.getHandleList("bad_particles"); })
+                .find("invalid parameter 'bad_particles[0].particles': wrong type, must be a list of integers"),
+            std::string::npos);
+}
+
+// Particles held by a frame follow its motion applied to their offsets at the first lookup; the
+// velocity is the derivative of the interpolated path; a missing frame holds them and says so.
+TEST(HandleFrames, ParticlesFollowTheirFrame)
+{
+  GridParams grid_params;
+  grid_params.rows = 3;
+  grid_params.cols = 3;
+  grid_params.dimension = 3;
+  grid_params.handles = {{0, 2}};
+  const Grid grid(grid_params);
+  const Eigen::Vector3d grid_offset(1.0, 2.0, 3.0);
+  HandleFrames frames({{"gripper", {0, 2}}}, grid, grid.initialPositions(), grid_offset);
+  const auto pose = [](const Eigen::Vector3d& t, double angle, const Eigen::Vector3d& axis) {
+    FramePose p;
+    p.translation = t;
+    p.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(angle, axis.normalized()));
+    return p;
+  };
+  const Eigen::Matrix3Xd points = grid.toPoints(grid.initialPositions());
+  const auto expected = [&](const FramePose& from, const FramePose& to) {
+    Eigen::VectorXd x(6);
+    for (int k = 0; k < 2; ++k)
+    {
+      const Eigen::Vector3d start = points.col(k == 0 ? 0 : 2) + grid_offset;
+      const Eigen::Vector3d in_frame = from.rotation.conjugate() * (start - from.translation);
+      x.segment<3>(3 * k) = to.rotation * in_frame + to.translation - grid_offset;
+    }
+    return x;
+  };
+  Eigen::VectorXd x, v, a;
+  frames.motion(0.1, 1.0, x, v, a);  // before any lookup: at the start
+  EXPECT_LT((x - expected(FramePose(), FramePose())).norm(), 1e-12);
+  EXPECT_EQ(frames.status(), "");
+
+  const FramePose first = pose({0.5, 0.0, 1.0}, 0.3, {0, 0, 1});
+  frames.setTargets({first});
+  frames.motion(0.1, 1.0, x, v, a);
+  EXPECT_LT((x - expected(first, first)).norm(), 1e-12) << "the first pose takes the offsets: no jump";
+  EXPECT_LT(v.norm(), 1e-12);
+  frames.finishTick(1.0);
+
+  const FramePose second = pose({0.6, 0.2, 0.9}, 0.8, {1, 1, 0});
+  frames.setTargets({second});
+  frames.motion(0.1, 1.0, x, v, a);
+  EXPECT_LT((x - expected(first, second)).norm(), 1e-12);
+  const double h = 1e-6;
+  Eigen::VectorXd x_minus, x_plus, unused_v, unused_a;
+  frames.motion(0.1, 0.5 - h, x_minus, unused_v, unused_a);
+  frames.motion(0.1, 0.5 + h, x_plus, unused_v, unused_a);
+  frames.motion(0.1, 0.5, x, v, a);
+  EXPECT_LT((v - (x_plus - x_minus) / (2.0 * h * 0.1)).norm(), 1e-6) << "velocity along the interpolated path";
+  frames.finishTick(0.5);  // the tick stopped half way: the next one starts there
+  Eigen::VectorXd half = x;
+
+  frames.setTargets({std::nullopt});
+  EXPECT_EQ(frames.status(), "held: frame 'gripper' not available");
+  frames.motion(0.1, 1.0, x, v, a);
+  EXPECT_LT((x - half).norm(), 1e-12) << "a missing frame holds the particles where they are";
+  EXPECT_LT(v.norm(), 1e-12);
+
+  frames.reset();
+  frames.setTargets({std::nullopt});
+  frames.motion(0.1, 1.0, x, v, a);
+  EXPECT_LT((x - expected(first, first)).norm(), 1e-12) << "a reset puts them back at the start";
+}
+
 // A YAML node as the parameter server would hold it (scalars: integer, number, bool or string).
 XmlRpc::XmlRpcValue toXmlRpc(const YAML::Node& node)
 {
+  if (node.IsMap())
+  {
+    XmlRpc::XmlRpcValue map;
+    map.begin();
+    for (const auto& item : node)
+      map[item.first.as<std::string>()] = toXmlRpc(item.second);
+    return map;
+  }
   if (node.IsSequence())
   {
     XmlRpc::XmlRpcValue list;
@@ -456,7 +618,8 @@ TEST(NodeParams, EveryShippedNodeConfigLoads)
     loaded.push_back(entry.path().filename().string());
   }
   std::sort(loaded.begin(), loaded.end());
-  EXPECT_EQ(loaded, (std::vector<std::string>{"cloth.yaml", "cloth_large.yaml", "paper_2d.yaml", "paper_3d.yaml"}));
+  EXPECT_EQ(loaded, (std::vector<std::string>{"cloth.yaml", "cloth_large.yaml", "held_cloth.yaml", "paper_2d.yaml",
+                                              "paper_3d.yaml"}));
 }
 
 }  // namespace
