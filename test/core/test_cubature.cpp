@@ -6,6 +6,8 @@
 #include "modal_mass_spring/simulation.h"
 #include "modal_mass_spring/spring_forces.h"
 
+#include "test_support.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -60,21 +62,6 @@ Eigen::VectorXd pose(const Simulation& sim, double size, unsigned seed)
   const Eigen::VectorXd modal = Eigen::VectorXd::Random(sim.basis().phi.cols());
   return modal * size / (sim.basis().phi * modal).cwiseAbs().maxCoeff();
 }
-
-std::string refusal(const std::function<void()>& build)
-{
-  try
-  {
-    build();
-  }
-  catch (const std::invalid_argument& e)
-  {
-    return e.what();
-  }
-  return "";
-}
-
-bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
 }  // namespace
 

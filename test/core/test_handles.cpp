@@ -7,6 +7,8 @@
 #include "modal_mass_spring/spring_forces.h"
 
 #include <Eigen/Dense>
+#include "test_support.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -72,19 +74,6 @@ void shakeHandles(Simulation& sim, const Eigen::VectorXd& amplitude, int steps, 
 }
 
 double largestDifference(const Eigen::VectorXd& a, const Eigen::VectorXd& b) { return (a - b).cwiseAbs().maxCoeff(); }
-
-std::string refusal(const std::function<void()>& build)
-{
-  try
-  {
-    build();
-  }
-  catch (const std::invalid_argument& e)
-  {
-    return e.what();
-  }
-  return "";
-}
 
 }  // namespace
 

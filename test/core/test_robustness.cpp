@@ -5,6 +5,8 @@
 #include "modal_mass_spring/simulation.h"
 #include "modal_mass_spring/spring_forces.h"
 
+#include "test_support.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -41,22 +43,6 @@ SimulationParams params(Method method, double dt, IntegratorKind integrator = In
   s.integrator = integrator;
   return s;
 }
-
-// The message of the std::invalid_argument that `build` throws, or "" when it throws none.
-std::string refusal(const std::function<void()>& build)
-{
-  try
-  {
-    build();
-  }
-  catch (const std::invalid_argument& e)
-  {
-    return e.what();
-  }
-  return "";
-}
-
-bool contains(const std::string& text, const std::string& part) { return text.find(part) != std::string::npos; }
 
 double largestParticleDistance(const Simulation& sim, const Eigen::VectorXd& positions)
 {
