@@ -27,15 +27,6 @@ GridParams paper2D()
   return g;
 }
 
-GridParams paper3D()
-{
-  GridParams g;
-  g.rows = g.cols = 10;
-  g.dimension = 3;
-  g.rotation_deg = 45.0;
-  return g;
-}
-
 SimulationParams paperParams(Method method, int r, Linearization linearization = Linearization::Rest)
 {
   SimulationParams s;

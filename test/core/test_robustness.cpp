@@ -26,15 +26,6 @@ namespace
 
 GridParams paper2D() { return GridParams{}; }
 
-GridParams paper3D()
-{
-  GridParams g;
-  g.rows = g.cols = 10;
-  g.dimension = 3;
-  g.rotation_deg = 45.0;
-  return g;
-}
-
 SimulationParams params(Method method, double dt, IntegratorKind integrator = IntegratorKind::Explicit)
 {
   SimulationParams s;
