@@ -7,8 +7,8 @@
 #include <Spectra/SymEigsShiftSolver.h>
 
 #include <algorithm>
-#include <cstddef>
 #include <chrono>
+#include <cstddef>
 #include <memory>
 #include <numeric>
 #include <stdexcept>
