@@ -1,6 +1,8 @@
-// Sparse shift-invert Lanczos (Spectra) over a sparse LDLT factorisation solved by supernodes.
+// Shift-invert Lanczos with partial reorthogonalisation (Spectra as a fallback) over a sparse LDLT
+// factorisation solved by supernodes.
 #include "modal_mass_spring/modal_basis.h"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/QR>
 #include <Eigen/SparseCholesky>
@@ -8,6 +10,9 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <limits>
+#include <random>
 #include <cstddef>
 #include <memory>
 #include <numeric>
@@ -19,6 +24,10 @@ namespace modal_mass_spring
 {
 namespace
 {
+
+// A Ritz value theta has converged when the estimate of its residual is below kTolerance |theta|
+// (Spectra's and ARPACK's criterion).
+constexpr double kTolerance = 1e-12;
 
 // Eigen's sparse LDLT factor of A - sigma I (its ordering and numbers unchanged) regrouped into
 // supernodes for the solves: runs of columns whose rows below the diagonal are the same, each kept as
@@ -44,6 +53,8 @@ public:
       return previous == count + 1 && row[start[j - 1]] == j &&
              std::equal(row + start[j], row + start[j + 1], row + start[j - 1] + 1);
     };
+    rows_.reserve(l.nonZeros());
+    values_.reserve(l.nonZeros() + l.nonZeros() / 4);  // and the triangles' upper halves, zero
     for (int first = 0; first < n_;)
     {
       int last = first;
@@ -167,7 +178,7 @@ private:
   mutable Eigen::VectorXd work_;
 };
 
-// y = P (A - sigma I)^-1 P x for Spectra, P = I - Q Q^T the projector onto the complement of the
+// y = P (A - sigma I)^-1 P x, P = I - Q Q^T the projector onto the complement of the
 // modes found so far (none at first). Spectra's own SparseSymShiftSolve uses SparseLU; A - sigma I is
 // symmetric positive definite here (sigma < 0, A semi-definite), so a simplicial LDLT is enough and
 // several times faster. It is factorised once and reused by every deflated pass.
@@ -189,6 +200,11 @@ public:
   Eigen::Index cols() const { return n_; }
   void set_shift(double) {}  // factorised at construction, for the one shift used
   void deflate(const Eigen::MatrixXd& q) { q_ = q; }
+  void project(Eigen::Ref<Eigen::VectorXd> x) const
+  {
+    if (q_.cols() > 0)
+      x -= q_ * (q_.transpose() * x);
+  }
 
   void perform_op(const double* x_in, double* y_out) const
   {
@@ -207,23 +223,128 @@ public:
 
 private:
   Eigen::Index n_;
-  std::shared_ptr<const SupernodalSolve> solve_;  // shared: Spectra copies the operator
+  std::shared_ptr<const SupernodalSolve> solve_;  // shared: Spectra may copy the operator
   Eigen::MatrixXd q_;
 };
 
-// The nev eigenpairs of A nearest sigma in the complement the operator is deflated to.
-void lanczos(ShiftInvertLDLT& op, int nev, double sigma, Eigen::VectorXd& values, Eigen::MatrixXd& vectors)
+// Lanczos without restarts and with partial reorthogonalisation (Simon 1984): the Ritz vectors of the
+// nev largest eigenvalues of the operator B, or false when max_steps were not enough. Reorthogonalising
+// against every earlier Lanczos vector at every step (Spectra's way) costs nearly as much as the solves
+// on a 100 x 100 grid; here Simon's recurrence estimates the loss of orthogonality and the vectors are
+// reorthogonalised only when it passes sqrt(eps) (every third step there), which keeps them
+// semi-orthogonal: enough for Ritz values to working precision. The Ritz vectors are orthonormalised
+// afterwards.
+bool partialLanczos(const ShiftInvertLDLT& op, int nev, int max_steps, Eigen::MatrixXd& vectors)
 {
   const int n = static_cast<int>(op.rows());
-  const int ncv = std::min(n, std::max(2 * nev + 1, nev + 20));
-  Spectra::SymEigsShiftSolver<ShiftInvertLDLT> solver(op, nev, ncv, sigma);
-  solver.init();
-  solver.compute(Spectra::SortRule::LargestMagn, 1000, 1e-12);
-  if (solver.info() != Spectra::CompInfo::Successful)
-    throw std::runtime_error("modal basis: the eigensolver did not converge for " + std::to_string(nev) +
-                             " modes of " + std::to_string(n) + " free degrees of freedom");
-  values = solver.eigenvalues();
-  vectors = solver.eigenvectors();
+  const int m = std::min(n, max_steps);
+  const double eps = std::numeric_limits<double>::epsilon();
+  const double limit = std::sqrt(eps);
+  Eigen::MatrixXd v(n, m + 1);
+  Eigen::VectorXd alpha = Eigen::VectorXd::Zero(m), beta = Eigen::VectorXd::Zero(m);
+  // omega[k] estimates v_j . v_k for the newest vector j, omega_previous for j - 1.
+  Eigen::VectorXd omega = Eigen::VectorXd::Zero(m + 1), omega_previous = Eigen::VectorXd::Zero(m + 1);
+  std::mt19937_64 random(1);  // fixed: the same basis for the same matrices
+  std::normal_distribution<double> normal;
+
+  // A random unit vector in the operator's complement, orthogonal to v.leftCols(cols), into
+  // v.col(cols); false when nothing is left (the Krylov spaces so far fill the complement).
+  auto fresh = [&](int cols) {
+    Eigen::VectorXd x(n);
+    for (int i = 0; i < n; ++i)
+      x[i] = normal(random);
+    op.project(x);
+    const double before = x.norm();
+    for (int pass = 0; pass < 2 && cols > 0; ++pass)
+      x -= v.leftCols(cols) * (v.leftCols(cols).transpose() * x);
+    if (x.norm() <= 1e-8 * before)
+      return false;
+    v.col(cols) = x / x.norm();
+    return true;
+  };
+  auto reorthogonalise = [&](Eigen::VectorXd& w, int cols) {
+    w -= v.leftCols(cols) * (v.leftCols(cols).transpose() * w);
+  };
+
+  if (!fresh(0))
+    return false;
+  omega[0] = 1.0;
+  bool reorthogonalise_next = false;
+
+  double norm_estimate = 0.0;  // of B, from the tridiagonal matrix so far
+  Eigen::VectorXd w(n);
+  for (int j = 0; j < m; ++j)
+  {
+    op.perform_op(v.col(j).data(), w.data());
+    if (j > 0)
+      w -= beta[j - 1] * v.col(j - 1);
+    alpha[j] = v.col(j).dot(w);
+    w -= alpha[j] * v.col(j);
+    const double local = v.col(j).dot(w);  // once more against v_j: the recurrence assumes it exact
+    w -= local * v.col(j);
+    alpha[j] += local;
+    beta[j] = w.norm();
+    norm_estimate = std::max(norm_estimate, std::abs(alpha[j]) + beta[j] + (j > 0 ? beta[j - 1] : 0.0));
+
+    // Simon's recurrence for omega_{j+1, k}, with a rounding term of the size of eps ||B||.
+    Eigen::VectorXd omega_next = Eigen::VectorXd::Zero(m + 1);
+    if (beta[j] > 0.0)
+      for (int k = 0; k < j; ++k)
+      {
+        double next = beta[k] * omega[k + 1] + (alpha[k] - alpha[j]) * omega[k] +
+                      (k > 0 ? beta[k - 1] * omega[k - 1] : 0.0) - beta[j - 1] * omega_previous[k];
+        next += std::copysign(eps * norm_estimate, next);
+        omega_next[k] = next / beta[j];
+      }
+    omega_next[j] = eps * norm_estimate / std::max(beta[j], eps * norm_estimate);
+    omega_next[j + 1] = 1.0;
+    const bool lost = omega_next.head(j).cwiseAbs().maxCoeff() > limit;
+    if ((lost || reorthogonalise_next) && j + 1 < n)
+    {
+      // Both this vector and the next, as Simon prescribes: the next inherits the error otherwise.
+      reorthogonalise(w, j + 1);
+      omega_next.head(j + 1).setConstant(eps);
+      beta[j] = w.norm();
+      reorthogonalise_next = lost;
+    }
+    omega_previous = omega;
+    omega = omega_next;
+
+    // A breakdown (an invariant subspace) goes on from a new direction, uncoupled (beta_j = 0): one
+    // more copy of a repeated eigenvalue each time. When none is left, the Ritz pairs are exact.
+    const bool breakdown = beta[j] <= 1e-12 * norm_estimate;
+    const bool exhausted = j + 1 == n || (breakdown && !fresh(j + 1));
+    const bool last = j + 1 == m || exhausted;
+    // When the steps may fill the whole space, only the end is looked at: stopping early could miss
+    // copies of a repeated eigenvalue that later breakdowns would find.
+    if (j + 1 >= nev && (last || (m < n && (j + 1 - nev) % 2 == 0)))
+    {
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> ritz;
+      if (breakdown)
+        beta[j] = 0.0;
+      ritz.computeFromTridiagonal(alpha.head(j + 1), beta.head(j), Eigen::ComputeEigenvectors);
+      // Ascending: the wanted (largest) ones are the last columns; residual beta_j |last entry|.
+      bool converged = true;
+      for (int i = j + 1 - nev; i <= j && converged && !exhausted; ++i)
+        converged = beta[j] * std::abs(ritz.eigenvectors()(j, i)) <=
+                    kTolerance * std::max(std::abs(ritz.eigenvalues()[i]), 1e-11);
+      if (converged)
+      {
+        vectors = v.leftCols(j + 1) * ritz.eigenvectors().rightCols(nev);
+        return true;
+      }
+    }
+    if (last)
+      return false;
+    if (breakdown)
+    {
+      beta[j] = 0.0;  // v.col(j + 1) is the fresh direction
+      omega.head(j + 1).setConstant(eps);
+      continue;
+    }
+    v.col(j + 1) = w / beta[j];
+  }
+  return false;
 }
 
 // Rayleigh-Ritz: the r lowest eigenpairs of A within the span of `vectors`.
@@ -235,6 +356,50 @@ void rayleighRitz(const SparseMatrix& a, int r, Eigen::VectorXd& values, Eigen::
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> small(0.5 * (projected + projected.transpose()));
   values = small.eigenvalues().head(r);
   vectors = q * small.eigenvectors().leftCols(r);
+}
+
+// Rayleigh-Ritz for vectors already orthonormal to about sqrt(eps) (Ritz vectors of semi-orthogonal
+// Lanczos vectors): made orthonormal by a Cholesky QR, half the cost of a Householder QR, and
+// rotated to the eigenvectors of A within their span, which undoes the mixing the orthonormalisation
+// brings. Householder when the Cholesky QR cannot.
+void orthonormalRayleighRitz(const SparseMatrix& a, Eigen::VectorXd& values, Eigen::MatrixXd& vectors)
+{
+  Eigen::MatrixXd gram = Eigen::MatrixXd::Zero(vectors.cols(), vectors.cols());
+  gram.selfadjointView<Eigen::Lower>().rankUpdate(vectors.transpose());
+  const Eigen::LLT<Eigen::MatrixXd> llt(gram);
+  if (llt.info() != Eigen::Success)
+  {
+    rayleighRitz(a, static_cast<int>(vectors.cols()), values, vectors);
+    return;
+  }
+  llt.matrixU().solveInPlace<Eigen::OnTheRight>(vectors);
+  const Eigen::MatrixXd projected = vectors.transpose() * (a * vectors);
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> small(0.5 * (projected + projected.transpose()));
+  values = small.eigenvalues();
+  vectors = vectors * small.eigenvectors();
+}
+
+// The nev eigenpairs of A nearest sigma in the complement the operator is deflated to: Lanczos with
+// partial reorthogonalisation; Spectra's restarted Lanczos (full reorthogonalisation, a bounded
+// space) when that has not converged within maxLanczosVectors(nev) - 1 steps.
+void lanczos(const SparseMatrix& a, ShiftInvertLDLT& op, int nev, double sigma, Eigen::VectorXd& values,
+             Eigen::MatrixXd& vectors)
+{
+  if (partialLanczos(op, nev, maxLanczosVectors(nev) - 1, vectors))
+  {
+    orthonormalRayleighRitz(a, values, vectors);
+    return;
+  }
+  const int n = static_cast<int>(op.rows());
+  const int ncv = std::min(n, std::max(2 * nev + 1, nev + 20));
+  Spectra::SymEigsShiftSolver<ShiftInvertLDLT> solver(op, nev, ncv, sigma);
+  solver.init();
+  solver.compute(Spectra::SortRule::LargestMagn, 1000, kTolerance);
+  if (solver.info() != Spectra::CompInfo::Successful)
+    throw std::runtime_error("modal basis: the eigensolver did not converge for " + std::to_string(nev) +
+                             " modes of " + std::to_string(n) + " free degrees of freedom");
+  values = solver.eigenvalues();
+  vectors = solver.eigenvectors();
 }
 
 }  // namespace
@@ -282,7 +447,7 @@ ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorX
     ShiftInvertLDLT op(a, basis.shift);
     basis.factorization_seconds = seconds();
     stage("eigensolver");
-    lanczos(op, r, basis.shift, values, vectors);
+    lanczos(a, op, r, basis.shift, values, vectors);
     // A Krylov space holds one vector per eigenvalue, so a null space larger than a few vectors (a
     // flat 3D sheet at rest has one zero mode per free particle) is found only in part, and modes
     // above zero slip in. Look again in the complement of what was found until nothing lower turns
@@ -295,7 +460,7 @@ ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorX
                  Eigen::MatrixXd::Identity(n, vectors.cols()));
       Eigen::VectorXd more_values;
       Eigen::MatrixXd more_vectors;
-      lanczos(op, r, basis.shift, more_values, more_vectors);
+      lanczos(a, op, r, basis.shift, more_values, more_vectors);
       ++basis.deflation_passes;
       if (more_values.minCoeff() >= highest - zero_tolerance)
         break;
@@ -323,6 +488,12 @@ ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorX
     basis.eigenvalues[k] = lambda2;
     basis.frequencies[k] = std::sqrt(std::max(lambda2, 0.0));
     basis.phi.col(k) = inv_sqrt_mass.asDiagonal() * vectors.col(order[k]);
+    // An eigenvector's sign is the eigensolver's accident; fixed here (its largest entry positive), so
+    // the same matrices give the same basis whichever solver path ran.
+    Eigen::Index largest = 0;
+    basis.phi.col(k).cwiseAbs().maxCoeff(&largest);
+    if (basis.phi(largest, k) < 0.0)
+      basis.phi.col(k) *= -1.0;
   }
   basis.build_seconds = seconds();
   return basis;

@@ -165,7 +165,7 @@ double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
   bytes += 12.0 * fill * n * std::log2(std::max(n, 2.0));
   // The basis: Phi, the physical model's Phi^T and (K Phi)^T, the Lanczos vectors and the Ritz
   // vectors of deflated passes; a dense eigensolver when r is close to n.
-  bytes += 8.0 * n * (3.0 * r + std::max(2.0 * r + 1.0, r + 20.0) + 2.0 * r);
+  bytes += 8.0 * n * (3.0 * r + std::min(n, static_cast<double>(maxLanczosVectors(p.num_modes))) + 2.0 * r);
   // The physical basis (a copy, or the modes and their derivative directions, three times for the
   // force model), and while it is built the derivatives of every pair with their right-hand sides.
   const double d = p.basis == BasisKind::ModalDerivatives ? p.num_derivative_modes : 0.0;
