@@ -189,6 +189,8 @@ void SimulationNode::onDragFeedback(const visualization_msgs::InteractiveMarkerF
       hand_forces_->release();
       placing_ = false;
     }
+    // The server took the pose as it came: the marker goes back onto its particle.
+    marker_position_ = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
     return;
   }
   size_t track = 0;
