@@ -2,7 +2,7 @@
 """Broadcasts a gripper frame (~frame, child of ~parent) with tf2_ros for launch/held_cloth.launch, in
 a loop: held at ~start for ~hold seconds; a slow wave, ~waves swings of ~amplitude metres along x,
 ~wave_period seconds each; a turn of ~turn_deg degrees about the vertical axis (z) in ~turn_seconds,
-held for ~hold seconds, and back. Every move starts and ends at rest (smoothstep), so the handles
+held for ~hold seconds, and back; then the loop starts again. Every move starts and ends at rest (smoothstep), so the handles
 the frame holds never jerk."""
 import math
 
@@ -21,7 +21,7 @@ class Motion:
         self.amplitude, self.wave_period, self.waves = amplitude, wave_period, waves
         self.turn, self.turn_seconds, self.hold = turn, turn_seconds, hold
         self.wave_seconds = waves * wave_period
-        self.period = 3.0 * hold + self.wave_seconds + 2.0 * turn_seconds
+        self.period = 2.0 * hold + self.wave_seconds + 2.0 * turn_seconds
 
     def at(self, t):
         """(x offset in m, yaw in rad) at t seconds."""
@@ -41,9 +41,7 @@ class Motion:
         if t < self.hold:
             return 0.0, self.turn
         t -= self.hold
-        if t < self.turn_seconds:
-            return 0.0, self.turn * (1.0 - smoothstep(t / self.turn_seconds))
-        return 0.0, 0.0
+        return 0.0, self.turn * (1.0 - smoothstep(t / self.turn_seconds))
 
 
 def main():
