@@ -66,6 +66,10 @@ struct NodeParams
   std::string cache_dir;
   // Particles held rigidly by TF frames (their groups also go to GridParams::handles).
   std::vector<HandleParam> handles;
+  // By hand in rviz: the interactive marker's spring (N/m) on the particle it grabs, and the impulse
+  // (N s) of a /clicked_point poke; 0 turns either off. Defaults from the grid (drag_and_poke.h).
+  double drag_stiffness = 0.0;
+  double poke_impulse = 0.0;
 };
 
 // Reads and validates the node's own parameters, each named once here with its range; defaults that

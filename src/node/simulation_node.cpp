@@ -195,6 +195,7 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
              frames.c_str(), params.fixed_frame.c_str());
   }
   apply_force_sub_ = private_nh_.subscribe("apply_force", 10, &SimulationNode::applyForce, this);
+  startInteraction();
   service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
   service_spinner_->start();
 
@@ -376,10 +377,15 @@ void SimulationNode::setHandleMotion(double duration, double s)
 bool SimulationNode::stepAll()
 {
   bool any_running = false;
-  for (Track& track : tracks_)
+  for (size_t k = 0; k < tracks_.size(); ++k)
   {
+    Track& track = tracks_[k];
     if (track.simulation->diverged())
+    {
+      hand_forces_->skip(k);
       continue;
+    }
+    applyHandForce(k);
     const auto start = Clock::now();
     const StepResult result = track.simulation->step(1);
     track.tick_seconds += secondsSince(start);
@@ -424,6 +430,7 @@ void SimulationNode::onTick()
   std::vector<std::string> divergences;
   std::string status_line;
   double period = 0.0;
+  std::optional<Eigen::Vector3d> drag_marker;
   {
     std::unique_lock<std::mutex> lock(mutex_);
     swapRebuilt();
@@ -497,6 +504,7 @@ void SimulationNode::onTick()
     clock_seconds_ += tick_steps_ * dt;
     achieved_factor_ = tick_steps_ * dt / std::max(wall, 1e-9);
     output = snapshot(stamp());
+    drag_marker = dragMarkerTarget();
 
     if (params.status_log_period > 0.0 && (ros::WallTime::now() - last_status_log_).toSec() >= params.status_log_period)
     {
@@ -516,6 +524,8 @@ void SimulationNode::onTick()
     ROS_ERROR("%s", divergence.c_str());
 
   send(output);
+  if (drag_marker)
+    placeDragMarker(*drag_marker);
 
   // A tick is late when its stepping alone takes longer than the period: the timer cannot keep up.
   ++diag_ticks_;
@@ -900,6 +910,7 @@ bool SimulationNode::clearForces(std_srvs::Trigger::Request&, std_srvs::Trigger:
 {
   ServiceLock lock(*this);
   const size_t count = applied_forces_->clear();
+  hand_forces_->release();  // a drag whose release never came ends too
   updateExternalForces();
   response.success = true;
   response.message = "cleared " + std::to_string(count) + (count == 1 ? " force" : " forces");
@@ -910,9 +921,10 @@ void SimulationNode::updateExternalForces()
 {
   applied_forces_->update(simTime(primary()), external_force_);
   // A rebuilt simulation starts without them: every track is brought to the current total.
-  for (Track& track : tracks_)
-    if (track.simulation->externalForce() != external_force_)
-      track.simulation->setExternalForce(external_force_);
+  // A track under the hand's force gets the total before its next step (applyHandForce).
+  for (size_t k = 0; k < tracks_.size(); ++k)
+    if (!(hand_forces_ && hand_forces_->active(k)) && tracks_[k].simulation->externalForce() != external_force_)
+      tracks_[k].simulation->setExternalForce(external_force_);
 }
 
 }  // namespace modal_mass_spring

@@ -117,6 +117,11 @@ CASES = [
     ({"shadow_full": "yes"}, [], ["shadow_full"]),
     ({}, ["_diagnostic_period:=-1"], ["diagnostic_period"]),
     ({"diagnostic_period": 0.0}, [], ["diagnostic_period"]),
+    ({"drag_stiffness": -1.0}, [], ["drag_stiffness"]),
+    ({"drag_stiffness": 1e5}, [], ["drag_stiffness"]),  # the paper grid's step takes at most 1e4 N/m
+    ({"drag_stiffness": "stiff"}, [], ["drag_stiffness"]),
+    ({"poke_impulse": -0.01}, [], ["poke_impulse"]),
+    ({"poke_impulse": NAN}, [], ["poke_impulse"]),
     ({"handles": [{"frame": "gripper", "particles": [25]}]}, [], ["handles"]),
     ({"handles": [{"frame": "gripper", "particles": [0, 1]}, {"frame": "finger", "particles": [1]}]}, [],
      ["handles"]),
