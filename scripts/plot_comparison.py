@@ -292,14 +292,15 @@ def plot_handles(path, out):
         for si, setting in enumerate(settings):
             variant = scenario + (" " + setting if setting else "")
             for method in ordered(r["method"] for r in rows if r["variant"] == variant):
-                if method == base:
+                # The reference and its check are the same for every setting: drawn once.
+                if method == base or (method == "reference_half_step" and si > 0):
                     continue
                 series = [r for r in rows if r["variant"] == variant and r["method"] == method and int(r["step"]) > 0]
                 good = [(number(r["time"]), number(r["rms_distance"])) for r in series if r["diverged"] == "0"]
                 good = [(t, e) for t, e in good if e > 0]
-                label = method if method != "reference_half_step" else "reference at half its step"
-                if setting:
-                    label += f" ({setting})"
+                label = method + (f" ({setting})" if setting else "")
+                if method == "reference_half_step":
+                    label = "reference at half its step (convergence check)"
                 ax.plot([t for t, _ in good], [e for _, e in good], VARIANT_STYLES[si % len(VARIANT_STYLES)],
                         color=METHOD_COLORS.get(method), label=label if k == 0 else None, lw=1)
                 if good and any(r["diverged"] == "1" for r in series):
