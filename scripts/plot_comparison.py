@@ -22,7 +22,8 @@ Reads, from DIR, every file the tool writes and draws:
       from the mean y's zero crossings)
   handles_<tag>_error.csv (modal_compare --experiment handles) -> handles_<tag>.png (RMS distance to
       the reference over time, one panel per handle scenario, every method), with
-      handles_<tag>_summary.csv for its table
+      handles_<tag>_summary.csv for its table, and handles_<tag>_snapshots.csv -> handles_<tag>_shapes.png
+      (the cloth where the move ends: the reference, `linear` and `physical`, one panel per scenario)
 and writes the numbers behind them as Markdown tables to DIR/tables.md, for docs/results.md to quote.
 The columns it needs are listed in COLUMNS: a file without them stops the script with a message.
 """
@@ -319,6 +320,62 @@ def plot_handles(path, out):
     legend_rows = (len(labels) + 3) // 4
     fig.tight_layout(rect=(0, (0.25 + 0.2 * legend_rows) / (3.3 * lines + 0.8), 1, 1))
     target = out / f"handles_{tag}.png"
+    fig.savefig(target, dpi=110)
+    plt.close(fig)
+    return [target]
+
+
+def plot_handle_shapes(path, out):
+    """The cloth where the move ends, one 3D panel per scenario (of the first varied setting): the
+    reference, `linear` and `physical` as wireframes over the grid's rows and columns."""
+    rows = read_csv(path, "snapshots")
+    tag = tag_of(path, "handles_", "_snapshots.csv")
+    base = "reference" if any(r["method"] == "reference" for r in rows) else "full"
+    first = ordered(scenario_of(r["variant"])[1] for r in rows)[0]
+    scenarios = [s for s in ordered(scenario_of(r["variant"])[0] for r in rows)]
+    shown = [(base, "black"), ("linear", METHOD_COLORS["linear"]), ("physical", METHOD_COLORS["physical"])]
+    columns = min(3, len(scenarios))
+    lines = (len(scenarios) + columns - 1) // columns
+    fig = plt.figure(figsize=(4.4 * columns, 4.0 * lines + 0.6))
+    for k, scenario in enumerate(scenarios):
+        ax = fig.add_subplot(lines, columns, k + 1, projection="3d")
+        variant = scenario + (" " + first if first else "")
+        lows, highs = [math.inf] * 3, [-math.inf] * 3
+        for method, color in shown:
+            points = [r for r in rows if r["variant"] == variant and r["method"] == method]
+            if not points:
+                continue
+            n_rows = max(int(r["row"]) for r in points) + 1
+            n_cols = max(int(r["col"]) for r in points) + 1
+            grid = [[None] * n_cols for _ in range(n_rows)]
+            for r in points:
+                grid[int(r["row"])][int(r["col"])] = tuple(number(r[c]) for c in ("x", "y", "z"))
+            for axis in range(3):
+                values = [p[axis] for line in grid for p in line]
+                lows[axis], highs[axis] = min(lows[axis], min(values)), max(highs[axis], max(values))
+            label = method if k == 0 else None
+            for line in grid:  # along each row, then along each column
+                ax.plot([p[0] for p in line], [p[1] for p in line], [p[2] for p in line], color=color, lw=0.6,
+                        label=label)
+                label = None
+            for c in range(n_cols):
+                column = [grid[r][c] for r in range(n_rows)]
+                ax.plot([p[0] for p in column], [p[1] for p in column], [p[2] for p in column], color=color, lw=0.6)
+        # Equal scales on the three axes, so a turn looks like a turn.
+        half = max(h - l for l, h in zip(lows, highs)) / 2
+        for axis, setter in enumerate((ax.set_xlim, ax.set_ylim, ax.set_zlim)):
+            centre = (lows[axis] + highs[axis]) / 2
+            setter(centre - half, centre + half)
+        ax.set_box_aspect((1, 1, 1))
+        ax.set_title(f"{scenario}, t = {number(points[0]['time']):.2g} s" if points else scenario, fontsize=10)
+        ax.set_xlabel("x (m)", fontsize=8)
+        ax.set_ylabel("y (m)", fontsize=8)
+        ax.set_zlabel("z (m)", fontsize=8)
+        ax.tick_params(labelsize=7)
+    fig.legend(loc="lower center", ncol=3, fontsize=9)
+    fig.suptitle(f"{tag}: the cloth where the handles stop moving" + (f" ({first})" if first else ""), fontsize=10)
+    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    target = out / f"handles_{tag}_shapes.png"
     fig.savefig(target, dpi=110)
     plt.close(fig)
     return [target]
@@ -787,6 +844,8 @@ def main(argv=None):
             written += plot_derivatives(derivatives, out)
         for path in sorted(data.glob("handles_*_error.csv")):
             written += plot_handles(path, out)
+        for path in sorted(data.glob("handles_*_snapshots.csv")):
+            written += plot_handle_shapes(path, out)
         if written:
             written += write_tables(data, data / "tables.md")
     except ColumnError as error:

@@ -75,8 +75,9 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
                 held_cloth.yaml): the grid's handles are the scenario's particle groups, each moved as a
                 rigid frame over move_time s along a smooth ramp, then held for hold_time s; every method
                 against the reference as in accuracy (--sample, --reference-time-step, --methods), each
-                scenario run for its move_time + hold_time; writes handles_<tag>_error.csv and
-                handles_<tag>_summary.csv
+                scenario run for its move_time + hold_time; writes handles_<tag>_error.csv,
+                handles_<tag>_summary.csv and (unless --no-snapshots) handles_<tag>_snapshots.csv,
+                every particle of every run where the move ends (of the first --vary combination)
   cost:       --sizes LIST (5,10,20,40; square grids)  --repeats R (7)  --min-repeat-seconds T (0.02)
 )";
 
@@ -491,10 +492,13 @@ std::vector<ExperimentSetup> handleSetups(const Options& o, const std::vector<Ex
   return out;
 }
 
-// Steps a handle scenario runs on a setup: its move and hold, rounded up to whole samples.
-int handleSteps(const Options& o, const ExperimentSetup& setup)
+// Steps a handle scenario runs on a setup: its move and hold (or its move alone), rounded up to whole
+// samples.
+int handleSteps(const Options& o, const ExperimentSetup& setup, bool move_only = false)
 {
-  const double steps = std::ceil(setup.handle_scenario->duration() / setup.sim.time_step - 1e-9);
+  const HandleScenario& scenario = *setup.handle_scenario;
+  const double seconds = move_only ? scenario.move_time : scenario.duration();
+  const double steps = std::ceil(seconds / setup.sim.time_step - 1e-9);
   const double samples = std::ceil(steps / o.accuracy.sample);
   if (!(samples * o.accuracy.sample <= 100000000.0))
     rejectParameter("time_step", setup.sim.time_step,
@@ -814,13 +818,19 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
 {
   const std::string reference = o.accuracy.reference_time_step > 0.0 ? "reference" : "full";
   std::vector<ErrorSample> errors;
+  std::vector<Snapshot> snapshots;
   std::vector<std::string> messages;
   for (const ExperimentSetup& setup : setups)
   {
     AccuracyOptions options = o.accuracy;
-    options.snapshots = false;
-    options.steps = options.interval = handleSteps(o, setup);
+    options.steps = handleSteps(o, setup);
+    options.interval = handleSteps(o, setup, true);
     const AccuracyResult result = runAccuracy(setup, options, std::ref(progress));
+    // The shapes where the move ends, where the methods differ most; of the first --vary combination
+    // only, to keep the file small.
+    for (const Snapshot& snapshot : result.snapshots)
+      if (snapshot.step == options.interval && setup.settings == setups.front().settings)
+        snapshots.push_back(snapshot);
     errors.insert(errors.end(), result.errors.begin(), result.errors.end());
     errors.insert(errors.end(), result.reference_check.begin(), result.reference_check.end());
     messages.insert(messages.end(), result.messages.begin(), result.messages.end());
@@ -839,6 +849,11 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
   const std::vector<AccuracySummary> summaries = summarizeAccuracy(errors);
   std::ofstream summary_out = openCsv(o, "handles_" + o.tag + "_summary.csv");
   writeAccuracySummaryCsv(summary_out, summaries);
+  if (o.accuracy.snapshots && !setups.empty())
+  {
+    std::ofstream snap = openCsv(o, "handles_" + o.tag + "_snapshots.csv");
+    writeSnapshotCsv(snap, Grid(setups.front().grid), snapshots);
+  }
   std::vector<std::vector<std::string>> table{
       {"scenario", "method", "mean RMS m", "largest RMS m", "RMS at the end m", "step us (median)"}};
   for (const AccuracySummary& s : summaries)

@@ -267,6 +267,36 @@ TEST_F(ModalCompareTool, HandlesExperimentMeasuresEveryScenarioAndMethodAgainstT
     samples += line.rfind("shift,physical,", 0) == 0;
   EXPECT_EQ(samples, 16);
   EXPECT_NE(r.output.find("handle scenario apart: 2 handle(s)"), std::string::npos) << r.output;
+  // Every particle of every run (reference, full and the three modal methods) where the move ends, at
+  // step 100 (0.2 s of 2 ms steps); the handle particles where the frame put them.
+  std::ifstream shapes(dir_ / "data" / "handles_held_snapshots.csv");
+  std::getline(shapes, line);
+  ASSERT_EQ(line, "variant,method,step,time,particle,row,col,fixed,x,y,z");
+  int points = 0, handle_points = 0;
+  while (std::getline(shapes, line))
+  {
+    ++points;
+    EXPECT_NE(line.find(",100,0.2,"), std::string::npos) << line;
+    // shift: particle 1 of the top row starts at x = 0.1 and moves by 0.1 with its handle.
+    if (line.rfind("shift,", 0) == 0 && line.find(",1,0,1,0,") != std::string::npos)
+    {
+      ++handle_points;
+      EXPECT_NE(line.find(",0,0.2,"), std::string::npos) << line;
+    }
+  }
+  EXPECT_EQ(points, 2 * 5 * 16);
+  EXPECT_EQ(handle_points, 5);
+
+  const fs::path figures = dir_ / "figures";
+  const CommandResult plot = run("MPLBACKEND=Agg /usr/bin/python3 " + std::string(MODAL_SOURCE_DIR) +
+                                 "/scripts/plot_comparison.py --data " + (dir_ / "data").string() + " --out " +
+                                 figures.string());
+  ASSERT_EQ(plot.status, 0) << plot.output;
+  for (const char* name : {"handles_held.png", "handles_held_shapes.png"})
+  {
+    ASSERT_TRUE(fs::exists(figures / name)) << name << "\n" << plot.output;
+    EXPECT_GT(fs::file_size(figures / name), 5000u) << name;
+  }
 }
 
 TEST_F(ModalCompareTool, BadHandleScenariosStopBeforeAnyWorkWithAMessageNamingThem)
