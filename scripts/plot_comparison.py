@@ -336,7 +336,7 @@ def plot_handle_shapes(path, out):
     shown = [(base, "black"), ("linear", METHOD_COLORS["linear"]), ("physical", METHOD_COLORS["physical"])]
     columns = min(3, len(scenarios))
     lines = (len(scenarios) + columns - 1) // columns
-    fig = plt.figure(figsize=(4.4 * columns, 4.0 * lines + 0.6))
+    fig = plt.figure(figsize=(4.4 * columns, 4.2 * lines + 1.2))
     for k, scenario in enumerate(scenarios):
         ax = fig.add_subplot(lines, columns, k + 1, projection="3d")
         variant = scenario + (" " + first if first else "")
@@ -374,7 +374,9 @@ def plot_handle_shapes(path, out):
         ax.tick_params(labelsize=7)
     fig.legend(loc="lower center", ncol=3, fontsize=9)
     fig.suptitle(f"{tag}: the cloth where the handles stop moving" + (f" ({first})" if first else ""), fontsize=10)
-    fig.tight_layout(rect=(0, 0.05, 1, 1))
+    # tight_layout misplaces 3D axes: the margins by hand, room for the titles between the lines.
+    fig.subplots_adjust(left=0.0, right=0.96, bottom=0.6 / fig.get_figheight(), top=1 - 0.8 / fig.get_figheight(),
+                        wspace=0.1, hspace=0.12)
     target = out / f"handles_{tag}_shapes.png"
     fig.savefig(target, dpi=110)
     plt.close(fig)
