@@ -28,9 +28,10 @@ MethodModel::MethodModel(Method method, const LinearizedGrid& linearized, std::u
 void MethodModel::setExternalForce(const Eigen::VectorXd& f_free)
 {
   if (f_free.size() == 0 || f_free.isZero(0.0))
-    external_load_.resize(0);
+    external_free_.resize(0);
   else
-    external_load_ = generalizedForce(f_free);
+    external_free_ = f_free;
+  external_load_ = external_free_.size() > 0 ? generalizedForce(bodyExternalForce()) : Eigen::VectorXd();
   updateLoad();
   if (state_.q.size() > 0)
     integrator_->initialize(loaded_, state_);
@@ -44,12 +45,45 @@ void MethodModel::setHandleLoad(const Eigen::VectorXd& load)
 
 void MethodModel::updateLoad()
 {
-  if (handle_load_.size() == 0)
-    loaded_.setLoad(external_load_);
-  else if (external_load_.size() == 0)
-    loaded_.setLoad(handle_load_);
-  else
-    loaded_.setLoad(external_load_ + handle_load_);
+  Eigen::VectorXd load;
+  for (const Eigen::VectorXd* part : {&external_load_, &handle_load_, &frame_load_})
+    if (part->size() > 0)
+      load = load.size() > 0 ? Eigen::VectorXd(load + *part) : *part;
+  loaded_.setLoad(load);
+}
+
+Eigen::VectorXd MethodModel::bodyExternalForce() const
+{
+  if (frame_.none || external_free_.size() == 0)
+    return external_free_;
+  // A particle's free dofs are consecutive: R^T per particle.
+  const int dim = lin_.grid.dimension();
+  Eigen::VectorXd f = external_free_;
+  for (Eigen::Index k = 0; k + dim <= f.size(); k += dim)
+    if (!f.segment(k, dim).isZero(0.0))
+      f.segment(k, dim) = frame_.rotation.transpose() * external_free_.segment(k, dim);
+  return f;
+}
+
+void MethodModel::setFrameForces(const FrameForces& frame)
+{
+  frame_ = frame;
+  applyFrame();
+}
+
+void MethodModel::applyFrame()
+{
+  SparseMatrix linear;
+  frame_gyroscopic_.resize(0, 0);
+  frame_load_.resize(0);
+  // At rest B adds nothing: the results are those of a grid held still, to the last bit.
+  if (!frame_.none)
+    frameTerms(frame_, frame_load_, linear, frame_gyroscopic_);
+  loaded_.setLinearTerm(linear);
+  integrator_->setGyroscopic(frame_gyroscopic_);
+  if (external_free_.size() > 0)
+    external_load_ = generalizedForce(bodyExternalForce());
+  updateLoad();
 }
 
 void MethodModel::configure(const IntegratorSettings& settings)
@@ -61,6 +95,7 @@ void MethodModel::configure(const IntegratorSettings& settings)
                                                     settings.hht_alpha);
   else
     integrator_ = std::make_unique<ExplicitNewmark>(std::move(system), settings.time_step);
+  integrator_->setGyroscopic(frame_gyroscopic_);
   if (state_.q.size() > 0)
     integrator_->initialize(loaded_, state_);
 }
@@ -102,6 +137,33 @@ void FullMethod::setHandleMotion(const HandleMotion& motion)
     setHandleLoad(-settings_.beta * (*lin_.handle_coupling * motion.velocity));
   else
     setHandleLoad(Eigen::VectorXd());
+}
+
+void FullMethod::frameTerms(const FrameForces& frame, Eigen::VectorXd& load, SparseMatrix& linear,
+                            SparseMatrix& gyroscopic)
+{
+  const int dim = lin_.grid.dimension();
+  const Eigen::VectorXd y_ref = lin_.grid.gatherFree(lin_.x_ref);
+  const Eigen::Index n = y_ref.size();
+  load.resize(n);
+  std::vector<Eigen::Triplet<double>> l, g;
+  l.reserve(n * dim);
+  g.reserve(n * dim);
+  for (Eigen::Index p = 0; p + dim <= n; p += dim)
+  {
+    const double m = lin_.mass[p];
+    load.segment(p, dim) = m * (frame.uniform - frame.position * y_ref.segment(p, dim));
+    for (int r = 0; r < dim; ++r)
+      for (int c = 0; c < dim; ++c)
+      {
+        l.emplace_back(p + r, p + c, m * frame.position(r, c));
+        g.emplace_back(p + r, p + c, 2.0 * m * frame.spin(r, c));
+      }
+  }
+  linear.resize(n, n);
+  linear.setFromTriplets(l.begin(), l.end());
+  gyroscopic.resize(n, n);
+  gyroscopic.setFromTriplets(g.begin(), g.end());
 }
 
 double FullMethod::kineticEnergy(const State& s) const { return 0.5 * s.v.cwiseAbs2().dot(lin_.mass); }
@@ -164,6 +226,65 @@ void ModalMethod::setOffset(const Eigen::VectorXd& offset)
   updateReference();
   if (anchor_.size() > 0)
     setAnchor(anchor_);
+  if (frame_projection_)
+    applyFrame();  // the frame's forces at q = 0 act at x_ref + offset
+}
+
+void ModalMethod::projectFrame()
+{
+  const int dim = lin_.grid.dimension();
+  const Eigen::MatrixXd& phi = lin_.basis.phi;
+  const Eigen::Index particles = phi.rows() / dim;
+  // A particle's free dofs are consecutive: component j is every dim-th row from j.
+  auto component = [&](const auto& dense, int j) { return Eigen::MatrixXd(dense(Eigen::seqN(j, particles, dim), Eigen::all)); };
+  if (!frame_projection_)
+  {
+    frame_projection_ = std::make_unique<FrameProjection>();
+    FrameProjection& f = *frame_projection_;
+    for (int j = 0; j < dim; ++j)
+    {
+      const Eigen::MatrixXd weighted = component(lin_.mass, j).asDiagonal() * component(phi, j);
+      f.u.push_back(weighted.colwise().sum().transpose());
+      for (int k = 0; k < dim; ++k)
+        f.s.push_back(weighted.transpose() * component(phi, k));
+    }
+  }
+  FrameProjection& f = *frame_projection_;
+  if (f.w.size() > 0 && f.w_offset.size() == offset_.size() && f.w_offset == offset_)
+    return;
+  const Eigen::VectorXd y = lin_.grid.gatherFree(lin_.x_ref) + offset_;
+  f.w.clear();
+  for (int j = 0; j < dim; ++j)
+  {
+    const Eigen::MatrixXd weighted = component(lin_.mass, j).asDiagonal() * component(phi, j);
+    for (int k = 0; k < dim; ++k)
+      f.w.push_back(weighted.transpose() * component(y, k));
+  }
+  f.w_offset = offset_;
+}
+
+void ModalMethod::frameTerms(const FrameForces& frame, Eigen::VectorXd& load, SparseMatrix& linear,
+                             SparseMatrix& gyroscopic)
+{
+  projectFrame();
+  const FrameProjection& f = *frame_projection_;
+  const int dim = lin_.grid.dimension();
+  const Eigen::Index r = lin_.basis.phi.cols();
+  load.setZero(r);
+  Eigen::MatrixXd l = Eigen::MatrixXd::Zero(r, r), g = Eigen::MatrixXd::Zero(r, r);
+  // Phi^T M (uniform - position y) = sum_j uniform_j U_j - sum_jk position_jk (W_jk + S_jk X).
+  for (int j = 0; j < dim; ++j)
+  {
+    load += frame.uniform[j] * f.u[j];
+    for (int k = 0; k < dim; ++k)
+    {
+      load -= frame.position(j, k) * f.w[j * dim + k];
+      l += frame.position(j, k) * f.s[j * dim + k];
+      g += (2.0 * frame.spin(j, k)) * f.s[j * dim + k];
+    }
+  }
+  linear = l.sparseView();
+  gyroscopic = g.sparseView();
 }
 
 void ModalMethod::updateReference()
