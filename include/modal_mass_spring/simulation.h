@@ -182,6 +182,10 @@ public:
   void setHandleFrameMotion(const FrameMotion& motion);
   // B's motion the current state was stepped to (at rest without a moving frame).
   const FrameMotion& frameMotion() const { return frame_current_; }
+  // Puts B where `motion` says now, for the current state, without a step (the particles move with
+  // it): to carry a state over from another simulation in its frame before setPhysicalState. Checked
+  // as setHandleFrameMotion; without a moving frame it does nothing.
+  void placeFrame(const FrameMotion& motion);
   HandleFormulation handleFormulation() const { return formulation_; }
   // The handles' motion the current state was stepped to (displacements from the linearization
   // point); empty vectors: at rest at the linearization point.
@@ -252,6 +256,8 @@ private:
   Eigen::VectorXd bodyDisplacement() const { return model_->displacement(model_->state()); }
   Eigen::VectorXd bodyVelocity() const { return model_->velocity(model_->state()); }
   FrameForces frameForcesOf(const FrameMotion& motion) const;
+  // Throws std::invalid_argument for a frame motion setHandleFrameMotion refuses.
+  void checkFrameMotion(const FrameMotion& motion) const;
   // Why `next` may not be taken, or empty.
   std::string divergence(bool integrator_ok, const State& next);
 

@@ -493,7 +493,19 @@ void Simulation::setHandleMotion(const Eigen::VectorXd& positions, const Eigen::
   handle_pending_ = true;
 }
 
-void Simulation::setHandleFrameMotion(const FrameMotion& m)
+void Simulation::placeFrame(const FrameMotion& m)
+{
+  checkFrameMotion(m);
+  if (formulation_ != HandleFormulation::MovingFrame)
+    return;
+  frame_current_ = frame_target_ = m;
+  frame_pending_ = false;
+  // The same state in B, its acceleration from B's new forces.
+  install(params_.method, bodyDisplacement(), bodyVelocity(), Remainder::Keep);
+  handles_moved_ = handles_moved_ || !m.atRest();
+}
+
+void Simulation::checkFrameMotion(const FrameMotion& m) const
 {
   if (grid_.numHandleDofs() == 0)
     rejectParameter("handle frame motion", "a frame", "the grid has no handles to move");
@@ -524,6 +536,11 @@ void Simulation::setHandleFrameMotion(const FrameMotion& m)
       rejectParameter("handle frame rotation", "a turn out of the x-z plane",
                       "a 2D grid's frame may only turn about y (its plane's normal)");
   }
+}
+
+void Simulation::setHandleFrameMotion(const FrameMotion& m)
+{
+  checkFrameMotion(m);
   if (formulation_ == HandleFormulation::MovingFrame)
   {
     frame_target_ = m;
