@@ -45,15 +45,17 @@ public:
   virtual int lastSubsteps() const { return 0; }
   // Adds a skew velocity coupling G to the damping from now on (the Coriolis forces -G q' of a
   // turning frame, in the method's coordinates; the acceleration of the end of the next step sees
-  // it); empty: none.
-  void setGyroscopic(const SparseMatrix& g);
+  // it); null: none. G stays the caller's (the method's), which keeps it alive and may change its
+  // values before the next step, calling this again.
+  void setGyroscopic(const SparseMatrix* g);
 
 protected:
-  Integrator(MassDamping system, double dt) : system_(std::move(system)), damping_(system_.damping), dt_(dt) {}
+  Integrator(MassDamping system, double dt) : system_(std::move(system)), dt_(dt) {}
   virtual void gyroscopicChanged() {}
+  // (C + G) v
+  Eigen::VectorXd dampingForce(const Eigen::VectorXd& v) const;
   MassDamping system_;
-  SparseMatrix gyroscopic_;  // G; empty: none
-  SparseMatrix damping_;     // C + G: what the velocity costs in force
+  const SparseMatrix* gyroscopic_ = nullptr;  // G; null: none
   double dt_;
 };
 
@@ -77,7 +79,7 @@ private:
   bool diagonal_;                       // modal methods: M + dt/2 C is diagonal, solve by division
   Eigen::VectorXd inverse_diagonal_;
   Eigen::SimplicialLDLT<SparseMatrix> ldlt_;
-  Eigen::VectorXd force_, rhs_;
+  Eigen::VectorXd force_, rhs_, gyroscopic_force_;
 };
 
 // Implicit Newmark with the Hilber-Hughes-Taylor alpha: each step solves
@@ -108,7 +110,7 @@ private:
   bool solve(ForceModel& model, const State& s, State& next);
   // The Newton direction -J^-1 R at next.q (empty when J cannot be factorised).
   Eigen::VectorXd direction(ForceModel& model, const State& next, bool symmetric);
-  void gyroscopicChanged() override { h_ = 0.0; }
+  void gyroscopicChanged() override;
   // a' and v' that the Newmark relations give for a trial q'.
   void kinematics(const State& s, State& next) const;
   void analyzeIfNewPattern(const SparseMatrix& jacobian);
@@ -127,7 +129,8 @@ private:
   Eigen::SimplicialLDLT<SparseMatrix> ldlt_;
   Eigen::SparseLU<SparseMatrix> lu_;
   std::vector<int> lu_outer_, lu_inner_;  // the pattern lu_ was analysed for
-  SparseMatrix inertia_;  // M / (beta h^2) + (1 + alpha) gamma / (beta h) C
+  SparseMatrix damping_;  // C + G
+  SparseMatrix inertia_;  // M / (beta h^2) + (1 + alpha) gamma / (beta h) (C + G)
   SparseMatrix tangent_;
   std::vector<int> pattern_outer_, pattern_inner_;
   Eigen::VectorXd force_, residual_;

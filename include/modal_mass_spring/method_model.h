@@ -47,8 +47,8 @@ public:
     inner_.force(q, f);
     if (load_.size() > 0)
       f += load_;
-    if (linear_.size() > 0)
-      f.noalias() -= linear_ * q;
+    if (linear_)
+      f.noalias() -= *linear_ * q;
   }
   double energy(const Eigen::VectorXd& q) override
   {
@@ -57,19 +57,19 @@ public:
   void tangentStiffness(const Eigen::VectorXd& q, SparseMatrix& k) override
   {
     inner_.tangentStiffness(q, k);
-    if (linear_.size() > 0)
-      k += linear_;
+    if (linear_)
+      k += *linear_;
   }
   bool isLinear() const override { return inner_.isLinear(); }
-  bool isSymmetric() const override { return linear_.size() == 0 && inner_.isSymmetric(); }
-  // A force -L q linear in q (a turning frame's Euler and centrifugal forces); empty: none. It has no
-  // potential in energy(): the energy check is off while a frame moves.
-  void setLinearTerm(const SparseMatrix& l) { linear_ = l; }
+  bool isSymmetric() const override { return !linear_ && inner_.isSymmetric(); }
+  // A force -L q linear in q (a turning frame's Euler and centrifugal forces), L kept by the caller;
+  // null: none. It has no potential in energy(): the energy check is off while a frame moves.
+  void setLinearTerm(const SparseMatrix* l) { linear_ = l; }
 
 private:
   ForceModel& inner_;
-  Eigen::VectorXd load_;  // empty: no load
-  SparseMatrix linear_;   // L; empty: none
+  Eigen::VectorXd load_;              // empty: no load
+  const SparseMatrix* linear_ = nullptr;  // L; null: none
 };
 
 // What a method's integrator is built from besides its force model.
@@ -145,7 +145,8 @@ protected:
   // acceleration through inertia); empty: none.
   void setHandleLoad(const Eigen::VectorXd& load);
   // B's forces in this method's coordinates: the load at q = 0, the linear force's matrix L (the
-  // force -L q) and the gyroscopic G (the force -G q').
+  // force -L q) and the gyroscopic G (the force -G q'); L and G are the last call's, to be updated
+  // in place where their pattern allows.
   virtual void frameTerms(const FrameForces& frame, Eigen::VectorXd& load, SparseMatrix& linear,
                           SparseMatrix& gyroscopic) = 0;
   // Computes the frame's terms again (after the reference they depend on moved).
@@ -166,7 +167,7 @@ private:
   Eigen::VectorXd external_free_;  // world, free dofs; empty: none
   Eigen::VectorXd external_load_, handle_load_, frame_load_;  // generalized; empty: none
   FrameForces frame_;
-  SparseMatrix frame_gyroscopic_;  // G; empty: none
+  SparseMatrix frame_linear_, frame_gyroscopic_;  // L and G
   std::unique_ptr<Integrator> integrator_;
   State state_, next_;
 };
@@ -193,6 +194,7 @@ private:
   void frameTerms(const FrameForces& frame, Eigen::VectorXd& load, SparseMatrix& linear,
                   SparseMatrix& gyroscopic) override;
   Eigen::VectorXd anchor_;
+  Eigen::VectorXd y_ref_;  // x_ref on the free dofs, once a frame moves
 };
 
 // `linear`, `physical` and `cubature`: q = X, u = offset + Phi X with a mass-orthonormal Phi. With
@@ -227,7 +229,7 @@ private:
   {
     std::vector<Eigen::MatrixXd> s;  // index j * dim + k
     std::vector<Eigen::VectorXd> u, w;
-    Eigen::VectorXd w_offset;  // the offset W was computed for
+    bool w_stale = true;  // the offset moved since W was computed
   };
   void projectFrame();
   std::unique_ptr<FrameProjection> frame_projection_;

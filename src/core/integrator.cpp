@@ -25,14 +25,21 @@ void Integrator::initialize(ForceModel& model, State& state) const
 {
   Eigen::VectorXd f;
   model.force(state.q, f);
-  state.a = (f - damping_ * state.v).cwiseQuotient(system_.mass);
+  state.a = (f - dampingForce(state.v)).cwiseQuotient(system_.mass);
 }
 
-void Integrator::setGyroscopic(const SparseMatrix& g)
+void Integrator::setGyroscopic(const SparseMatrix* g)
 {
-  gyroscopic_ = g;
-  damping_ = g.size() > 0 ? SparseMatrix(system_.damping + g) : system_.damping;
+  gyroscopic_ = g && g->size() > 0 ? g : nullptr;
   gyroscopicChanged();
+}
+
+Eigen::VectorXd Integrator::dampingForce(const Eigen::VectorXd& v) const
+{
+  Eigen::VectorXd f = system_.damping * v;
+  if (gyroscopic_)
+    f.noalias() += *gyroscopic_ * v;
+  return f;
 }
 
 ExplicitNewmark::ExplicitNewmark(MassDamping system, double dt) : Integrator(std::move(system), dt)
@@ -67,24 +74,31 @@ bool ExplicitNewmark::step(ForceModel& model, const State& s, State& next)
   next.q = s.q + dt_ * s.v + (0.5 * dt_ * dt_) * s.a;
   model.force(next.q, force_);
   rhs_ = m.cwiseProduct(s.v) + (0.5 * dt_) * (m.cwiseProduct(s.a) + force_);
-  next.v = solve(rhs_);
   last_iterations_ = 0;
-  if (gyroscopic_.size() > 0)
+  if (!gyroscopic_)
   {
-    // Until the velocity stops changing at round-off; a frame turning so fast that this does not
-    // contract (dt |omega| near 1) refuses the step.
+    next.v = solve(rhs_);
+  }
+  else
+  {
+    // From the velocity the start's acceleration predicts, O(dt^2) off, until it stops changing at
+    // round-off; a frame turning so fast that this does not contract (dt |omega| near 1) refuses the
+    // step.
+    next.v = s.v + dt_ * s.a;
     bool converged = false;
     while (!converged && last_iterations_ < kMaxIterations)
     {
       ++last_iterations_;
-      Eigen::VectorXd v = solve(rhs_ - (0.5 * dt_) * (gyroscopic_ * next.v));
-      converged = (v - next.v).norm() <= 1e-14 * v.norm() || (v - next.v).norm() == 0.0;
+      gyroscopic_force_.noalias() = *gyroscopic_ * next.v;
+      Eigen::VectorXd v = solve(rhs_ - (0.5 * dt_) * gyroscopic_force_);
+      const double change = (v - next.v).norm();
+      converged = change <= 1e-14 * v.norm() || change == 0.0;
       next.v = std::move(v);
     }
     if (!converged || !next.v.allFinite())
       return false;
   }
-  next.a = (force_ - damping_ * next.v).cwiseQuotient(m);
+  next.a = (force_ - dampingForce(next.v)).cwiseQuotient(m);
   return true;
 }
 
@@ -105,7 +119,14 @@ ImplicitNewmark::ImplicitNewmark(MassDamping system, double dt, int max_iteratio
   mass_matrix_.resize(system_.mass.size(), system_.mass.size());
   mass_matrix_.setIdentity();
   mass_matrix_ = system_.mass.asDiagonal() * mass_matrix_;
+  damping_ = system_.damping;
   setStepSize(dt_);
+}
+
+void ImplicitNewmark::gyroscopicChanged()
+{
+  damping_ = gyroscopic_ ? SparseMatrix(system_.damping + *gyroscopic_) : system_.damping;
+  h_ = 0.0;  // the inertia term holds C + G: built again at the next step
 }
 
 void ImplicitNewmark::setStepSize(double h)
@@ -188,7 +209,7 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
            (1.0 + alpha_) * model.energy(q) + linear_term.dot(q);
   };
 
-  const bool symmetric = gyroscopic_.size() == 0 && model.isSymmetric();
+  const bool symmetric = !gyroscopic_ && model.isSymmetric();
   for (last_iterations_ = 1; last_iterations_ <= max_iterations_; ++last_iterations_)
   {
     const double residual_norm = residual(model, s, next);

@@ -73,14 +73,12 @@ void MethodModel::setFrameForces(const FrameForces& frame)
 
 void MethodModel::applyFrame()
 {
-  SparseMatrix linear;
-  frame_gyroscopic_.resize(0, 0);
   frame_load_.resize(0);
   // At rest B adds nothing: the results are those of a grid held still, to the last bit.
   if (!frame_.none)
-    frameTerms(frame_, frame_load_, linear, frame_gyroscopic_);
-  loaded_.setLinearTerm(linear);
-  integrator_->setGyroscopic(frame_gyroscopic_);
+    frameTerms(frame_, frame_load_, frame_linear_, frame_gyroscopic_);
+  loaded_.setLinearTerm(frame_.none ? nullptr : &frame_linear_);
+  integrator_->setGyroscopic(frame_.none ? nullptr : &frame_gyroscopic_);
   if (external_free_.size() > 0)
     external_load_ = generalizedForce(bodyExternalForce());
   updateLoad();
@@ -95,7 +93,7 @@ void MethodModel::configure(const IntegratorSettings& settings)
                                                     settings.hht_alpha);
   else
     integrator_ = std::make_unique<ExplicitNewmark>(std::move(system), settings.time_step);
-  integrator_->setGyroscopic(frame_gyroscopic_);
+  integrator_->setGyroscopic(frame_.none ? nullptr : &frame_gyroscopic_);
   if (state_.q.size() > 0)
     integrator_->initialize(loaded_, state_);
 }
@@ -143,27 +141,37 @@ void FullMethod::frameTerms(const FrameForces& frame, Eigen::VectorXd& load, Spa
                             SparseMatrix& gyroscopic)
 {
   const int dim = lin_.grid.dimension();
-  const Eigen::VectorXd y_ref = lin_.grid.gatherFree(lin_.x_ref);
-  const Eigen::Index n = y_ref.size();
+  const Eigen::Index n = lin_.mass.size();
+  // One dim x dim block per particle, every entry stored: built once, then only its values change.
+  if (linear.rows() != n || gyroscopic.rows() != n)
+  {
+    y_ref_ = lin_.grid.gatherFree(lin_.x_ref);
+    std::vector<Eigen::Triplet<double>> blocks;
+    blocks.reserve(n * dim);
+    for (Eigen::Index p = 0; p + dim <= n; p += dim)
+      for (int c = 0; c < dim; ++c)
+        for (int r = 0; r < dim; ++r)
+          blocks.emplace_back(p + r, p + c, 1.0);
+    linear.resize(n, n);
+    linear.setFromTriplets(blocks.begin(), blocks.end());
+    gyroscopic = linear;
+  }
   load.resize(n);
-  std::vector<Eigen::Triplet<double>> l, g;
-  l.reserve(n * dim);
-  g.reserve(n * dim);
+  double* l = linear.valuePtr();
+  double* g = gyroscopic.valuePtr();
   for (Eigen::Index p = 0; p + dim <= n; p += dim)
   {
     const double m = lin_.mass[p];
-    load.segment(p, dim) = m * (frame.uniform - frame.position * y_ref.segment(p, dim));
-    for (int r = 0; r < dim; ++r)
-      for (int c = 0; c < dim; ++c)
+    load.segment(p, dim) = m * frame.uniform;
+    // Column p + c holds rows p .. p + dim - 1, in order.
+    for (int c = 0; c < dim; ++c)
+      for (int r = 0; r < dim; ++r)
       {
-        l.emplace_back(p + r, p + c, m * frame.position(r, c));
-        g.emplace_back(p + r, p + c, 2.0 * m * frame.spin(r, c));
+        l[(p + c) * dim + r] = m * frame.position(r, c);
+        g[(p + c) * dim + r] = 2.0 * m * frame.spin(r, c);
       }
   }
-  linear.resize(n, n);
-  linear.setFromTriplets(l.begin(), l.end());
-  gyroscopic.resize(n, n);
-  gyroscopic.setFromTriplets(g.begin(), g.end());
+  load.noalias() -= linear * y_ref_;  // the linear force at q = 0: the positions of x_ref in B
 }
 
 double FullMethod::kineticEnergy(const State& s) const { return 0.5 * s.v.cwiseAbs2().dot(lin_.mass); }
@@ -227,7 +235,10 @@ void ModalMethod::setOffset(const Eigen::VectorXd& offset)
   if (anchor_.size() > 0)
     setAnchor(anchor_);
   if (frame_projection_)
+  {
+    frame_projection_->w_stale = true;
     applyFrame();  // the frame's forces at q = 0 act at x_ref + offset
+  }
 }
 
 void ModalMethod::projectFrame()
@@ -250,7 +261,7 @@ void ModalMethod::projectFrame()
     }
   }
   FrameProjection& f = *frame_projection_;
-  if (f.w.size() > 0 && f.w_offset.size() == offset_.size() && f.w_offset == offset_)
+  if (!f.w_stale)
     return;
   const Eigen::VectorXd y = lin_.grid.gatherFree(lin_.x_ref) + offset_;
   f.w.clear();
@@ -260,7 +271,7 @@ void ModalMethod::projectFrame()
     for (int k = 0; k < dim; ++k)
       f.w.push_back(weighted.transpose() * component(y, k));
   }
-  f.w_offset = offset_;
+  f.w_stale = false;
 }
 
 void ModalMethod::frameTerms(const FrameForces& frame, Eigen::VectorXd& load, SparseMatrix& linear,
@@ -271,7 +282,16 @@ void ModalMethod::frameTerms(const FrameForces& frame, Eigen::VectorXd& load, Sp
   const int dim = lin_.grid.dimension();
   const Eigen::Index r = lin_.basis.phi.cols();
   load.setZero(r);
-  Eigen::MatrixXd l = Eigen::MatrixXd::Zero(r, r), g = Eigen::MatrixXd::Zero(r, r);
+  // Dense r x r, stored with every entry: the values of a full column-major pattern are the dense
+  // matrix itself, written in place step after step.
+  if (linear.rows() != r || gyroscopic.rows() != r)
+  {
+    linear = Eigen::MatrixXd::Ones(r, r).sparseView();
+    gyroscopic = linear;
+  }
+  Eigen::Map<Eigen::MatrixXd> l(linear.valuePtr(), r, r), g(gyroscopic.valuePtr(), r, r);
+  l.setZero();
+  g.setZero();
   // Phi^T M (uniform - position y) = sum_j uniform_j U_j - sum_jk position_jk (W_jk + S_jk X).
   for (int j = 0; j < dim; ++j)
   {
@@ -283,8 +303,6 @@ void ModalMethod::frameTerms(const FrameForces& frame, Eigen::VectorXd& load, Sp
       g += (2.0 * frame.spin(j, k)) * f.s[j * dim + k];
     }
   }
-  linear = l.sparseView();
-  gyroscopic = g.sparseView();
 }
 
 void ModalMethod::updateReference()
