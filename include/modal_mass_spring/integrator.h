@@ -69,13 +69,11 @@ class ExplicitNewmark : public Integrator
 public:
   ExplicitNewmark(MassDamping system, double dt);
   bool step(ForceModel& model, const State& state, State& next) override;
-  int lastIterations() const override { return last_iterations_; }
 
 private:
   static constexpr int kMaxIterations = 100;
   // (M + dt/2 C)^-1 rhs
   Eigen::VectorXd solve(const Eigen::VectorXd& rhs) const;
-  int last_iterations_ = 0;
   bool diagonal_;                       // modal methods: M + dt/2 C is diagonal, solve by division
   Eigen::VectorXd inverse_diagonal_;
   Eigen::SimplicialLDLT<SparseMatrix> ldlt_;

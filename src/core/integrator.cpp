@@ -74,7 +74,6 @@ bool ExplicitNewmark::step(ForceModel& model, const State& s, State& next)
   next.q = s.q + dt_ * s.v + (0.5 * dt_ * dt_) * s.a;
   model.force(next.q, force_);
   rhs_ = m.cwiseProduct(s.v) + (0.5 * dt_) * (m.cwiseProduct(s.a) + force_);
-  last_iterations_ = 0;
   if (!gyroscopic_)
   {
     next.v = solve(rhs_);
@@ -86,9 +85,8 @@ bool ExplicitNewmark::step(ForceModel& model, const State& s, State& next)
     // step.
     next.v = s.v + dt_ * s.a;
     bool converged = false;
-    while (!converged && last_iterations_ < kMaxIterations)
+    for (int iteration = 0; !converged && iteration < kMaxIterations; ++iteration)
     {
-      ++last_iterations_;
       gyroscopic_force_.noalias() = *gyroscopic_ * next.v;
       Eigen::VectorXd v = solve(rhs_ - (0.5 * dt_) * gyroscopic_force_);
       const double change = (v - next.v).norm();

@@ -586,6 +586,9 @@ void Simulation::reset()
 
 std::string Simulation::divergence(bool integrator_ok, const State& next)
 {
+  if (!integrator_ok && params_.integrator == IntegratorKind::Explicit)
+    return "the explicit scheme's velocity with the Coriolis forces of the turning handle frame did not converge: "
+           "the frame turns too fast for time_step (time_step times its angular velocity must stay well below 1)";
   if (!integrator_ok)
     return "the implicit Newton iteration did not converge in newton_max_iterations = " +
            std::to_string(params_.newton_max_iterations) + ", even in 1/16 of the step";

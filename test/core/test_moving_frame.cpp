@@ -475,6 +475,16 @@ TEST(MovingFrame, BadFormulationsAndMotionsAreNamed)
   sim.step(10);
   EXPECT_FALSE(sim.energyCheckSuspended());
   EXPECT_TRUE(sim.positions().allFinite());
+  // A frame turning so fast that the explicit step's Coriolis iteration cannot converge (dt |omega|
+  // = 3): the step is refused with why, the last good state kept.
+  FrameMotion fast;
+  fast.angular_velocity.y() = 3000.0;
+  const Eigen::VectorXd before = sim.positions();
+  sim.setHandleFrameMotion(fast);
+  const StepResult result = sim.step();
+  EXPECT_TRUE(result.diverged);
+  EXPECT_TRUE(contains(result.message, "the frame turns too fast for time_step")) << result.message;
+  EXPECT_EQ(sim.positions(), before);
 }
 
 TEST(MovingFrame, ConstraintModesTakeTheFrameAsTheHandlesRigidPath)
