@@ -183,8 +183,8 @@ public:
   // B's motion the current state was stepped to (at rest without a moving frame).
   const FrameMotion& frameMotion() const { return frame_current_; }
   // Puts B where `motion` says now, for the current state, without a step (the particles move with
-  // it): to carry a state over from another simulation in its frame before setPhysicalState. Checked
-  // as setHandleFrameMotion; without a moving frame it does nothing.
+  // it): to carry a state over from another simulation in its frame before setPhysicalState. Without
+  // a moving frame it does nothing; else checked as setHandleFrameMotion.
   void placeFrame(const FrameMotion& motion);
   HandleFormulation handleFormulation() const { return formulation_; }
   // The handles' motion the current state was stepped to (displacements from the linearization

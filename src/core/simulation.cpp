@@ -495,9 +495,9 @@ void Simulation::setHandleMotion(const Eigen::VectorXd& positions, const Eigen::
 
 void Simulation::placeFrame(const FrameMotion& m)
 {
-  checkFrameMotion(m);
   if (formulation_ != HandleFormulation::MovingFrame)
     return;
+  checkFrameMotion(m);
   frame_current_ = frame_target_ = m;
   frame_pending_ = false;
   // The same state in B, its acceleration from B's new forces.

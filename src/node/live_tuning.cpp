@@ -196,7 +196,8 @@ void SimulationNode::swapRebuilt()
     // The motion carries over: the same positions and velocities, measured from the new
     // linearization point (a modal method takes their projection onto the new modes); in a moving
     // frame, in the frame where it has gone.
-    next.placeFrame(old.frameMotion());
+    if (next.handleFormulation() == HandleFormulation::MovingFrame)
+      next.placeFrame(old.frameMotion());
     next.setPhysicalState(next.grid().gatherFree(old.positions() - next.linearizationPositions()), old.velocity());
     track.step_offset += old.stepCount();
     track.simulation = std::move(rebuilt_[k]);

@@ -540,6 +540,13 @@ TEST(MovingFrame, SwitchesResetsAndExternalForcesInAMovedFrame)
   const Eigen::Vector3d moved = (pushed.points() - free.points()).col(24);
   EXPECT_GT(moved.y(), 1e-3);
   EXPECT_LT(std::abs(moved.x()), 0.2 * moved.y());
+  // Another simulation takes the state over in the frame where it has gone (a live rebuild).
+  Simulation rebuilt(topHeld(3), frameParams(Method::Full, 10, HandleFormulation::MovingFrame, 1e-3, 0.5));
+  rebuilt.placeFrame(sim.frameMotion());
+  rebuilt.setPhysicalState(sim.displacement(), sim.velocity());
+  EXPECT_LT(largestDifference(rebuilt.positions(), sim.positions()), 1e-12);
+  EXPECT_LT(largestDifference(rebuilt.velocity(), sim.velocity()), 1e-12);
+  EXPECT_TRUE(rebuilt.energyCheckSuspended());
   // A reset puts B back at its start.
   sim.reset();
   EXPECT_TRUE(sim.frameMotion().atRest());
