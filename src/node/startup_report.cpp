@@ -95,7 +95,7 @@ std::string describeHandleFormulation(const GridParams& grid, const SimulationPa
   if (resolveHandleFormulation(grid, params) == HandleFormulation::MovingFrame)
     return "handles: moving frame of '" + frames.front() +
            "' (one rigid body holds every held particle and nothing is fixed: every method simulates in its frame, "
-           "exact at any turn; " + why + ")";
+           "whose motion enters exactly at any turn; " + why + ")";
   std::ostringstream line;
   line << "handles: constraint modes (Craig-Bampton) for the modal methods, prescribed positions for full; "
        << grid.handles.size() << (grid.handles.size() == 1 ? " handle" : " handles") << " on " << frames.size()

@@ -152,7 +152,7 @@ TEST(StartupReport, HandleFormulationAndWhy)
   params.handles_one_body = true;
   EXPECT_EQ(describeHandleFormulation(grid, params, {"gripper"}),
             "handles: moving frame of 'gripper' (one rigid body holds every held particle and nothing is fixed: every "
-            "method simulates in its frame, exact at any turn; handle_formulation: auto)");
+            "method simulates in its frame, whose motion enters exactly at any turn; handle_formulation: auto)");
   params.handle_formulation = HandleFormulation::ConstraintModes;
   EXPECT_EQ(describeHandleFormulation(grid, params, {"gripper"}),
             "handles: constraint modes (Craig-Bampton) for the modal methods, prescribed positions for full; 1 handle "
