@@ -77,7 +77,7 @@ private:
   bool diagonal_;                       // modal methods: M + dt/2 C is diagonal, solve by division
   Eigen::VectorXd inverse_diagonal_;
   Eigen::SimplicialLDLT<SparseMatrix> ldlt_;
-  Eigen::VectorXd force_, rhs_, gyroscopic_force_;
+  Eigen::VectorXd force_, rhs_, gyroscopic_force_, velocity_;
 };
 
 // Implicit Newmark with the Hilber-Hughes-Taylor alpha: each step solves

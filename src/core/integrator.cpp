@@ -88,10 +88,14 @@ bool ExplicitNewmark::step(ForceModel& model, const State& s, State& next)
     for (int iteration = 0; !converged && iteration < kMaxIterations; ++iteration)
     {
       gyroscopic_force_.noalias() = *gyroscopic_ * next.v;
-      Eigen::VectorXd v = solve(rhs_ - (0.5 * dt_) * gyroscopic_force_);
-      const double change = (v - next.v).norm();
-      converged = change <= 1e-14 * v.norm() || change == 0.0;
-      next.v = std::move(v);
+      gyroscopic_force_ = rhs_ - (0.5 * dt_) * gyroscopic_force_;
+      if (diagonal_)
+        velocity_ = inverse_diagonal_.cwiseProduct(gyroscopic_force_);
+      else
+        velocity_ = ldlt_.solve(gyroscopic_force_);
+      const double change = (velocity_ - next.v).norm();
+      converged = change <= 1e-14 * velocity_.norm() || change == 0.0;
+      next.v.swap(velocity_);
     }
     if (!converged || !next.v.allFinite())
       return false;
