@@ -202,7 +202,10 @@ void SimulationNode::swapRebuilt()
     if (next.method() != old.method())
       next.setMethod(old.method());  // switched while it was built
     // The motion carries over: the same positions and velocities, measured from the new
-    // linearization point (a modal method takes their projection onto the new modes).
+    // linearization point (a modal method takes their projection onto the new modes); in a moving
+    // frame, in the frame where it has gone.
+    if (next.handleFormulation() == HandleFormulation::MovingFrame)
+      next.placeFrame(old.frameMotion());
     next.setPhysicalState(next.grid().gatherFree(old.positions() - next.linearizationPositions()), old.velocity());
     track.step_offset += old.stepCount();
     track.simulation = std::move(rebuilt_[k]);

@@ -226,6 +226,15 @@ std::vector<HandleParam> loadHandles(const NodeParameterSource& s)
 
 }  // namespace
 
+std::vector<std::string> handleFrames(const std::vector<HandleParam>& handles)
+{
+  std::vector<std::string> frames;
+  for (const auto& handle : handles)
+    if (std::find(frames.begin(), frames.end(), handle.frame) == frames.end())
+      frames.push_back(handle.frame);
+  return frames;
+}
+
 NodeConfiguration loadNodeConfiguration(const NodeParameterSource& source, const std::vector<std::string>& present_keys)
 {
   const RecordingSource recording(source);
@@ -236,6 +245,19 @@ NodeConfiguration loadNodeConfiguration(const NodeParameterSource& source, const
   const std::vector<HandleParam> handles = loadHandles(recording);
   for (const auto& handle : handles)
     c.grid.handles.push_back(handle.particles);
+  // Handles on one TF frame move as one rigid body: the core may then simulate in that frame.
+  const std::vector<std::string> frames = handleFrames(handles);
+  c.simulation.handles_one_body = frames.size() == 1;
+  if (c.simulation.handle_formulation == HandleFormulation::MovingFrame && frames.size() > 1)
+  {
+    std::string names;
+    for (const auto& frame : frames)
+      names += (names.empty() ? "'" : ", '") + frame + "'";
+    rejectParameter("handle_formulation", "moving_frame",
+                    "needs every handle on one TF frame (one rigid body), but the handles name " +
+                        std::to_string(frames.size()) + " frames: " + names +
+                        "; use auto or constraint_modes for handles that move apart");
+  }
   // The node's own checks (tf_particles, steps per tick) rely on a valid grid and time step.
   validateParameters(c.grid, c.simulation);
   c.node = loadNodeParams(recording, c.grid, c.simulation);

@@ -190,9 +190,9 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
     for (size_t h = 0; h < params.handles.size(); ++h)
       frames += (h ? ", '" : "'") + params.handles[h].frame + "' (" +
                 std::to_string(params.handles[h].particles.size()) + " particles)";
-    ROS_INFO("handles following the TF frames %s relative to '%s', offsets taken at each frame's first lookup; "
-             "formulation: Craig-Bampton constraint modes for the modal methods, prescribed positions for full",
+    ROS_INFO("handles following the TF frames %s relative to '%s', offsets taken at each frame's first lookup",
              frames.c_str(), params.fixed_frame.c_str());
+    ROS_INFO("%s", describeHandleFormulation(config_.grid, config_.simulation, handleFrames(params.handles)).c_str());
   }
   apply_force_sub_ = private_nh_.subscribe("apply_force", 10, &SimulationNode::applyForce, this);
   startInteraction();
@@ -367,6 +367,24 @@ void SimulationNode::setHandleMotion(double duration, double s)
 {
   if (handle_frames_->empty())
     return;
+  if (primary().simulation->handleFormulation() == HandleFormulation::MovingFrame)
+  {
+    // Every track simulates in the frame: its motion, from the same interpolation.
+    const FrameMotion motion = handle_frames_->frameMotion(duration, s);
+    try
+    {
+      for (Track& track : tracks_)
+        if (!track.simulation->diverged())
+          track.simulation->setHandleFrameMotion(motion);
+    }
+    catch (const std::invalid_argument& error)
+    {
+      // A 2D grid's frame that turns out of the grid's plane: held where it was.
+      ROS_WARN_THROTTLE(5.0, "handle frame '%s' refused, its particles hold where they are: %s",
+                        handle_frames_->frame(0).c_str(), error.what());
+    }
+    return;
+  }
   Eigen::VectorXd x, v, a;
   handle_frames_->motion(duration, s, x, v, a);
   for (Track& track : tracks_)
@@ -625,6 +643,8 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     status.state = state(track);
     status.message = simulation.diverged() ? track.divergence_message : "";
     status.handles = handle_frames_->status();
+    status.handle_formulation =
+        handle_frames_->empty() ? "" : toString(simulation.handleFormulation());
     status.reference = measured ? "full" : "";
     status.rms_distance = track.rms_distance;
     status.max_distance = track.max_distance;

@@ -163,6 +163,8 @@ def cases(configs):
         setting("memory_limit_gb", "0"),
         setting("memory_limit_gb", "-1"),
         setting("basis", "derivatives"),
+        setting("handle_formulation", "frame"),
+        setting("handle_formulation", "moving_frame"),  # no handles
         setting("num_derivative_modes", "2"),  # with basis: linear_modes
         tool("num_derivative_modes_negative", "num_derivative_modes", "--set", "basis=modal_derivatives",
              "--set", "num_derivative_modes=-1"),

@@ -137,6 +137,13 @@ CASES = [
     ({"handles": [{"frame": "world", "particles": [0]}]}, [], ["handles"]),
     ({}, ["_handles:=[{frame: gripper, particles: [0]}"], ["handles"]),
     ({}, ["_handles:=[{frame: gripper, particles: [0, x]}]"], ["handles"]),
+    ({"handle_formulation": "frame"}, [], ["handle_formulation"]),
+    ({"handle_formulation": "moving_frame"}, [], ["handle_formulation"]),  # no handles
+    ({"handle_formulation": "moving_frame", "fixed": [0], "handles": [{"frame": "gripper", "particles": [24]}]},
+     [], ["handle_formulation"]),  # a fixed particle
+    ({"handle_formulation": "moving_frame", "fixed": [],
+      "handles": [{"frame": "left", "particles": [0]}, {"frame": "right", "particles": [4]}]}, [],
+     ["handle_formulation"]),  # two frames
     # A grid whose equilibrium and basis would take minutes: the node parameter fails at once.
     ({"rows": 600, "cols": 600, "dimension": 3, "num_modes": 30, "linearization": "equilibrium",
       "tf_particles": [360000]}, [], ["tf_particles"]),

@@ -2,7 +2,9 @@
 """Rostest checker of handles that follow TF frames, on every method in lockstep: the particles of
 the handle whose frame moves (move_handle.py) are where the frame's recorded motion takes their start
 offsets, a free particle below responds, and the handle whose frame is never broadcast holds its
-particle with a warning on /rosout and a note in ~status."""
+particle with a warning on /rosout and a note in ~status; ~status names the formulation the node
+chose. Parameters: ~moving, ~missing (particle lists), ~formulation (handles_frame.test: every handle
+on one frame, the moving frame)."""
 import threading
 import time
 import unittest
@@ -18,8 +20,9 @@ from tf2_msgs.msg import TFMessage
 
 NODE = "/modal_mass_spring"
 METHODS = ["full", "linear", "physical", "cubature"]
-MOVING = [0, 1, 2]  # held by `gripper`
-MISSING = [3]       # held by `absent`, never broadcast
+MOVING = [0, 1, 2]  # held by `gripper` (~moving)
+MISSING = [3]       # held by `absent`, never broadcast (~missing)
+FORMULATION = "constraint_modes"  # the one the node resolves (~formulation)
 FREE = 15           # a bottom corner
 TOLERANCE = 1e-6    # m; the point clouds are float32 (1.2e-7 relative)
 
@@ -98,11 +101,18 @@ class Handles(unittest.TestCase):
             self.assertGreater(moved, 0.02, "%s: the frame moved them" % method)
             free_motion = max(np.linalg.norm(c[FREE] - shift - start[FREE]) for c in clouds[method])
             self.assertGreater(free_motion, 1e-3, "%s: a free particle responds" % method)
-        self.assertTrue(any("handle frame 'absent' not available" in w for w in warnings), warnings[:5])
         self.assertIsNotNone(rec.status)
-        self.assertEqual(rec.status.handles, "held: frame 'absent' not available")
+        self.assertEqual(rec.status.handle_formulation, FORMULATION)
+        if MISSING:
+            self.assertTrue(any("handle frame 'absent' not available" in w for w in warnings), warnings[:5])
+            self.assertEqual(rec.status.handles, "held: frame 'absent' not available")
+        else:
+            self.assertEqual(rec.status.handles, "")
 
 
 if __name__ == "__main__":
     rospy.init_node("check_handles")
+    MOVING = rospy.get_param("~moving", MOVING)
+    MISSING = rospy.get_param("~missing", MISSING)
+    FORMULATION = rospy.get_param("~formulation", FORMULATION)
     rostest.rosrun("modal_mass_spring", "check_handles", Handles)
