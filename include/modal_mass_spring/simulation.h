@@ -190,6 +190,14 @@ public:
   // The handles' motion the current state was stepped to (displacements from the linearization
   // point); empty vectors: at rest at the linearization point.
   const HandleMotion& handleMotion() const { return handle_current_; }
+  // Where the handle particles are now (absolute, m), over grid().handleDofs().
+  Eigen::VectorXd handlePositions() const;
+  // Puts the handles at these positions, velocities and accelerations now, in the current state (not
+  // at the end of the next step, as setHandleMotion): the free particles stay where they are, and
+  // the next step starts from there. For a simulation that takes over another's run (a rebuild),
+  // before setPhysicalState places the grid around them. Throws as setHandleMotion, changing nothing.
+  void setHandleState(const Eigen::VectorXd& positions, const Eigen::VectorXd& velocities = {},
+                      const Eigen::VectorXd& accelerations = {});
   // The constraint modes Psi = -K_ii^-1 K_ib (built when a modal method is first used with handles;
   // empty before), and K_ib at the linearization point.
   const Eigen::MatrixXd& constraintModes() const { return constraint_modes_; }
@@ -231,8 +239,10 @@ public:
 
   // Of the world velocities.
   double kineticEnergy() const;
-  // Kinetic + spring + gravity potential energy, from the physical positions.
+  // Kinetic + spring + gravity potential energy, from the physical positions; the second form takes
+  // positions() already reconstructed (O(n r) for a modal method).
   double totalEnergy() const;
+  double totalEnergy(const Eigen::VectorXd& positions) const;
   // The energy the divergence check measures growth against (J): the grid's weight times its
   // larger side, plus the spring and kinetic energy of the start (the last reset or
   // setPhysicalState), plus the energy of every spring stretched by 1% (so that it is never 0).

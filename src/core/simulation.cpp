@@ -573,6 +573,37 @@ FrameForces Simulation::frameForcesOf(const FrameMotion& motion) const
   return frameForces(motion, grid_.dimension(), grid_.params().gravity, params_.alpha);
 }
 
+Eigen::VectorXd Simulation::handlePositions() const
+{
+  const std::vector<int>& dofs = grid_.handleDofs();
+  Eigen::VectorXd x(static_cast<Eigen::Index>(dofs.size()));
+  for (size_t k = 0; k < dofs.size(); ++k)
+    x[static_cast<Eigen::Index>(k)] = x_ref_[dofs[k]];
+  if (handle_current_.displacement.size() > 0)
+    x += handle_current_.displacement;
+  return x;
+}
+
+void Simulation::setHandleState(const Eigen::VectorXd& positions, const Eigen::VectorXd& velocities,
+                                const Eigen::VectorXd& accelerations)
+{
+  setHandleMotion(positions, velocities, accelerations);  // checks them
+  const Eigen::VectorXd u = displacement(), v = velocity();
+  handle_current_ = handle_target_;
+  handle_pending_ = false;
+  // Once a handle has moved it can do work on the grid: the energy check stays off.
+  handles_moved_ = handles_moved_ || !handle_current_.atRest();
+  // The method splits the same free-dof motion again around the handles' new place (a divergence
+  // stays: only a reset or a method switch clears it).
+  const double rise = methodEnergy() - start_energy_;
+  const bool diverged = diverged_;
+  const std::string message = divergence_message_;
+  install(params_.method, u, v, Remainder::Keep);
+  diverged_ = diverged;
+  divergence_message_ = message;
+  start_energy_ = methodEnergy() - rise;
+}
+
 void Simulation::reset()
 {
   // The handles go back to rest at the linearization point with the grid.
@@ -594,10 +625,12 @@ std::string Simulation::divergence(bool integrator_ok, const State& next)
            std::to_string(params_.newton_max_iterations) + ", even in 1/16 of the step";
   if (!next.q.allFinite() || !next.v.allFinite() || !next.a.allFinite())
     return "non-finite state";
+  // O(r) for a modal method, like the energy below (the force evaluation of the step left it cached):
+  // nothing here grows with the grid. The message is built only for a step that fails.
   const double distance = std::sqrt(model_->anchorDistanceSquared(next.q) / total_mass_);
-  std::ostringstream msg;
   if (distance > limit_)
   {
+    std::ostringstream msg;
     msg << "mass-weighted RMS displacement from the start " << distance << " m beyond divergence_limit " << limit_
         << " m";
     return msg.str();
@@ -609,6 +642,7 @@ std::string Simulation::divergence(bool integrator_ok, const State& next)
   const double energy = model_->energy(next);
   if (!std::isfinite(energy) || energy > start_energy_ + params_.energy_tolerance * energy_scale_)
   {
+    std::ostringstream msg;
     msg << "energy " << energy << " J rose above its start " << start_energy_ << " J by more than energy_tolerance "
         << params_.energy_tolerance << " x the energy scale " << energy_scale_ << " J";
     return msg.str();
@@ -764,9 +798,10 @@ double Simulation::kineticEnergy() const
 
 double Simulation::methodEnergy() const { return model_->energy(model_->state()); }
 
-double Simulation::totalEnergy() const
+double Simulation::totalEnergy() const { return totalEnergy(positions()); }
+
+double Simulation::totalEnergy(const Eigen::VectorXd& x) const
 {
-  const Eigen::VectorXd x = positions();
   return kineticEnergy() + springEnergy(grid_, x) + gravityEnergy(grid_, x);
 }
 

@@ -201,11 +201,13 @@ void SimulationNode::swapRebuilt()
     Simulation& next = *rebuilt_[k];
     if (next.method() != old.method())
       next.setMethod(old.method());  // switched while it was built
-    // The motion carries over: the same positions and velocities, measured from the new
-    // linearization point (a modal method takes their projection onto the new modes); in a moving
-    // frame, in the frame where it has gone.
+    // The motion carries over: the handles where they are (in a moving frame, the frame where it has
+    // gone), then the same positions and velocities around them, measured from the new linearization
+    // point (a modal method takes their projection onto the new modes).
     if (next.handleFormulation() == HandleFormulation::MovingFrame)
       next.placeFrame(old.frameMotion());
+    else if (next.grid().numHandleDofs() > 0)
+      next.setHandleState(old.handlePositions(), old.handleMotion().velocity, old.handleMotion().acceleration);
     next.setPhysicalState(next.grid().gatherFree(old.positions() - next.linearizationPositions()), old.velocity());
     track.step_offset += old.stepCount();
     track.simulation = std::move(rebuilt_[k]);

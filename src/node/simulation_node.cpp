@@ -562,12 +562,15 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
   Output output;
   output.stamp = stamp;
   // The core keeps the last good state on divergence; never publish a non-finite one anyway.
+  // The positions are reconstructed here, once per published tick (x_ref + Phi X costs O(n r)), not
+  // at every step.
   for (Track& track : tracks_)
   {
-    const Eigen::Matrix3Xd points = track.simulation->points();
+    const Eigen::VectorXd positions = track.simulation->positions();
+    const Eigen::Matrix3Xd points = track.simulation->grid().toPoints(positions);
     if (points.allFinite())
       track.last_points = points;
-    const double energy = track.simulation->totalEnergy();
+    const double energy = track.simulation->totalEnergy(positions);
     if (std::isfinite(energy))
       track.last_energy = energy;
   }
@@ -612,7 +615,9 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
         options.label += pace;
       }
     }
-    grid.markers = makeMarkers(simulation.grid(), options, track.last_points, stamp);
+    // One pass over the springs for both the surface's colours and the cloud.
+    const Eigen::VectorXd strains = particleStrains(simulation.grid(), track.last_points);
+    grid.markers = makeMarkers(simulation.grid(), options, track.last_points, stamp, strains);
     if (measured && ref->shadow)
     {
       // The reference drawn faintly where the method is: the gap between them is the error.
@@ -625,7 +630,7 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
       const auto shadow = makeMarkers(simulation.grid(), ghost, ref->last_points, stamp);
       grid.markers.markers.insert(grid.markers.markers.end(), shadow.markers.begin(), shadow.markers.end());
     }
-    grid.points = makePointCloud(track.last_points, particleStrains(simulation.grid(), track.last_points),
+    grid.points = makePointCloud(track.last_points, strains,
                                  track.offset, params.fixed_frame, stamp);
 
     Status& status = grid.status;
@@ -663,6 +668,10 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
       status.cubature_heldout_error = cubature->heldout_error;
       status.cubature_training_seconds = cubature->training_seconds;
     }
+    const CacheReport& cache = simulation.cacheReport();
+    status.basis_from_cache = cache.basis_loaded;
+    status.cubature_from_cache = cache.cubature_loaded;
+    status.cache = describeCache(cache);
 
     if (send_tf)
       for (int particle : params.tf_particles)
