@@ -261,6 +261,8 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
     SimulationParams p = withMethod(setup.sim, Method::Full);
     p.integrator = IntegratorKind::Explicit;
     p.linearization = Linearization::Rest;
+    // In the world, handles prescribed: the same reference whichever formulation the methods use.
+    p.handle_formulation = HandleFormulation::ConstraintModes;
     p.time_step = setup.sim.time_step / divide;
     return p;
   };

@@ -298,9 +298,32 @@ void HandleDriver::particleMotion(double t, Eigen::VectorXd& positions, Eigen::V
 void HandleDriver::drive(Simulation& sim) const
 {
   const double t = (sim.stepCount() + 1) * sim.params().time_step;
+  if (sim.handleFormulation() == HandleFormulation::MovingFrame)
+  {
+    sim.setHandleFrameMotion(bodyFrameMotion(t));
+    return;
+  }
   Eigen::VectorXd x_b, v_b, a_b;
   particleMotion(t, x_b, v_b, a_b);
   sim.setHandleMotion(x_b, v_b, a_b);
+}
+
+FrameMotion HandleDriver::bodyFrameMotion(double t) const
+{
+  // The handle's frame has its origin o at the particles' centroid: x = o + R (y - o_0) for a point
+  // at y when it starts, so B, the frame that starts at the world's, has p = o - R o_0 and, with
+  // c = R o_0, p' = o' - w x c and p'' = o'' - alpha x c - w x (w x c).
+  const RigidFrameMotion f = frame(0, t);
+  const Eigen::Matrix3d r = f.rotation.toRotationMatrix();
+  const Eigen::Vector3d c = r * start_origins_[0];
+  FrameMotion b;
+  b.rotation = r;
+  b.translation = f.origin - c;
+  b.velocity = f.velocity - f.angular_velocity.cross(c);
+  b.acceleration = f.acceleration - f.angular_acceleration.cross(c) - f.angular_velocity.cross(f.angular_velocity.cross(c));
+  b.angular_velocity = f.angular_velocity;
+  b.angular_acceleration = f.angular_acceleration;
+  return b;
 }
 
 }  // namespace modal_mass_spring

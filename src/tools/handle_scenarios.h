@@ -89,8 +89,11 @@ public:
   // grid().handleDofs().
   void particleMotion(double t, Eigen::VectorXd& positions, Eigen::VectorXd& velocities,
                       Eigen::VectorXd& accelerations) const;
-  // Hands the motion at the end of the simulation's next step to it: the one place a formulation of
-  // the handles is chosen (today the Craig-Bampton one, through every particle's motion).
+  // The motion of the frame B of a scenario with one handle (x = p + R y, B at the world's at the
+  // start), as Simulation::setHandleFrameMotion takes it.
+  FrameMotion bodyFrameMotion(double t) const;
+  // Hands the motion at the end of the simulation's next step to it, as its handle formulation takes
+  // it: the frame's motion in the moving frame, every handle particle's motion with constraint modes.
   void drive(Simulation& sim) const;
 
 private:

@@ -485,6 +485,8 @@ std::vector<ExperimentSetup> handleSetups(const Options& o, const std::vector<Ex
       {
         throw std::invalid_argument("config '" + o.config + "': " + e.what());
       }
+      // One handle is one rigid body: with `auto` and nothing fixed, the methods simulate in its frame.
+      s.sim.handles_one_body = scenario.handles.size() == 1;
       s.variant = scenario.name + (setup.settings.empty() ? "" : " " + setup.variant);
       s.handle_scenario = scenario;
       out.push_back(s);

@@ -254,3 +254,68 @@ TEST(HandleScenarios, EveryInteriorModeUnderPhysicalFollowsFullThroughALargeMove
   EXPECT_LT(physical, 1e-6) << "physical with every interior mode against full (m)";
   EXPECT_GT(linear, 1e-3) << "linear with every interior mode against full (m)";
 }
+
+TEST(HandleScenarios, TheBodyFrameCarriesTheHandleParticlesAlongTheirPath)
+{
+  const HandleScenario scenario = parse(R"(
+- name: turn_and_shift
+  move_time: 0.5
+  handles:
+    - {particles: [0, 1, 2, 3], translation: [0.1, -0.2, 0.05], rotation_axis: [1, 0, 1], rotation_deg: 120}
+)")
+                                      .front();
+  ExperimentSetup setup = heldSheet(scenario);
+  setup.sim.handles_one_body = true;
+  Simulation sim(setup.grid, setup.sim);
+  ASSERT_EQ(sim.handleFormulation(), HandleFormulation::MovingFrame);
+  const HandleDriver driver(scenario, sim);
+  const Eigen::Matrix3Xd start = sim.grid().toPoints(sim.positions()).leftCols(4);
+  for (double t : {0.0, 0.13, 0.25, 0.41, 0.5, 0.7})
+  {
+    Eigen::VectorXd x, v, a;
+    driver.particleMotion(t, x, v, a);
+    const RigidPointMotion body = pointMotion(driver.bodyFrameMotion(t), start);
+    for (int k = 0; k < 4; ++k)
+    {
+      EXPECT_LT((body.position.col(k) - x.segment<3>(3 * k)).norm(), 1e-12) << "t = " << t << ", particle " << k;
+      EXPECT_LT((body.velocity.col(k) - v.segment<3>(3 * k)).norm(), 1e-12) << "t = " << t << ", particle " << k;
+      EXPECT_LT((body.acceleration.col(k) - a.segment<3>(3 * k)).norm(), 1e-10) << "t = " << t << ", particle " << k;
+    }
+  }
+}
+
+TEST(HandleScenarios, InTheMovingFrameEveryInteriorModeUnderPhysicalFollowsFullThroughALargeTurn)
+{
+  const HandleScenario scenario = parse(R"(
+- name: turn_and_shift
+  move_time: 0.5
+  hold_time: 0.25
+  handles:
+    - {particles: [0, 1, 2, 3], translation: [0.1, 0.0, 0.05], rotation_axis: [0, 0, 1], rotation_deg: 90}
+)")
+                                      .front();
+  ExperimentSetup setup = heldSheet(scenario);
+  setup.sim.handles_one_body = true;  // auto: the moving frame
+  AccuracyOptions options;
+  options.methods = {Method::Linear, Method::Physical};
+  options.sample = 50;
+  options.steps = options.interval = 1500;
+  options.snapshots = false;
+  const AccuracyResult result = runAccuracy(setup, options);
+  ASSERT_TRUE(result.messages.empty()) << result.messages.front();
+  double physical = 0.0, linear = 0.0, moved = 0.0;
+  for (const ErrorSample& e : result.errors)
+  {
+    ASSERT_FALSE(e.diverged) << e.method << " at step " << e.step;
+    if (e.method == "physical")
+      physical = std::max(physical, e.max_distance);
+    else if (e.method == "linear")
+      linear = std::max(linear, e.max_distance);
+    else
+      moved = std::max(moved, e.max_displacement);
+  }
+  EXPECT_GT(moved, 0.25) << "the frame did not move the sheet far";
+  EXPECT_LT(physical, 1e-6) << "physical with every interior mode against full, both in the frame (m)";
+  // The frame's forces swing the sheet far from its linearization: the linear force is not enough.
+  EXPECT_GT(linear, 1e-3) << "linear with every interior mode against full in the frame (m)";
+}
