@@ -277,6 +277,12 @@ def scenario_of(variant):
     return name, rest
 
 
+def short_setting(setting):
+    """A legend's name for varied settings: the values alone, "integrator=explicit
+    handle_formulation=auto" as "explicit, auto"."""
+    return ", ".join(part.split("=", 1)[-1].replace("_", " ") for part in setting.split())
+
+
 def plot_handles(path, out):
     """RMS distance to the reference over time, one panel per scenario, every method (the line style
     tells the varied settings apart); a diverged run's curve stops where it diverged, marked x."""
@@ -299,7 +305,7 @@ def plot_handles(path, out):
                 series = [r for r in rows if r["variant"] == variant and r["method"] == method and int(r["step"]) > 0]
                 good = [(number(r["time"]), number(r["rms_distance"])) for r in series if r["diverged"] == "0"]
                 good = [(t, e) for t, e in good if e > 0]
-                label = method + (f" ({setting})" if setting else "")
+                label = method + (f" ({short_setting(setting)})" if setting else "")
                 if method == "reference_half_step":
                     label = "reference at half its step (convergence check)"
                 ax.plot([t for t, _ in good], [e for _, e in good], VARIANT_STYLES[si % len(VARIANT_STYLES)],
