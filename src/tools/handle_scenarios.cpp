@@ -183,19 +183,15 @@ RigidFrameMotion frameMotion(const HandlePath& path, const Eigen::Vector3d& star
 
 RigidPointMotion pointsOnFrame(const RigidFrameMotion& frame, const Eigen::Matrix3Xd& offsets)
 {
-  RigidPointMotion motion;
-  const Eigen::Matrix3Xd r = frame.rotation.toRotationMatrix() * offsets;
-  motion.position = r.colwise() + frame.origin;
-  motion.velocity.resize(3, offsets.cols());
-  motion.acceleration.resize(3, offsets.cols());
-  const Eigen::Vector3d& w = frame.angular_velocity;
-  for (Eigen::Index k = 0; k < offsets.cols(); ++k)
-  {
-    motion.velocity.col(k) = frame.velocity + w.cross(r.col(k));
-    motion.acceleration.col(k) =
-        frame.acceleration + frame.angular_acceleration.cross(r.col(k)) + w.cross(w.cross(r.col(k)));
-  }
-  return motion;
+  // The offsets are points of a frame whose translation is the origin: the core's rigid point motion.
+  FrameMotion carried;
+  carried.translation = frame.origin;
+  carried.rotation = frame.rotation.toRotationMatrix();
+  carried.velocity = frame.velocity;
+  carried.acceleration = frame.acceleration;
+  carried.angular_velocity = frame.angular_velocity;
+  carried.angular_acceleration = frame.angular_acceleration;
+  return pointMotion(carried, offsets);
 }
 
 std::vector<HandleScenario> parseHandleScenarios(const YAML::Node& node, const std::string& key)

@@ -58,6 +58,29 @@ ExperimentSetup heldSheet(const HandleScenario& scenario)
   return setup;
 }
 
+// The largest distance to the reference of `physical` and of `linear`, and the largest displacement
+// of the reference, over a run's samples; fails on a divergence.
+struct Worst
+{
+  double physical = 0.0, linear = 0.0, moved = 0.0;
+};
+
+Worst worstOf(const AccuracyResult& result)
+{
+  Worst w;
+  for (const ErrorSample& e : result.errors)
+  {
+    EXPECT_FALSE(e.diverged) << e.method << " at step " << e.step;
+    if (e.method == "physical")
+      w.physical = std::max(w.physical, e.max_distance);
+    else if (e.method == "linear")
+      w.linear = std::max(w.linear, e.max_distance);
+    else
+      w.moved = std::max(w.moved, e.max_displacement);
+  }
+  return w;
+}
+
 }  // namespace
 
 TEST(HandleScenarios, RampStartsAndEndsAtRestAndItsRatesAreItsDerivatives)
@@ -238,18 +261,7 @@ TEST(HandleScenarios, EveryInteriorModeUnderPhysicalFollowsFullThroughALargeMove
   options.snapshots = false;
   const AccuracyResult result = runAccuracy(setup, options);
   ASSERT_TRUE(result.messages.empty()) << result.messages.front();
-
-  double physical = 0.0, linear = 0.0, moved = 0.0;
-  for (const ErrorSample& e : result.errors)
-  {
-    ASSERT_FALSE(e.diverged) << e.method << " at step " << e.step;
-    if (e.method == "physical")
-      physical = std::max(physical, e.max_distance);
-    else if (e.method == "linear")
-      linear = std::max(linear, e.max_distance);
-    else
-      moved = std::max(moved, e.max_displacement);
-  }
+  const auto [physical, linear, moved] = worstOf(result);
   EXPECT_GT(moved, 0.25) << "the handles did not move the sheet far";
   EXPECT_LT(physical, 1e-6) << "physical with every interior mode against full (m)";
   EXPECT_GT(linear, 1e-3) << "linear with every interior mode against full (m)";
@@ -303,17 +315,7 @@ TEST(HandleScenarios, InTheMovingFrameEveryInteriorModeUnderPhysicalFollowsFullT
   options.snapshots = false;
   const AccuracyResult result = runAccuracy(setup, options);
   ASSERT_TRUE(result.messages.empty()) << result.messages.front();
-  double physical = 0.0, linear = 0.0, moved = 0.0;
-  for (const ErrorSample& e : result.errors)
-  {
-    ASSERT_FALSE(e.diverged) << e.method << " at step " << e.step;
-    if (e.method == "physical")
-      physical = std::max(physical, e.max_distance);
-    else if (e.method == "linear")
-      linear = std::max(linear, e.max_distance);
-    else
-      moved = std::max(moved, e.max_displacement);
-  }
+  const auto [physical, linear, moved] = worstOf(result);
   EXPECT_GT(moved, 0.25) << "the frame did not move the sheet far";
   EXPECT_LT(physical, 1e-6) << "physical with every interior mode against full, both in the frame (m)";
   // The frame's forces swing the sheet far from its linearization: the linear force is not enough.
