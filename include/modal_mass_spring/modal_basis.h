@@ -21,7 +21,7 @@ struct ModalBasis
   double shift = 0.0;           // sigma of the shift-invert, negative so K - sigma M stays regular
   int deflation_passes = 0;     // extra Lanczos passes that looked for more of a large null space
   double build_seconds = 0.0;
-  double factorization_seconds = 0.0;  // of build_seconds, the sparse LDLT of K - sigma M
+  double factorization_seconds = 0.0;  // of build_seconds, the sparse LDLT of K - sigma M, regrouped for the solves
   // Phi^T K Phi (r x r, dense) when the columns are not all eigenvectors of K (a basis with modal
   // derivatives: the reduced stiffness and Rayleigh damping are then dense); empty for an eigenbasis,
   // where it is diag(eigenvalues).
