@@ -515,7 +515,9 @@ TEST(MovingFrame, SwitchesResetsAndExternalForcesInAMovedFrame)
     sim.setMethod(method);
     EXPECT_LT(largestDifference(sim.positions(), before), 1e-12) << toString(method);
     if (method == Method::Full)
+    {
       EXPECT_LT(largestDifference(sim.velocity(), velocity), 1e-12);
+    }
     sim.setHandleFrameMotion(sim.frameMotion());
     sim.step(10);
     EXPECT_FALSE(sim.diverged()) << toString(method);
