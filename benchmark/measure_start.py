@@ -5,7 +5,9 @@ Starts its own ROS master on a free port, loads a config into the node's namespa
 node --runs times: each time it measures from the moment the process is spawned to the first
 ~markers message a subscriber here receives (the node's whole start-up: process, ROS connections,
 the Simulation's build or cache load, the first tick), and stops it. The first run uses an empty
-cache directory unless --keep-cache (a cold start that fills it); the others load from it.
+cache directory unless --keep-cache (a cold start that fills it); the others load from it. With
+--cpu-seconds, the last run also gives the node's share of one core and, from ~status over the same
+window, its stepping per tick and per step.
 
   benchmark/measure_start.py --config config/cloth_large.yaml --runs 4 [--cpu-seconds 20]
 Needs the workspace's setup.bash sourced (rosrun finds the node).
@@ -53,6 +55,7 @@ def main():
     try:
         import rospy
         import rosparam
+        from modal_mass_spring.msg import Status
         from visualization_msgs.msg import MarkerArray
 
         for _ in range(100):
@@ -70,6 +73,10 @@ def main():
         rospy.init_node("measure_start", anonymous=True, disable_signals=True)
         received = threading.Event()
         rospy.Subscriber(name + "/markers", MarkerArray, lambda _msg: received.set(), queue_size=1)
+        statuses = []  # ~status while the core share is measured
+        measuring = threading.Event()
+        rospy.Subscriber(name + "/status", Status, lambda msg: measuring.is_set() and statuses.append(msg),
+                         queue_size=100)
 
         times = []
         for run in range(args.runs):
@@ -90,7 +97,9 @@ def main():
                         fields = stat.read().rsplit(")", 1)[1].split()
                     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
                 before, wall = cpu(), time.monotonic()
+                measuring.set()
                 time.sleep(args.cpu_seconds)
+                measuring.clear()
                 share = (cpu() - before) / (time.monotonic() - wall)
             node.send_signal(signal.SIGINT)
             try:
@@ -109,6 +118,14 @@ def main():
             if share is not None:
                 print("run %d: the node used %.1f%% of one core over %g s of running" % (run + 1, 100 * share,
                                                                                         args.cpu_seconds))
+                if statuses:
+                    # The stepping per tick and per step as ~status reports them, medians over the window.
+                    print("  ~status over %d ticks: median %.3f ms of stepping per tick (%s steps), %.2f us per step; "
+                          "basis_from_cache %s, cubature_from_cache %s"
+                          % (len(statuses), 1e3 * statistics.median(m.tick_step_seconds for m in statuses),
+                             "/".join(str(n) for n in sorted({m.tick_steps for m in statuses})),
+                             1e6 * statistics.median(m.step_seconds for m in statuses),
+                             statuses[-1].basis_from_cache, statuses[-1].cubature_from_cache))
                 # Its last status line (status_log_period) and any warning: did it run, at what cost?
                 clean = [re.sub(r"\x1b\[[0-9;]*m", "", l).strip() for l in log]
                 for line in [l for l in clean if "WARN" in l or "ERROR" in l][:3] + clean[-1:]:

@@ -10,7 +10,7 @@ packages=(
   libtf2-ros-dev libtf2-dev libtf2-msgs-dev libgeometry-msgs-dev
   libvisualization-msgs-dev libsensor-msgs-dev python3-sensor-msgs libros-rosgraph-msgs-dev
   libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure libstd-srvs-dev libstd-msgs-dev libdiagnostic-updater-dev
-  libdiagnostic-msgs-dev librostest-dev python3-rostest python3-roslaunch
+  libdiagnostic-msgs-dev libinteractive-markers-dev librostest-dev python3-rostest python3-roslaunch
   libeigen3-dev libspectra-dev libgtest-dev googletest libbenchmark-dev libyaml-cpp-dev
   python3-rosservice python3-rostopic python3-rosbag python3-rosnode python3-rosparam rosbash
   python3-std-srvs python3-std-msgs python3-visualization-msgs python3-geometry-msgs

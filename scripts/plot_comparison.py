@@ -20,6 +20,10 @@ Reads, from DIR, every file the tool writes and draws:
       to `full` over time and the swing, the sheet's mean y, of `linear` and `physical` with R + D
       linear modes and `physical` with R modes plus D derivative directions; the swing period of each
       from the mean y's zero crossings)
+  handles_<tag>_error.csv (modal_compare --experiment handles) -> handles_<tag>.png (RMS distance to
+      the reference over time, one panel per handle scenario, every method), with
+      handles_<tag>_summary.csv for its table, and handles_<tag>_snapshots.csv -> handles_<tag>_shapes.png
+      (the cloth where the move ends: the reference, `linear` and `physical`, one panel per scenario)
 and writes the numbers behind them as Markdown tables to DIR/tables.md, for docs/results.md to quote.
 The columns it needs are listed in COLUMNS: a file without them stops the script with a message.
 """
@@ -40,6 +44,7 @@ COLUMNS = {
              "build_seconds", "step_seconds", "diverged"],
     "error": ["variant", "method", "step", "time", "max_distance", "rms_distance", "diverged"],
     "snapshots": ["variant", "method", "step", "time", "particle", "row", "col", "fixed", "x", "y", "z"],
+    "summary": ["variant", "method", "mean_rms", "max_rms", "final_rms", "step_seconds_median", "diverged"],
     "stability": ["variant", "method", "stable_dt", "unstable_dt", "steps", "tolerance", "modal_bound",
                   "full_bound"],
 }
@@ -264,6 +269,139 @@ def plot_error(path, out):
     fig.savefig(target, dpi=110)
     plt.close(fig)
     return [target]
+
+
+def scenario_of(variant):
+    """A handles variant is the scenario's name, then the varied settings, if any."""
+    name, _, rest = variant.partition(" ")
+    return name, rest
+
+
+def short_setting(setting):
+    """A legend's name for varied settings: the values alone, "integrator=explicit
+    handle_formulation=auto" as "explicit, auto"."""
+    return ", ".join(part.split("=", 1)[-1].replace("_", " ") for part in setting.split())
+
+
+def plot_handles(path, out):
+    """RMS distance to the reference over time, one panel per scenario, every method (the line style
+    tells the varied settings apart); a diverged run's curve stops where it diverged, marked x."""
+    rows = read_csv(path, "error")
+    tag = tag_of(path, "handles_", "_error.csv")
+    base = "reference" if any(r["method"] == "reference" for r in rows) else "full"
+    scenarios = ordered(scenario_of(r["variant"])[0] for r in rows)
+    settings = ordered(scenario_of(r["variant"])[1] for r in rows)
+    columns = min(3, len(scenarios))
+    lines = (len(scenarios) + columns - 1) // columns
+    fig, axes = plt.subplots(lines, columns, figsize=(4.2 * columns, 3.3 * lines + 0.8), squeeze=False, sharey=True)
+    for k, scenario in enumerate(scenarios):
+        ax = axes[k // columns][k % columns]
+        for si, setting in enumerate(settings):
+            variant = scenario + (" " + setting if setting else "")
+            for method in ordered(r["method"] for r in rows if r["variant"] == variant):
+                # The reference and its check are the same for every setting: drawn once.
+                if method == base or (method == "reference_half_step" and si > 0):
+                    continue
+                series = [r for r in rows if r["variant"] == variant and r["method"] == method and int(r["step"]) > 0]
+                good = [(number(r["time"]), number(r["rms_distance"])) for r in series if r["diverged"] == "0"]
+                good = [(t, e) for t, e in good if e > 0]
+                label = method + (f" ({short_setting(setting)})" if setting else "")
+                if method == "reference_half_step":
+                    label = "reference at half its step (convergence check)"
+                ax.plot([t for t, _ in good], [e for _, e in good], VARIANT_STYLES[si % len(VARIANT_STYLES)],
+                        color=METHOD_COLORS.get(method), label=label if k == 0 else None, lw=1)
+                if good and any(r["diverged"] == "1" for r in series):
+                    ax.plot([good[-1][0]], [good[-1][1]], "x", color=METHOD_COLORS.get(method), ms=7)
+        ax.set_yscale("log")
+        ax.set_title(scenario, fontsize=10)
+        ax.set_xlabel("time (s)")
+        ax.grid(True, which="both", alpha=0.3)
+        if k % columns == 0:
+            ax.set_ylabel(f"RMS distance to {base} (m)")
+    for k in range(len(scenarios), lines * columns):
+        axes[k // columns][k % columns].axis("off")
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=min(4, max(1, len(labels))), fontsize=8)
+    fig.suptitle(f"{tag}: moving handles, every method against {base} (x: diverged)", fontsize=10)
+    legend_rows = (len(labels) + 3) // 4
+    fig.tight_layout(rect=(0, (0.25 + 0.2 * legend_rows) / (3.3 * lines + 0.8), 1, 1))
+    target = out / f"handles_{tag}.png"
+    fig.savefig(target, dpi=110)
+    plt.close(fig)
+    return [target]
+
+
+def plot_handle_shapes(path, out):
+    """The cloth where the move ends, one 3D panel per scenario (of the first varied setting): the
+    reference, `linear` and `physical` as wireframes over the grid's rows and columns."""
+    rows = read_csv(path, "snapshots")
+    tag = tag_of(path, "handles_", "_snapshots.csv")
+    base = "reference" if any(r["method"] == "reference" for r in rows) else "full"
+    first = ordered(scenario_of(r["variant"])[1] for r in rows)[0]
+    scenarios = [s for s in ordered(scenario_of(r["variant"])[0] for r in rows)]
+    shown = [(base, "black"), ("linear", METHOD_COLORS["linear"]), ("physical", METHOD_COLORS["physical"])]
+    columns = min(3, len(scenarios))
+    lines = (len(scenarios) + columns - 1) // columns
+    fig = plt.figure(figsize=(4.4 * columns, 4.2 * lines + 1.2))
+    for k, scenario in enumerate(scenarios):
+        ax = fig.add_subplot(lines, columns, k + 1, projection="3d")
+        variant = scenario + (" " + first if first else "")
+        lows, highs = [math.inf] * 3, [-math.inf] * 3
+        for method, color in shown:
+            points = [r for r in rows if r["variant"] == variant and r["method"] == method]
+            if not points:
+                continue
+            n_rows = max(int(r["row"]) for r in points) + 1
+            n_cols = max(int(r["col"]) for r in points) + 1
+            grid = [[None] * n_cols for _ in range(n_rows)]
+            for r in points:
+                grid[int(r["row"])][int(r["col"])] = tuple(number(r[c]) for c in ("x", "y", "z"))
+            for axis in range(3):
+                values = [p[axis] for line in grid for p in line]
+                lows[axis], highs[axis] = min(lows[axis], min(values)), max(highs[axis], max(values))
+            label = method if k == 0 else None
+            for line in grid:  # along each row, then along each column
+                ax.plot([p[0] for p in line], [p[1] for p in line], [p[2] for p in line], color=color, lw=0.6,
+                        label=label)
+                label = None
+            for c in range(n_cols):
+                column = [grid[r][c] for r in range(n_rows)]
+                ax.plot([p[0] for p in column], [p[1] for p in column], [p[2] for p in column], color=color, lw=0.6)
+        # Equal scales on the three axes, so a turn looks like a turn.
+        half = max(h - l for l, h in zip(lows, highs)) / 2
+        for axis, setter in enumerate((ax.set_xlim, ax.set_ylim, ax.set_zlim)):
+            centre = (lows[axis] + highs[axis]) / 2
+            setter(centre - half, centre + half)
+        ax.set_box_aspect((1, 1, 1))
+        ax.set_title(f"{scenario}, t = {number(points[0]['time']):.2g} s" if points else scenario, fontsize=10)
+        ax.set_xlabel("x (m)", fontsize=8)
+        ax.set_ylabel("y (m)", fontsize=8)
+        ax.set_zlabel("z (m)", fontsize=8)
+        ax.tick_params(labelsize=7)
+    fig.legend(loc="lower center", ncol=3, fontsize=9)
+    fig.suptitle(f"{tag}: the cloth where the handles stop moving" + (f" ({first})" if first else ""), fontsize=10)
+    # tight_layout misplaces 3D axes: the margins by hand, room for the titles between the lines.
+    fig.subplots_adjust(left=0.0, right=0.96, bottom=0.6 / fig.get_figheight(), top=1 - 0.8 / fig.get_figheight(),
+                        wspace=0.1, hspace=0.12)
+    target = out / f"handles_{tag}_shapes.png"
+    fig.savefig(target, dpi=110)
+    plt.close(fig)
+    return [target]
+
+
+def handle_tables(data):
+    parts = []
+    for path in sorted(data.glob("handles_*_summary.csv")):
+        rows = read_csv(path, "summary")
+        base = "reference" if any(r["method"] == "reference" for r in rows) else "full"
+        body = [[r["variant"], r["method"], fmt(1e3 * number(r["mean_rms"])), fmt(1e3 * number(r["max_rms"])),
+                 "diverged" if r["diverged"] == "1" else fmt(1e3 * number(r["final_rms"])),
+                 fmt(1e6 * number(r["step_seconds_median"]))]
+                for r in rows if r["method"] != base]
+        parts.append(f"## {path.name}: distance of the free particles to the reference (mm)\n\nMean and largest "
+                     "RMS over every sample after step 0, the RMS at the end; median wall time per step.\n\n" + markdown(
+                         ["scenario", "method", "mean RMS", "largest RMS", "RMS at the end", "step (us)"], body))
+    return parts
 
 
 def plot_stability(path, out):
@@ -671,6 +809,7 @@ def write_tables(data, target):
                      f"{rows[0]['tolerance']}\n\n" + markdown(header, body))
     parts += combination_tables(combination_files(data))
     parts += derivative_tables(derivative_files(data))
+    parts += handle_tables(data)
     target.write_text("\n".join(parts))
     return [target]
 
@@ -711,6 +850,10 @@ def main(argv=None):
         derivatives = derivative_files(data)
         if derivatives:
             written += plot_derivatives(derivatives, out)
+        for path in sorted(data.glob("handles_*_error.csv")):
+            written += plot_handles(path, out)
+        for path in sorted(data.glob("handles_*_snapshots.csv")):
+            written += plot_handle_shapes(path, out)
         if written:
             written += write_tables(data, data / "tables.md")
     except ColumnError as error:

@@ -12,10 +12,11 @@ MODAL_VIEWER=1 bash "$REPO_DIR/scripts/install_deps.sh"
 [ -x "$WS_DIR/devel/lib/modal_mass_spring/modal_mass_spring_node" ] || bash "$REPO_DIR/scripts/build.sh"
 set +u; source "$WS_DIR/devel/setup.bash"; set -u
 
-display=":$((90 + RANDOM % 100))"
+# MODAL_DISPLAY and MODAL_ROS_PORT pick the display and the master's port (default: random ones).
+display="${MODAL_DISPLAY:-:$((90 + RANDOM % 100))}"
 Xvfb "$display" -screen 0 1280x720x24 -nolisten tcp >/dev/null 2>&1 &
 xvfb_pid=$!
-port=$((20000 + RANDOM % 10000))
+port="${MODAL_ROS_PORT:-$((20000 + RANDOM % 10000))}"
 export DISPLAY="$display" LIBGL_ALWAYS_SOFTWARE=1 ROS_MASTER_URI="http://localhost:$port"
 roslaunch -p "$port" modal_mass_spring "$launch" rviz:=true "$@" >/tmp/modal_screenshot_roslaunch.log 2>&1 &
 launch_pid=$!

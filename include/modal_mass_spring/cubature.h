@@ -73,17 +73,30 @@ public:
 private:
   // Weighted sum over T of spring forces (returned in f) and energies at X.
   double weightedSprings(const Eigen::VectorXd& modal, Eigen::VectorXd* f);
+  template <int Dim>
+  double weightedSpringForces(const Eigen::VectorXd& modal, bool forces);
+  template <int Dim>
+  void weightedTangentBlocks();
+  // d_ = D X + the rest vectors, unless it already holds them for this X (a tangent after the force
+  // of a Newton iteration, at the same X).
+  void springVectors(const Eigen::VectorXd& modal);
 
   const Grid& grid_;
   const ModalBasis& basis_;
   int dim_;
   std::vector<Spring> springs_;
   Eigen::VectorXd weights_;
-  Eigen::MatrixXd diff_;        // (|T| dim) x r: rows of Phi_j - Phi_i, zero for fixed dofs
+  Eigen::MatrixXd diff_;        // D, (|T| dim) x r: rows of Phi_j - Phi_i, zero for fixed dofs
+  Eigen::MatrixXd diff_t_;      // D^T, for the tangent's blocks (a spring's D_s^T is contiguous there)
   Eigen::VectorXd rest_diff_;   // x_ref_j - x_ref_i per spring of T
   Eigen::VectorXd constant_;    // Phi^T f_g plus the correction that makes F exact at X = 0
   double energy_constant_ = 0.0;
-  Eigen::VectorXd d_, fd_;      // scratch: spring vectors and weighted forces, (|T| dim)
+  // Scratch, kept so that a step allocates nothing: spring vectors (and the X they are at), weighted
+  // forces, the blocks (w_s K_s D_s)^T, D_s^T u and the reduced tangent.
+  Eigen::VectorXd d_, d_modal_, fd_, d_rows_;
+  Eigen::MatrixXd weighted_t_, reduced_;
+  // The last force and its X: an implicit step asks again for the force at the state it starts from.
+  Eigen::VectorXd f_modal_, f_;
   EnergyCache cache_;
 };
 

@@ -26,6 +26,8 @@ public:
   virtual void tangentStiffness(const Eigen::VectorXd& q, SparseMatrix& k) = 0;
   // True when F is affine in q, so one Newton iteration solves an implicit step exactly.
   virtual bool isLinear() const { return false; }
+  // False when the tangent stiffness is not symmetric (the force is then not conservative).
+  virtual bool isSymmetric() const { return true; }
   // The round-off of one evaluation of F (its norm, N in these coordinates): an iteration cannot
   // bring a residual below it. Where forces balance (an equilibrium) it is the only scale there is.
   double roundoff() const { return roundoff_; }

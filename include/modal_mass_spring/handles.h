@@ -51,4 +51,49 @@ struct RigidPointMotion
 RigidPointMotion interpolateRigidMotion(const Eigen::Matrix3Xd& offsets, const FramePose& from, const FramePose& to,
                                         double duration, double s);
 
+// The motion of a rigid frame B relative to its pose at the start, where it coincides with the grid's
+// coordinates: the point at y in B is at x = translation + rotation y. The velocity and acceleration
+// are those of `translation` (the point of B at the origin), the angular velocity and acceleration
+// the frame's; all in the grid's (world) coordinates. The default is B at rest at its start.
+struct FrameMotion
+{
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d rotation = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d velocity = Eigen::Vector3d::Zero(), acceleration = Eigen::Vector3d::Zero();
+  Eigen::Vector3d angular_velocity = Eigen::Vector3d::Zero(), angular_acceleration = Eigen::Vector3d::Zero();
+  bool atRest() const;
+};
+
+// The motion of the points that sit at `points` (3 x N, world) when B is at its start.
+RigidPointMotion pointMotion(const FrameMotion& frame, const Eigen::Matrix3Xd& points);
+
+// A frame moving from pose `from` to pose `to` over `duration` seconds as interpolateRigidMotion
+// moves it (translation linearly, rotation by slerp: a constant angular velocity, no angular
+// acceleration), at the fraction s, relative to its pose `start`: the FrameMotion of B = the frame
+// at `start`. Poses in the grid's coordinates.
+FrameMotion interpolateFrameMotion(const FramePose& start, const FramePose& from, const FramePose& to,
+                                   double duration, double s);
+
+// What the motion of B adds to the equations of a grid simulated in B (positions y, x = p + R y), per
+// unit mass and in B's coordinates restricted to the grid's (x, z in 2D): the force on a particle is
+//   m (uniform - position y - 2 spin y')
+// with uniform = R^T g - g - R^T (a_0 + alpha v_0) (gravity rotated into B, minus the g the force
+// models already add, the frame's acceleration and the drag of mass-proportional damping alpha on
+// the frame's velocity), position = [alpha_B]x + [omega_B]x^2 + alpha [omega_B]x (Euler,
+// centrifugal and drag of the turning), spin = [omega_B]x (Coriolis, through the damping). Spring
+// forces are invariant under rigid motion and need nothing; the stiffness-proportional damping
+// beta K acts on the velocity y' relative to B.
+struct FrameForces
+{
+  Eigen::MatrixXd rotation;  // dim x dim: R, world = R body
+  Eigen::VectorXd uniform;   // dim
+  Eigen::MatrixXd position;  // dim x dim
+  Eigen::MatrixXd spin;      // dim x dim, skew
+  bool none = true;          // B at rest at its start: no term at all
+};
+
+// For a 2D grid the motion must stay in its x-z plane (checked by the caller); its y components
+// are dropped.
+FrameForces frameForces(const FrameMotion& motion, int dimension, const Eigen::Vector3d& gravity, double alpha);
+
 }  // namespace modal_mass_spring

@@ -7,6 +7,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/SparseCholesky>
+#include <Eigen/SparseLU>
 
 #include <memory>
 #include <vector>
@@ -42,15 +43,27 @@ public:
   // failed and the step was split); 0 for a scheme without iterations.
   virtual int lastIterations() const { return 0; }
   virtual int lastSubsteps() const { return 0; }
+  // Adds a skew velocity coupling G to the damping from now on (the Coriolis forces -G q' of a
+  // turning frame, in the method's coordinates; the acceleration of the end of the next step sees
+  // it); null: none. G stays the caller's (the method's), which keeps it alive and may change its
+  // values before the next step, calling this again.
+  void setGyroscopic(const SparseMatrix* g);
 
 protected:
   Integrator(MassDamping system, double dt) : system_(std::move(system)), dt_(dt) {}
+  virtual void gyroscopicChanged() {}
+  // (C + G) v
+  Eigen::VectorXd dampingForce(const Eigen::VectorXd& v) const;
   MassDamping system_;
+  const SparseMatrix* gyroscopic_ = nullptr;  // G; null: none
   double dt_;
 };
 
 // The paper's scheme (eqs. 7-9): explicit positions, trapezoidal velocities, damping implicit, so
-// each step solves (M + dt/2 C) v' = M v + dt/2 (M a + F(q')), factorised once.
+// each step solves (M + dt/2 C) v' = M v + dt/2 (M a + F(q')), factorised once. A gyroscopic G
+// joins C by a fixed-point iteration on that factorisation, v' <- (M + dt/2 C)^-1 (rhs - dt/2 G v'),
+// which contracts by about dt |omega| per iteration: the scheme stays second order and
+// damping-implicit.
 class ExplicitNewmark : public Integrator
 {
 public:
@@ -58,10 +71,13 @@ public:
   bool step(ForceModel& model, const State& state, State& next) override;
 
 private:
+  static constexpr int kMaxIterations = 100;
+  // (M + dt/2 C)^-1 rhs
+  Eigen::VectorXd solve(const Eigen::VectorXd& rhs) const;
   bool diagonal_;                       // modal methods: M + dt/2 C is diagonal, solve by division
   Eigen::VectorXd inverse_diagonal_;
   Eigen::SimplicialLDLT<SparseMatrix> ldlt_;
-  Eigen::VectorXd force_, rhs_;
+  Eigen::VectorXd force_, rhs_, gyroscopic_force_, velocity_;
 };
 
 // Implicit Newmark with the Hilber-Hughes-Taylor alpha: each step solves
@@ -73,6 +89,8 @@ private:
 // [-1/3, 0) damps the highest frequencies (second order still), which keeps those steps bounded.
 // Where Newton does not converge in max_iterations, the step is retried as two half steps
 // (recursively, down to 1/16); a step that still does not converge is refused, never taken.
+// A gyroscopic G or a force whose tangent is not symmetric (a turning frame's) makes R no gradient:
+// Newton then solves with a sparse LU and its line search asks for a smaller |R|.
 class ImplicitNewmark : public Integrator
 {
 public:
@@ -88,6 +106,9 @@ private:
   bool advance(ForceModel& model, const State& s, State& next, double h, int depth);
   // One Newton solve of a step of size h_.
   bool solve(ForceModel& model, const State& s, State& next);
+  // The Newton direction -J^-1 R at next.q (empty when J cannot be factorised).
+  Eigen::VectorXd direction(ForceModel& model, const State& next, bool symmetric);
+  void gyroscopicChanged() override;
   // a' and v' that the Newmark relations give for a trial q'.
   void kinematics(const State& s, State& next) const;
   void analyzeIfNewPattern(const SparseMatrix& jacobian);
@@ -104,7 +125,10 @@ private:
   double h_ = 0.0;             // the step size being solved
   SparseMatrix mass_matrix_;
   Eigen::SimplicialLDLT<SparseMatrix> ldlt_;
-  SparseMatrix inertia_;  // M / (beta h^2) + (1 + alpha) gamma / (beta h) C
+  Eigen::SparseLU<SparseMatrix> lu_;
+  std::vector<int> lu_outer_, lu_inner_;  // the pattern lu_ was analysed for
+  SparseMatrix damping_;  // C + G
+  SparseMatrix inertia_;  // M / (beta h^2) + (1 + alpha) gamma / (beta h) (C + G)
   SparseMatrix tangent_;
   std::vector<int> pattern_outer_, pattern_inner_;
   Eigen::VectorXd force_, residual_;

@@ -47,17 +47,29 @@ public:
     inner_.force(q, f);
     if (load_.size() > 0)
       f += load_;
+    if (linear_)
+      f.noalias() -= *linear_ * q;
   }
   double energy(const Eigen::VectorXd& q) override
   {
     return inner_.energy(q) - (load_.size() > 0 ? load_.dot(q) : 0.0);
   }
-  void tangentStiffness(const Eigen::VectorXd& q, SparseMatrix& k) override { inner_.tangentStiffness(q, k); }
+  void tangentStiffness(const Eigen::VectorXd& q, SparseMatrix& k) override
+  {
+    inner_.tangentStiffness(q, k);
+    if (linear_)
+      k += *linear_;
+  }
   bool isLinear() const override { return inner_.isLinear(); }
+  bool isSymmetric() const override { return !linear_ && inner_.isSymmetric(); }
+  // A force -L q linear in q (a turning frame's Euler and centrifugal forces), L kept by the caller;
+  // null: none. It has no potential in energy(): the energy check is off while a frame moves.
+  void setLinearTerm(const SparseMatrix* l) { linear_ = l; }
 
 private:
   ForceModel& inner_;
-  Eigen::VectorXd load_;  // empty: no load
+  Eigen::VectorXd load_;              // empty: no load
+  const SparseMatrix* linear_ = nullptr;  // L; null: none
 };
 
 // What a method's integrator is built from besides its force model.
@@ -108,6 +120,10 @@ public:
   // Prescribes the handle dofs' motion for the forces evaluated from now on (the end of the next
   // step); the state, its acceleration included, is left as it is.
   virtual void setHandleMotion(const HandleMotion& motion) = 0;
+  // Simulates in a moving frame B (handle_formulation moving_frame): its forces for the end of the
+  // next step, as setHandleMotion; q then measures positions in B, and the external force (world)
+  // is turned into B. The state is left as it is.
+  void setFrameForces(const FrameForces& frame);
 
   // Takes one step from state() into next(); false when the integrator refuses it. commit() makes
   // next() the state.
@@ -128,6 +144,13 @@ protected:
   // The generalized load the handles' motion adds (their velocity through damping, their
   // acceleration through inertia); empty: none.
   void setHandleLoad(const Eigen::VectorXd& load);
+  // B's forces in this method's coordinates: the load at q = 0, the linear force's matrix L (the
+  // force -L q) and the gyroscopic G (the force -G q'); L and G are the last call's, to be updated
+  // in place where their pattern allows.
+  virtual void frameTerms(const FrameForces& frame, Eigen::VectorXd& load, SparseMatrix& linear,
+                          SparseMatrix& gyroscopic) = 0;
+  // Computes the frame's terms again (after the reference they depend on moved).
+  void applyFrame();
 
   const LinearizedGrid lin_;
   IntegratorSettings settings_;
@@ -137,8 +160,14 @@ private:
   std::unique_ptr<ForceModel> force_;
   void updateLoad();
 
+  // The external force on the free dofs (world), turned into B when a frame turns.
+  Eigen::VectorXd bodyExternalForce() const;
+
   LoadedForceModel loaded_;  // force_ plus the external force and handle load: what the integrator sees
-  Eigen::VectorXd external_load_, handle_load_;  // generalized; empty: none
+  Eigen::VectorXd external_free_;  // world, free dofs; empty: none
+  Eigen::VectorXd external_load_, handle_load_, frame_load_;  // generalized; empty: none
+  FrameForces frame_;
+  SparseMatrix frame_linear_, frame_gyroscopic_;  // L and G
   std::unique_ptr<Integrator> integrator_;
   State state_, next_;
 };
@@ -161,7 +190,11 @@ public:
 private:
   MassDamping massDamping(double alpha, double beta) const override;
   Eigen::VectorXd generalizedForce(const Eigen::VectorXd& f_free) const override { return f_free; }
+  // Per particle: m (uniform - position y_ref), m position and 2 m spin, 3 x 3 blocks.
+  void frameTerms(const FrameForces& frame, Eigen::VectorXd& load, SparseMatrix& linear,
+                  SparseMatrix& gyroscopic) override;
   Eigen::VectorXd anchor_;
+  Eigen::VectorXd y_ref_;  // x_ref on the free dofs, once a frame moves
 };
 
 // `linear`, `physical` and `cubature`: q = X, u = offset + Phi X with a mass-orthonormal Phi. With
@@ -186,6 +219,20 @@ private:
   MassDamping massDamping(double alpha, double beta) const override;
   // Phi^T f from the rows of the dofs the force touches.
   Eigen::VectorXd generalizedForce(const Eigen::VectorXd& f_free) const override;
+  // The frame's per-particle terms projected, from the products of Phi's components below: O(r^2)
+  // per step whatever the grid's size.
+  void frameTerms(const FrameForces& frame, Eigen::VectorXd& load, SparseMatrix& linear,
+                  SparseMatrix& gyroscopic) override;
+  // Built at the first moving frame: with Phi_j the rows of Phi for component j (x, y, z),
+  // S_jk = Phi_j^T M Phi_k (r x r), U_j = Phi_j^T M 1 and W_jk = Phi_j^T M y_k, y = x_ref + offset.
+  struct FrameProjection
+  {
+    std::vector<Eigen::MatrixXd> s;  // index j * dim + k
+    std::vector<Eigen::VectorXd> u, w;
+    bool w_stale = true;  // the offset moved since W was computed
+  };
+  void projectFrame();
+  std::unique_ptr<FrameProjection> frame_projection_;
   void setOffset(const Eigen::VectorXd& offset);
   // Moves the force model's reference to x_ref + offset, plus the handles' displacement (handle
   // dofs) and its static response Psi dx_b (interior) unless the method is `linear`.

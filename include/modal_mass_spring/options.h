@@ -43,6 +43,14 @@ enum class BasisKind
   ModalDerivatives,  // the modes plus directions from their modal derivatives (Barbic & James)
 };
 
+// How the modal methods follow moving handles.
+enum class HandleFormulation
+{
+  Auto,             // the moving frame where it applies (see SimulationParams), else constraint modes
+  ConstraintModes,  // Craig-Bampton: the fixed-interface modes plus Psi = -K_ii^-1 K_ib, linear in the handles
+  MovingFrame,      // the grid simulated in the frame of the one rigid body that holds every handle
+};
+
 // "full", "linear", "physical", "cubature"
 std::string toString(Method method);
 // Throws std::invalid_argument naming the valid methods.
@@ -59,5 +67,8 @@ InitialState parseInitialState(const std::string& name);
 // "linear_modes", "modal_derivatives"
 std::string toString(BasisKind basis);
 BasisKind parseBasis(const std::string& name);
+// "auto", "constraint_modes", "moving_frame"
+std::string toString(HandleFormulation formulation);
+HandleFormulation parseHandleFormulation(const std::string& name);
 
 }  // namespace modal_mass_spring

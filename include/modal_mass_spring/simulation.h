@@ -53,7 +53,21 @@ struct SimulationParams
   int cubature_training_poses = 100;
   double cubature_pose_size = 0.4;
   int cubature_seed = 1;
+  // How the modal methods follow moving handles. constraint_modes: Craig-Bampton (see
+  // setHandleMotion), linear in the handles' displacement, so large turns distort it. moving_frame:
+  // every method simulates the grid in the frame B of the one rigid body that holds every handle
+  // (setHandleFrameMotion), with B's inertial forces and gravity turned into B: exact at any turn,
+  // needs no constraint modes; it needs handles, no fixed particles and handles_one_body. auto: the
+  // moving frame where it applies, else constraint modes.
+  HandleFormulation handle_formulation = HandleFormulation::Auto;
+  // The caller moves every handle together as one rigid body, through setHandleFrameMotion (the node:
+  // all handles name one TF frame).
+  bool handles_one_body = false;
 };
+
+// The formulation a simulation with these parameters uses: auto resolved (ConstraintModes or
+// MovingFrame; ConstraintModes also when there are no handles).
+HandleFormulation resolveHandleFormulation(const GridParams& grid, const SimulationParams& params);
 
 // The cubature training parameters of a simulation's.
 CubatureParams cubatureParams(const SimulationParams& params);
@@ -154,11 +168,36 @@ public:
   // the energy check of a step is off until the next reset(); the state and displacement checks
   // stay. Throws std::invalid_argument for a vector of the wrong size or with a non-finite entry,
   // changing nothing.
+  // With handle_formulation moving_frame the handles move with B only: refused (use
+  // setHandleFrameMotion).
   void setHandleMotion(const Eigen::VectorXd& positions, const Eigen::VectorXd& velocities = {},
                        const Eigen::VectorXd& accelerations = {});
+  // Moves every handle with the one rigid body B that holds them, relative to B's pose at the start
+  // (the handle particles at the linearization point), for the end of the next step, like
+  // setHandleMotion. In the moving frame (handleFormulation()) the grid is simulated in B; with
+  // constraint modes this is setHandleMotion with the handle particles' rigid motion. A 2D grid's
+  // frame may only move in its x-z plane (turn about y). Throws std::invalid_argument for a grid
+  // without handles, a non-finite value, a rotation that is not one (|R^T R - I| or det) or leaves
+  // the plane, changing nothing.
+  void setHandleFrameMotion(const FrameMotion& motion);
+  // B's motion the current state was stepped to (at rest without a moving frame).
+  const FrameMotion& frameMotion() const { return frame_current_; }
+  // Puts B where `motion` says now, for the current state, without a step (the particles move with
+  // it): to carry a state over from another simulation in its frame before setPhysicalState. Without
+  // a moving frame it does nothing; else checked as setHandleFrameMotion.
+  void placeFrame(const FrameMotion& motion);
+  HandleFormulation handleFormulation() const { return formulation_; }
   // The handles' motion the current state was stepped to (displacements from the linearization
   // point); empty vectors: at rest at the linearization point.
   const HandleMotion& handleMotion() const { return handle_current_; }
+  // Where the handle particles are now (absolute, m), over grid().handleDofs().
+  Eigen::VectorXd handlePositions() const;
+  // Puts the handles at these positions, velocities and accelerations now, in the current state (not
+  // at the end of the next step, as setHandleMotion): the free particles stay where they are, and
+  // the next step starts from there. For a simulation that takes over another's run (a rebuild),
+  // before setPhysicalState places the grid around them. Throws as setHandleMotion, changing nothing.
+  void setHandleState(const Eigen::VectorXd& positions, const Eigen::VectorXd& velocities = {},
+                      const Eigen::VectorXd& accelerations = {});
   // The constraint modes Psi = -K_ii^-1 K_ib (built when a modal method is first used with handles;
   // empty before), and K_ib at the linearization point.
   const Eigen::MatrixXd& constraintModes() const { return constraint_modes_; }
@@ -190,16 +229,20 @@ public:
 
   // The generalized state of the current method (u for full, X for the modal methods).
   const State& state() const { return model_->state(); }
-  // Free-dof displacement (from the linearization point) and velocity, whatever the method.
+  // Free-dof displacement (from the linearization point) and velocity, whatever the method, in the
+  // grid's (world) coordinates also in a moving frame.
   Eigen::VectorXd displacement() const;
   Eigen::VectorXd velocity() const;
   // All particle positions as a flat vector (dimension values per particle), and as 3 x N points.
   Eigen::VectorXd positions() const;
   Eigen::Matrix3Xd points() const { return grid_.toPoints(positions()); }
 
+  // Of the world velocities.
   double kineticEnergy() const;
-  // Kinetic + spring + gravity potential energy, from the physical positions.
+  // Kinetic + spring + gravity potential energy, from the physical positions; the second form takes
+  // positions() already reconstructed (O(n r) for a modal method).
   double totalEnergy() const;
+  double totalEnergy(const Eigen::VectorXd& positions) const;
   // The energy the divergence check measures growth against (J): the grid's weight times its
   // larger side, plus the spring and kinetic energy of the start (the last reset or
   // setPhysicalState), plus the energy of every spring stretched by 1% (so that it is never 0).
@@ -218,6 +261,13 @@ private:
   void precompute(const StageFn& on_stage);
   // Loads, or trains and stores, the cubature on the physical basis.
   void prepareCubature();
+  // In a moving frame: a world free-dof displacement and velocity in B and back (identity else).
+  void toBody(Eigen::VectorXd& u, Eigen::VectorXd& v) const;
+  Eigen::VectorXd bodyDisplacement() const { return model_->displacement(model_->state()); }
+  Eigen::VectorXd bodyVelocity() const { return model_->velocity(model_->state()); }
+  FrameForces frameForcesOf(const FrameMotion& motion) const;
+  // Throws std::invalid_argument for a frame motion setHandleFrameMotion refuses.
+  void checkFrameMotion(const FrameMotion& motion) const;
   // Why `next` may not be taken, or empty.
   std::string divergence(bool integrator_ok, const State& next);
 
@@ -253,6 +303,9 @@ private:
   HandleMotion handle_target_;          // where the next step takes them
   bool handle_pending_ = false;         // the target differs from the current motion
   bool handles_moved_ = false;          // a handle left its rest at x_ref since the start of the run
+  HandleFormulation formulation_ = HandleFormulation::ConstraintModes;  // resolved
+  FrameMotion frame_current_, frame_target_;  // B's motion: where the state is, where the next step goes
+  bool frame_pending_ = false;
 };
 
 }  // namespace modal_mass_spring

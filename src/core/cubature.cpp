@@ -16,9 +16,8 @@ namespace modal_mass_spring
 namespace
 {
 
-// Up to 3 entries, never on the heap: per-spring vectors and blocks in the inner loops.
+// Up to 3 entries, never on the heap: per-spring vectors of the training.
 using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 3, 1>;
-using SmallMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, 3, 3>;
 
 // D_s = Phi_j - Phi_i: the spring's vector from i to j changes by D_s X (dim x r; fixed rows are 0).
 // Read from Phi^T, where a dof's row of Phi is contiguous (Phi's rows are strided by n).
@@ -251,6 +250,7 @@ CubatureForceModel::CubatureForceModel(const Grid& grid, const ModalBasis& basis
     diff_.middleRows(t * dim_, dim_) = springRows(grid, phi_t, springs_.back());
   }
   // The exact force at the reference is part of F: it carries the round-off of every spring.
+  diff_t_ = diff_.transpose();
   roundoff_ = modalRoundoff(grid, basis, x_ref);
   setReference(x_ref);
 }
@@ -260,6 +260,8 @@ void CubatureForceModel::setReference(const Eigen::VectorXd& x_ref)
   rest_diff_.resize(diff_.rows());
   for (size_t t = 0; t < springs_.size(); ++t)
     rest_diff_.segment(static_cast<Eigen::Index>(t) * dim_, dim_) = restDiff(grid_, x_ref, springs_[t]);
+  d_modal_.resize(0);
+  f_modal_.resize(0);
   // The exact force and energy at the reference, minus what the cubature gives there.
   Eigen::VectorXd f_all;
   double spring_energy = 0.0;
@@ -273,19 +275,43 @@ void CubatureForceModel::setReference(const Eigen::VectorXd& x_ref)
   cache_.clear();
 }
 
-double CubatureForceModel::weightedSprings(const Eigen::VectorXd& modal, Eigen::VectorXd* f)
+void CubatureForceModel::springVectors(const Eigen::VectorXd& modal)
 {
+  if (d_modal_.size() == modal.size() && d_modal_ == modal)
+    return;
   d_.noalias() = diff_ * modal;
   d_ += rest_diff_;
+  d_modal_ = modal;
+}
+
+// The per-spring work with the dimension fixed at compile time: Eigen's fixed-size vectors keep it on
+// the stack and unrolled (dynamic ones of at most 3 entries cost twice as much here).
+template <int Dim>
+double CubatureForceModel::weightedSpringForces(const Eigen::VectorXd& modal, bool forces)
+{
+  using Vector = Eigen::Matrix<double, Dim, 1>;
+  springVectors(modal);
   fd_.resize(d_.size());
   double energy = 0.0;
   for (size_t t = 0; t < springs_.size(); ++t)
   {
-    const Eigen::Index row = static_cast<Eigen::Index>(t) * dim_;
-    double e = 0.0;
-    fd_.segment(row, dim_) = weights_[static_cast<Eigen::Index>(t)] * springForce(springs_[t], d_.segment(row, dim_), &e);
-    energy += weights_[static_cast<Eigen::Index>(t)] * e;
+    const Eigen::Index row = static_cast<Eigen::Index>(t) * Dim;
+    const Spring& s = springs_[t];
+    const Vector d = d_.segment<Dim>(row);
+    const double l = d.norm();
+    const double stretch = l - s.rest_length;
+    const double tension = weights_[static_cast<Eigen::Index>(t)] * s.stiffness * stretch;  // w_s k_s (l - L)
+    energy += 0.5 * tension * stretch;
+    if (forces)
+      fd_.segment<Dim>(row) = (tension / l) * d;  // w_s times the force on particle i
   }
+  return energy;
+}
+
+double CubatureForceModel::weightedSprings(const Eigen::VectorXd& modal, Eigen::VectorXd* f)
+{
+  const double energy =
+      dim_ == 3 ? weightedSpringForces<3>(modal, f != nullptr) : weightedSpringForces<2>(modal, f != nullptr);
   if (f)
     f->noalias() = -diff_.transpose() * fd_;  // dE_s/dX = D_s^T f_i
   return energy;
@@ -293,9 +319,16 @@ double CubatureForceModel::weightedSprings(const Eigen::VectorXd& modal, Eigen::
 
 void CubatureForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorXd& f)
 {
+  if (f_modal_.size() == modal.size() && f_modal_ == modal)
+  {
+    f = f_;
+    return;
+  }
   const double energy = weightedSprings(modal, &f);
   f += constant_;
   cache_.store(modal, energy + energy_constant_ - constant_.dot(modal));
+  f_modal_ = modal;
+  f_ = f;
 }
 
 double CubatureForceModel::energy(const Eigen::VectorXd& modal)
@@ -306,25 +339,47 @@ double CubatureForceModel::energy(const Eigen::VectorXd& modal)
   return weightedSprings(modal, nullptr) + energy_constant_ - constant_.dot(modal);
 }
 
-void CubatureForceModel::tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k)
+// The blocks w_s K_s D_s, with K_s = k_s (u u^T + (1 - L/l) (I - u u^T)) = a I + b u u^T: so
+// a D_s + b u (u^T D_s), without forming K_s. Built transposed (r x dim per spring, contiguous): a
+// spring's rows of the column-major D are r cache lines apart, which made this loop cost half the product.
+template <int Dim>
+void CubatureForceModel::weightedTangentBlocks()
 {
-  d_.noalias() = diff_ * modal;
-  d_ += rest_diff_;
-  Eigen::MatrixXd weighted(diff_.rows(), diff_.cols());  // blocks w_s K_s D_s
+  using Vector = Eigen::Matrix<double, Dim, 1>;
+  weighted_t_.resize(diff_t_.rows(), diff_t_.cols());
+  d_rows_.resize(diff_t_.rows());
   for (size_t t = 0; t < springs_.size(); ++t)
   {
-    const Eigen::Index row = static_cast<Eigen::Index>(t) * dim_;
+    const Eigen::Index row = static_cast<Eigen::Index>(t) * Dim;
     const Spring& s = springs_[t];
-    const SmallVector d = d_.segment(row, dim_);
+    const Vector d = d_.segment<Dim>(row);
     const double l = d.norm();
-    const SmallVector u = d / l;
-    const SmallMatrix uu = u * u.transpose();
-    const SmallMatrix ke = weights_[static_cast<Eigen::Index>(t)] * s.stiffness *
-                           (uu + (1.0 - s.rest_length / l) * (SmallMatrix::Identity(dim_, dim_) - uu));
-    weighted.middleRows(row, dim_).noalias() = ke * diff_.middleRows(row, dim_);
+    const Vector u = d / l;
+    const double wk = weights_[static_cast<Eigen::Index>(t)] * s.stiffness;
+    const double a = wk * (1.0 - s.rest_length / l);
+    const double b = wk - a;
+    const auto block = diff_t_.middleCols<Dim>(row);  // D_s^T
+    d_rows_.noalias() = block * u;                    // D_s^T u
+    for (int c = 0; c < Dim; ++c)  // column by column: an outer product in a sum would need a temporary
+      weighted_t_.col(row + c) = a * block.col(c) + (b * u[c]) * d_rows_;
   }
-  const Eigen::MatrixXd reduced = diff_.transpose() * weighted;
-  k = reduced.sparseView();
+}
+
+void CubatureForceModel::tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k)
+{
+  springVectors(modal);
+  if (dim_ == 3)
+    weightedTangentBlocks<3>();
+  else
+    weightedTangentBlocks<2>();
+  // D^T (w K D) is symmetric: one triangle is computed, half the product's cost, and mirrored.
+  const Eigen::Index r = diff_.cols();
+  reduced_.resize(r, r);
+  reduced_.triangularView<Eigen::Lower>() = diff_t_ * weighted_t_.transpose();
+  for (Eigen::Index j = 1; j < r; ++j)
+    for (Eigen::Index i = 0; i < j; ++i)
+      reduced_(i, j) = reduced_(j, i);
+  k = reduced_.sparseView();
 }
 
 }  // namespace modal_mass_spring

@@ -92,3 +92,80 @@ RigidPointMotion interpolateRigidMotion(const Eigen::Matrix3Xd& offsets, const F
 }
 
 }  // namespace modal_mass_spring
+
+namespace modal_mass_spring
+{
+namespace
+{
+
+Eigen::Matrix3d cross(const Eigen::Vector3d& w)
+{
+  Eigen::Matrix3d m;
+  m << 0.0, -w.z(), w.y(), w.z(), 0.0, -w.x(), -w.y(), w.x(), 0.0;
+  return m;
+}
+
+}  // namespace
+
+bool FrameMotion::atRest() const
+{
+  return translation.isZero(0.0) && rotation == Eigen::Matrix3d::Identity() && velocity.isZero(0.0) &&
+         acceleration.isZero(0.0) && angular_velocity.isZero(0.0) && angular_acceleration.isZero(0.0);
+}
+
+RigidPointMotion pointMotion(const FrameMotion& frame, const Eigen::Matrix3Xd& points)
+{
+  RigidPointMotion m;
+  const Eigen::Matrix3Xd r = frame.rotation * points;
+  m.position = r.colwise() + frame.translation;
+  m.velocity.resize(3, points.cols());
+  m.acceleration.resize(3, points.cols());
+  const Eigen::Vector3d& w = frame.angular_velocity;
+  for (Eigen::Index k = 0; k < points.cols(); ++k)
+  {
+    m.velocity.col(k) = frame.velocity + w.cross(r.col(k));
+    m.acceleration.col(k) = frame.acceleration + frame.angular_acceleration.cross(r.col(k)) + w.cross(w.cross(r.col(k)));
+  }
+  return m;
+}
+
+FrameMotion interpolateFrameMotion(const FramePose& start, const FramePose& from, const FramePose& to,
+                                   double duration, double s)
+{
+  // The frame's origin c and rotation Q along the path (interpolateRigidMotion of the origin): then
+  // x = c + Q Q_start^-1 (y - c_start), so R = Q Q_start^-1 and p = c - R c_start.
+  const Eigen::Matrix3Xd origin = Eigen::Vector3d::Zero();
+  const RigidPointMotion c = interpolateRigidMotion(origin, from, to, duration, s);
+  Eigen::Quaterniond q0 = from.rotation.normalized(), q1 = to.rotation.normalized();
+  if (q0.dot(q1) < 0.0)
+    q1.coeffs() = -q1.coeffs();
+  const Eigen::AngleAxisd turn(q1 * q0.conjugate());
+  FrameMotion m;
+  m.rotation = (q0.slerp(s, q1) * start.rotation.normalized().conjugate()).toRotationMatrix();
+  m.angular_velocity = turn.angle() * turn.axis() / duration;
+  const Eigen::Vector3d r = m.rotation * start.translation;  // the start's origin, turned
+  const Eigen::Vector3d& w = m.angular_velocity;
+  m.translation = c.position.col(0) - r;
+  m.velocity = c.velocity.col(0) - w.cross(r);
+  m.acceleration = c.acceleration.col(0) - w.cross(w.cross(r));
+  return m;
+}
+
+FrameForces frameForces(const FrameMotion& motion, int dimension, const Eigen::Vector3d& gravity, double alpha)
+{
+  const Eigen::Matrix3d& rt = motion.rotation.transpose();
+  const Eigen::Vector3d w = rt * motion.angular_velocity;
+  const Eigen::Matrix3d spin = cross(w);
+  const Eigen::Vector3d uniform = rt * gravity - gravity - rt * (motion.acceleration + alpha * motion.velocity);
+  const Eigen::Matrix3d position = cross(rt * motion.angular_acceleration) + spin * spin + alpha * spin;
+  const std::vector<int> rows = dimension == 3 ? std::vector<int>{0, 1, 2} : std::vector<int>{0, 2};
+  FrameForces f;
+  f.rotation = motion.rotation(rows, rows);
+  f.uniform = uniform(rows);
+  f.position = position(rows, rows);
+  f.spin = spin(rows, rows);
+  f.none = motion.atRest();
+  return f;
+}
+
+}  // namespace modal_mass_spring

@@ -25,7 +25,21 @@ void Integrator::initialize(ForceModel& model, State& state) const
 {
   Eigen::VectorXd f;
   model.force(state.q, f);
-  state.a = (f - system_.damping * state.v).cwiseQuotient(system_.mass);
+  state.a = (f - dampingForce(state.v)).cwiseQuotient(system_.mass);
+}
+
+void Integrator::setGyroscopic(const SparseMatrix* g)
+{
+  gyroscopic_ = g && g->size() > 0 ? g : nullptr;
+  gyroscopicChanged();
+}
+
+Eigen::VectorXd Integrator::dampingForce(const Eigen::VectorXd& v) const
+{
+  Eigen::VectorXd f = system_.damping * v;
+  if (gyroscopic_)
+    f.noalias() += *gyroscopic_ * v;
+  return f;
 }
 
 ExplicitNewmark::ExplicitNewmark(MassDamping system, double dt) : Integrator(std::move(system), dt)
@@ -47,17 +61,46 @@ ExplicitNewmark::ExplicitNewmark(MassDamping system, double dt) : Integrator(std
   }
 }
 
+Eigen::VectorXd ExplicitNewmark::solve(const Eigen::VectorXd& rhs) const
+{
+  if (diagonal_)
+    return inverse_diagonal_.cwiseProduct(rhs);
+  return ldlt_.solve(rhs);
+}
+
 bool ExplicitNewmark::step(ForceModel& model, const State& s, State& next)
 {
   const Eigen::VectorXd& m = system_.mass;
   next.q = s.q + dt_ * s.v + (0.5 * dt_ * dt_) * s.a;
   model.force(next.q, force_);
   rhs_ = m.cwiseProduct(s.v) + (0.5 * dt_) * (m.cwiseProduct(s.a) + force_);
-  if (diagonal_)
-    next.v = inverse_diagonal_.cwiseProduct(rhs_);
+  if (!gyroscopic_)
+  {
+    next.v = solve(rhs_);
+  }
   else
-    next.v = ldlt_.solve(rhs_);
-  next.a = (force_ - system_.damping * next.v).cwiseQuotient(m);
+  {
+    // From the velocity the start's acceleration predicts, O(dt^2) off, until it stops changing at
+    // round-off; a frame turning so fast that this does not contract (dt |omega| near 1) refuses the
+    // step.
+    next.v = s.v + dt_ * s.a;
+    bool converged = false;
+    for (int iteration = 0; !converged && iteration < kMaxIterations; ++iteration)
+    {
+      gyroscopic_force_.noalias() = *gyroscopic_ * next.v;
+      gyroscopic_force_ = rhs_ - (0.5 * dt_) * gyroscopic_force_;
+      if (diagonal_)
+        velocity_ = inverse_diagonal_.cwiseProduct(gyroscopic_force_);
+      else
+        velocity_ = ldlt_.solve(gyroscopic_force_);
+      const double change = (velocity_ - next.v).norm();
+      converged = change <= 1e-14 * velocity_.norm() || change == 0.0;
+      next.v.swap(velocity_);
+    }
+    if (!converged || !next.v.allFinite())
+      return false;
+  }
+  next.a = (force_ - dampingForce(next.v)).cwiseQuotient(m);
   return true;
 }
 
@@ -78,7 +121,14 @@ ImplicitNewmark::ImplicitNewmark(MassDamping system, double dt, int max_iteratio
   mass_matrix_.resize(system_.mass.size(), system_.mass.size());
   mass_matrix_.setIdentity();
   mass_matrix_ = system_.mass.asDiagonal() * mass_matrix_;
+  damping_ = system_.damping;
   setStepSize(dt_);
+}
+
+void ImplicitNewmark::gyroscopicChanged()
+{
+  damping_ = gyroscopic_ ? SparseMatrix(system_.damping + *gyroscopic_) : system_.damping;
+  h_ = 0.0;  // the inertia term holds C + G: built again at the next step
 }
 
 void ImplicitNewmark::setStepSize(double h)
@@ -86,7 +136,7 @@ void ImplicitNewmark::setStepSize(double h)
   if (h == h_)
     return;
   h_ = h;
-  inertia_ = (1.0 / (beta_ * h * h)) * mass_matrix_ + ((1.0 + alpha_) * gamma_ / (beta_ * h)) * system_.damping;
+  inertia_ = (1.0 / (beta_ * h * h)) * mass_matrix_ + ((1.0 + alpha_) * gamma_ / (beta_ * h)) * damping_;
 }
 
 bool ImplicitNewmark::step(ForceModel& model, const State& s, State& next)
@@ -143,7 +193,7 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
   if (alpha_ != 0.0)
   {
     model.force(s.q, force_);
-    old_terms_ = alpha_ * (system_.damping * s.v - force_);
+    old_terms_ = alpha_ * (damping_ * s.v - force_);
   }
   // Predictor: constant velocity. The explicit extrapolation, with a step far past the explicit
   // bound, lands too far away.
@@ -153,14 +203,15 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
   //           + (1 + alpha) (E(q') + (C (v + h (1 - gamma) a)) . q') - alpha (C v - F(q)) . q',
   // so a Newton direction that descends G, found with a line search on G, converges from far away.
   const Eigen::VectorXd linear_term =
-      (1.0 + alpha_) * (system_.damping * (s.v + (h_ * (1.0 - gamma_)) * s.a)) - old_terms_;
+      (1.0 + alpha_) * (damping_ * (s.v + (h_ * (1.0 - gamma_)) * s.a)) - old_terms_;
   auto incremental = [&](const Eigen::VectorXd& q) {
     const Eigen::VectorXd dy = q - predicted_;
-    return (dy.dot(system_.mass.cwiseProduct(dy)) + (1.0 + alpha_) * gamma_ * h_ * dy.dot(system_.damping * dy)) /
+    return (dy.dot(system_.mass.cwiseProduct(dy)) + (1.0 + alpha_) * gamma_ * h_ * dy.dot(damping_ * dy)) /
                (2.0 * beta_ * h_ * h_) +
            (1.0 + alpha_) * model.energy(q) + linear_term.dot(q);
   };
 
+  const bool symmetric = !gyroscopic_ && model.isSymmetric();
   for (last_iterations_ = 1; last_iterations_ <= max_iterations_; ++last_iterations_)
   {
     const double residual_norm = residual(model, s, next);
@@ -170,24 +221,7 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
     if (residual_norm <= tolerance_ * (force_.norm() + inertial_norm_) + roundoff(model, next))
       return true;
 
-    Eigen::VectorXd delta;
-    // The exact tangent; where compressed springs make the Jacobian indefinite, more of the
-    // (positive) inertia is added until it is positive definite, so the direction descends G.
-    model.tangentStiffness(next.q, tangent_);
-    for (double extra = 0.0; extra < 1e8; extra = std::max(1e-3, 10.0 * extra))
-    {
-      SparseMatrix jacobian = (1.0 + extra) * inertia_ + (1.0 + alpha_) * tangent_;
-      jacobian.makeCompressed();
-      analyzeIfNewPattern(jacobian);
-      ldlt_.factorize(jacobian);
-      if (ldlt_.info() == Eigen::Success && ldlt_.vectorD().minCoeff() > 0.0)
-      {
-        delta = -ldlt_.solve(residual_);
-        break;
-      }
-    }
-    if (delta.size() > 0 && (!delta.allFinite() || residual_.dot(delta) >= 0.0))
-      delta.resize(0);
+    Eigen::VectorXd delta = direction(model, next, symmetric);
     if (delta.size() == 0)
       return false;
     // Also converged when the Newton correction is negligible against the step's own motion: with
@@ -200,12 +234,18 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
     }
 
     const Eigen::VectorXd start = next.q;
-    const double g0 = incremental(start);
+    const double g0 = symmetric ? incremental(start) : 0.0;
     const double slope = residual_.dot(delta);
     bool accepted = false;
     for (double fraction = 1.0; fraction > 1e-6 && !accepted; fraction *= 0.5)
     {
       next.q = start + fraction * delta;
+      if (!symmetric)
+      {
+        // No potential: a residual smaller in proportion to the step.
+        accepted = residual(model, s, next) <= (1.0 - 1e-4 * fraction) * residual_norm;
+        continue;
+      }
       // Armijo on G; only where the expected decrease drowns in G's round-off, a smaller residual.
       const double expected = fraction * slope;
       const bool roundoff = std::abs(expected) < 1e-12 * (std::abs(g0) + 1e-300);
@@ -224,6 +264,50 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
   return false;
 }
 
+Eigen::VectorXd ImplicitNewmark::direction(ForceModel& model, const State& next, bool symmetric)
+{
+  Eigen::VectorXd delta;
+  model.tangentStiffness(next.q, tangent_);
+  if (!symmetric)
+  {
+    SparseMatrix jacobian = inertia_ + (1.0 + alpha_) * tangent_;
+    jacobian.makeCompressed();
+    const int* outer = jacobian.outerIndexPtr();
+    const int* inner = jacobian.innerIndexPtr();
+    const size_t num_outer = jacobian.outerSize() + 1, num_inner = jacobian.nonZeros();
+    if (lu_outer_.size() != num_outer || lu_inner_.size() != num_inner ||
+        !std::equal(outer, outer + num_outer, lu_outer_.begin()) || !std::equal(inner, inner + num_inner, lu_inner_.begin()))
+    {
+      lu_.analyzePattern(jacobian);
+      lu_outer_.assign(outer, outer + num_outer);
+      lu_inner_.assign(inner, inner + num_inner);
+    }
+    lu_.factorize(jacobian);
+    if (lu_.info() == Eigen::Success)
+      delta = -lu_.solve(residual_);
+    if (delta.size() > 0 && !delta.allFinite())
+      delta.resize(0);
+    return delta;
+  }
+  // The exact tangent; where compressed springs make the Jacobian indefinite, more of the
+  // (positive) inertia is added until it is positive definite, so the direction descends G.
+  for (double extra = 0.0; extra < 1e8; extra = std::max(1e-3, 10.0 * extra))
+  {
+    SparseMatrix jacobian = (1.0 + extra) * inertia_ + (1.0 + alpha_) * tangent_;
+    jacobian.makeCompressed();
+    analyzeIfNewPattern(jacobian);
+    ldlt_.factorize(jacobian);
+    if (ldlt_.info() == Eigen::Success && ldlt_.vectorD().minCoeff() > 0.0)
+    {
+      delta = -ldlt_.solve(residual_);
+      break;
+    }
+  }
+  if (delta.size() > 0 && (!delta.allFinite() || residual_.dot(delta) >= 0.0))
+    delta.resize(0);
+  return delta;
+}
+
 double ImplicitNewmark::roundoff(const ForceModel& model, const State& next) const
 {
   // a' = (q' - y) / (beta h^2) differences nearly equal numbers: its round-off is about
@@ -238,7 +322,7 @@ double ImplicitNewmark::residual(ForceModel& model, const State& s, State& next)
   kinematics(s, next);
   model.force(next.q, force_);
   force_ *= 1.0 + alpha_;
-  residual_ = system_.mass.cwiseProduct(next.a) + (1.0 + alpha_) * (system_.damping * next.v);
+  residual_ = system_.mass.cwiseProduct(next.a) + (1.0 + alpha_) * (damping_ * next.v);
   inertial_norm_ = residual_.norm();
   residual_ -= force_ + old_terms_;
   return residual_.norm();

@@ -28,9 +28,10 @@ MethodModel::MethodModel(Method method, const LinearizedGrid& linearized, std::u
 void MethodModel::setExternalForce(const Eigen::VectorXd& f_free)
 {
   if (f_free.size() == 0 || f_free.isZero(0.0))
-    external_load_.resize(0);
+    external_free_.resize(0);
   else
-    external_load_ = generalizedForce(f_free);
+    external_free_ = f_free;
+  external_load_ = external_free_.size() > 0 ? generalizedForce(bodyExternalForce()) : Eigen::VectorXd();
   updateLoad();
   if (state_.q.size() > 0)
     integrator_->initialize(loaded_, state_);
@@ -44,12 +45,43 @@ void MethodModel::setHandleLoad(const Eigen::VectorXd& load)
 
 void MethodModel::updateLoad()
 {
-  if (handle_load_.size() == 0)
-    loaded_.setLoad(external_load_);
-  else if (external_load_.size() == 0)
-    loaded_.setLoad(handle_load_);
-  else
-    loaded_.setLoad(external_load_ + handle_load_);
+  Eigen::VectorXd load;
+  for (const Eigen::VectorXd* part : {&external_load_, &handle_load_, &frame_load_})
+    if (part->size() > 0)
+      load = load.size() > 0 ? Eigen::VectorXd(load + *part) : *part;
+  loaded_.setLoad(load);
+}
+
+Eigen::VectorXd MethodModel::bodyExternalForce() const
+{
+  if (frame_.none || external_free_.size() == 0)
+    return external_free_;
+  // A particle's free dofs are consecutive: R^T per particle.
+  const int dim = lin_.grid.dimension();
+  Eigen::VectorXd f = external_free_;
+  for (Eigen::Index k = 0; k + dim <= f.size(); k += dim)
+    if (!f.segment(k, dim).isZero(0.0))
+      f.segment(k, dim) = frame_.rotation.transpose() * external_free_.segment(k, dim);
+  return f;
+}
+
+void MethodModel::setFrameForces(const FrameForces& frame)
+{
+  frame_ = frame;
+  applyFrame();
+}
+
+void MethodModel::applyFrame()
+{
+  frame_load_.resize(0);
+  // At rest B adds nothing: the results are those of a grid held still, to the last bit.
+  if (!frame_.none)
+    frameTerms(frame_, frame_load_, frame_linear_, frame_gyroscopic_);
+  loaded_.setLinearTerm(frame_.none ? nullptr : &frame_linear_);
+  integrator_->setGyroscopic(frame_.none ? nullptr : &frame_gyroscopic_);
+  if (external_free_.size() > 0)
+    external_load_ = generalizedForce(bodyExternalForce());
+  updateLoad();
 }
 
 void MethodModel::configure(const IntegratorSettings& settings)
@@ -61,6 +93,7 @@ void MethodModel::configure(const IntegratorSettings& settings)
                                                     settings.hht_alpha);
   else
     integrator_ = std::make_unique<ExplicitNewmark>(std::move(system), settings.time_step);
+  integrator_->setGyroscopic(frame_.none ? nullptr : &frame_gyroscopic_);
   if (state_.q.size() > 0)
     integrator_->initialize(loaded_, state_);
 }
@@ -102,6 +135,43 @@ void FullMethod::setHandleMotion(const HandleMotion& motion)
     setHandleLoad(-settings_.beta * (*lin_.handle_coupling * motion.velocity));
   else
     setHandleLoad(Eigen::VectorXd());
+}
+
+void FullMethod::frameTerms(const FrameForces& frame, Eigen::VectorXd& load, SparseMatrix& linear,
+                            SparseMatrix& gyroscopic)
+{
+  const int dim = lin_.grid.dimension();
+  const Eigen::Index n = lin_.mass.size();
+  // One dim x dim block per particle, every entry stored: built once, then only its values change.
+  if (linear.rows() != n || gyroscopic.rows() != n)
+  {
+    y_ref_ = lin_.grid.gatherFree(lin_.x_ref);
+    std::vector<Eigen::Triplet<double>> blocks;
+    blocks.reserve(n * dim);
+    for (Eigen::Index p = 0; p + dim <= n; p += dim)
+      for (int c = 0; c < dim; ++c)
+        for (int r = 0; r < dim; ++r)
+          blocks.emplace_back(p + r, p + c, 1.0);
+    linear.resize(n, n);
+    linear.setFromTriplets(blocks.begin(), blocks.end());
+    gyroscopic = linear;
+  }
+  load.resize(n);
+  double* l = linear.valuePtr();
+  double* g = gyroscopic.valuePtr();
+  for (Eigen::Index p = 0; p + dim <= n; p += dim)
+  {
+    const double m = lin_.mass[p];
+    load.segment(p, dim) = m * frame.uniform;
+    // Column p + c holds rows p .. p + dim - 1, in order.
+    for (int c = 0; c < dim; ++c)
+      for (int r = 0; r < dim; ++r)
+      {
+        l[(p + c) * dim + r] = m * frame.position(r, c);
+        g[(p + c) * dim + r] = 2.0 * m * frame.spin(r, c);
+      }
+  }
+  load.noalias() -= linear * y_ref_;  // the linear force at q = 0: the positions of x_ref in B
 }
 
 double FullMethod::kineticEnergy(const State& s) const { return 0.5 * s.v.cwiseAbs2().dot(lin_.mass); }
@@ -164,6 +234,75 @@ void ModalMethod::setOffset(const Eigen::VectorXd& offset)
   updateReference();
   if (anchor_.size() > 0)
     setAnchor(anchor_);
+  if (frame_projection_)
+  {
+    frame_projection_->w_stale = true;
+    applyFrame();  // the frame's forces at q = 0 act at x_ref + offset
+  }
+}
+
+void ModalMethod::projectFrame()
+{
+  const int dim = lin_.grid.dimension();
+  const Eigen::MatrixXd& phi = lin_.basis.phi;
+  const Eigen::Index particles = phi.rows() / dim;
+  // A particle's free dofs are consecutive: component j is every dim-th row from j.
+  auto component = [&](const auto& dense, int j) { return Eigen::MatrixXd(dense(Eigen::seqN(j, particles, dim), Eigen::all)); };
+  if (!frame_projection_)
+  {
+    frame_projection_ = std::make_unique<FrameProjection>();
+    FrameProjection& f = *frame_projection_;
+    for (int j = 0; j < dim; ++j)
+    {
+      const Eigen::MatrixXd weighted = component(lin_.mass, j).asDiagonal() * component(phi, j);
+      f.u.push_back(weighted.colwise().sum().transpose());
+      for (int k = 0; k < dim; ++k)
+        f.s.push_back(weighted.transpose() * component(phi, k));
+    }
+  }
+  FrameProjection& f = *frame_projection_;
+  if (!f.w_stale)
+    return;
+  const Eigen::VectorXd y = lin_.grid.gatherFree(lin_.x_ref) + offset_;
+  f.w.clear();
+  for (int j = 0; j < dim; ++j)
+  {
+    const Eigen::MatrixXd weighted = component(lin_.mass, j).asDiagonal() * component(phi, j);
+    for (int k = 0; k < dim; ++k)
+      f.w.push_back(weighted.transpose() * component(y, k));
+  }
+  f.w_stale = false;
+}
+
+void ModalMethod::frameTerms(const FrameForces& frame, Eigen::VectorXd& load, SparseMatrix& linear,
+                             SparseMatrix& gyroscopic)
+{
+  projectFrame();
+  const FrameProjection& f = *frame_projection_;
+  const int dim = lin_.grid.dimension();
+  const Eigen::Index r = lin_.basis.phi.cols();
+  load.setZero(r);
+  // Dense r x r, stored with every entry: the values of a full column-major pattern are the dense
+  // matrix itself, written in place step after step.
+  if (linear.rows() != r || gyroscopic.rows() != r)
+  {
+    linear = Eigen::MatrixXd::Ones(r, r).sparseView();
+    gyroscopic = linear;
+  }
+  Eigen::Map<Eigen::MatrixXd> l(linear.valuePtr(), r, r), g(gyroscopic.valuePtr(), r, r);
+  l.setZero();
+  g.setZero();
+  // Phi^T M (uniform - position y) = sum_j uniform_j U_j - sum_jk position_jk (W_jk + S_jk X).
+  for (int j = 0; j < dim; ++j)
+  {
+    load += frame.uniform[j] * f.u[j];
+    for (int k = 0; k < dim; ++k)
+    {
+      load -= frame.position(j, k) * f.w[j * dim + k];
+      l += frame.position(j, k) * f.s[j * dim + k];
+      g += (2.0 * frame.spin(j, k)) * f.s[j * dim + k];
+    }
+  }
 }
 
 void ModalMethod::updateReference()

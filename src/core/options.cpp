@@ -24,6 +24,7 @@ const std::vector<std::string> kLinearizations{"rest", "equilibrium"};
 const std::vector<std::string> kIntegrators{"explicit", "implicit"};
 const std::vector<std::string> kInitialStates{"initial", "equilibrium"};
 const std::vector<std::string> kBases{"linear_modes", "modal_derivatives"};
+const std::vector<std::string> kHandleFormulations{"auto", "constraint_modes", "moving_frame"};
 
 }  // namespace
 
@@ -53,5 +54,11 @@ InitialState parseInitialState(const std::string& name)
 
 std::string toString(BasisKind value) { return kBases[static_cast<int>(value)]; }
 BasisKind parseBasis(const std::string& name) { return static_cast<BasisKind>(parseName("basis", name, kBases)); }
+
+std::string toString(HandleFormulation value) { return kHandleFormulations[static_cast<int>(value)]; }
+HandleFormulation parseHandleFormulation(const std::string& name)
+{
+  return static_cast<HandleFormulation>(parseName("handle_formulation", name, kHandleFormulations));
+}
 
 }  // namespace modal_mass_spring

@@ -133,6 +133,23 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
                     "must be a finite number of metres > 0 (the largest particle displacement of a training pose)");
   if (p.cubature_seed < 0)
     rejectParameter("cubature_seed", p.cubature_seed, "must be an integer >= 0");
+  if (p.handle_formulation == HandleFormulation::MovingFrame)
+  {
+    const std::string value = "moving_frame";
+    if (grid.handles.empty())
+      rejectParameter("handle_formulation", value,
+                      "needs handles (the grid has none); allowed without handles: auto or constraint_modes");
+    const std::vector<int> fixed = effectiveFixed(grid);
+    if (!fixed.empty())
+      rejectParameter("handle_formulation", value,
+                      "needs a grid with no fixed particles (it has " + std::to_string(fixed.size()) +
+                          "): a fixed particle cannot move with the frame; hold it with the handle (fixed: [] and "
+                          "handles) or use constraint_modes or auto");
+    if (!p.handles_one_body)
+      rejectParameter("handle_formulation", value,
+                      "needs every handle moved as one rigid body (handles_one_body; in the node: every handle on "
+                      "one TF frame); handles moving apart need constraint_modes or auto");
+  }
   if (!std::isfinite(p.memory_limit_gb) || p.memory_limit_gb <= 0.0)
     rejectParameter("memory_limit_gb", p.memory_limit_gb, "must be a finite number of GB > 0");
   const double needed_gb = estimateMemoryBytes(grid, p) / 1e9;
@@ -146,6 +163,15 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
             << " GB; use a smaller grid or fewer modes, or raise memory_limit_gb if the machine has the memory";
     rejectParameter("rows, cols, num_modes", value.str(), allowed.str());
   }
+}
+
+HandleFormulation resolveHandleFormulation(const GridParams& grid, const SimulationParams& params)
+{
+  if (params.handle_formulation == HandleFormulation::Auto)
+    return !grid.handles.empty() && effectiveFixed(grid).empty() && params.handles_one_body
+               ? HandleFormulation::MovingFrame
+               : HandleFormulation::ConstraintModes;
+  return params.handle_formulation;
 }
 
 double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
@@ -209,6 +235,7 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
   : grid_((validateParameters(grid_params, params), grid_params)), params_(params), cache_(cache)
 {
   const GridParams& g = grid_.params();
+  formulation_ = resolveHandleFormulation(g, params_);
   limit_ = params_.divergence_limit > 0.0 ? params_.divergence_limit
                                           : 100.0 * g.spacing * std::max(g.rows, g.cols);
   precompute(on_stage);
@@ -357,9 +384,11 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
   const ModalBasis& basis = method == Method::Linear ? basis_ : physical_basis_;
   if (method == Method::Cubature)
     prepareCubature();
-  // The modal methods carry the handles' static influence with the constraint modes.
+  // The modal methods carry the handles' static influence with the constraint modes; in the moving
+  // frame the handles never leave x_ref and the fixed-interface modes are the whole basis.
   const bool handles = grid_.numHandleDofs() > 0;
-  if (handles && method != Method::Full && constraint_modes_.size() == 0)
+  const bool moving_frame = formulation_ == HandleFormulation::MovingFrame;
+  if (handles && !moving_frame && method != Method::Full && constraint_modes_.size() == 0)
     constraint_modes_ = modal_mass_spring::constraintModes(stiffness_, handle_coupling_);
   const LinearizedGrid linearized{grid_,
                                   basis,
@@ -373,6 +402,8 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
   params_.method = method;
   if (handles)
     model_->setHandleMotion(handle_current_);
+  if (moving_frame)
+    model_->setFrameForces(frameForcesOf(frame_current_));
   model_->setExternalForce(grid_.gatherFree(external_force_));
   projection_error_ = model_->assign(u, v, remainder);
   model_->setAnchor(anchor_);
@@ -385,19 +416,21 @@ void Simulation::setMethod(Method method)
   // The energy measures differ between methods (linear conserves its quadratic model's): the rise
   // since the start carries over, so that switching back and forth never resets the check.
   const double rise = methodEnergy() - start_energy_;
-  install(method, displacement(), velocity(), Remainder::Keep);
+  install(method, bodyDisplacement(), bodyVelocity(), Remainder::Keep);
   start_energy_ = methodEnergy() - rise;
 }
 
-void Simulation::setPhysicalState(const Eigen::VectorXd& u, const Eigen::VectorXd& v)
+void Simulation::setPhysicalState(const Eigen::VectorXd& u_world, const Eigen::VectorXd& v_world)
 {
+  Eigen::VectorXd u = u_world, v = v_world;
+  toBody(u, v);
   anchor_ = u;
   install(params_.method, u, v, Remainder::Drop);
   // Distances are measured from the start as this method holds it: a modal method's projection of a
   // start far outside its modes has not diverged by being where the projection put it.
-  anchor_ = displacement();
+  anchor_ = bodyDisplacement();
   model_->setAnchor(anchor_);
-  handles_moved_ = !handle_current_.atRest();
+  handles_moved_ = !handle_current_.atRest() || !frame_current_.atRest();
   start_energy_ = methodEnergy();
   energy_scale_ = base_energy_scale_ + kineticEnergy() + springEnergy(grid_, positions());
 }
@@ -443,6 +476,10 @@ void Simulation::setHandleMotion(const Eigen::VectorXd& positions, const Eigen::
       if (!std::isfinite(values[k]))
         rejectParameter(name, "a non-finite value on handle dof " + std::to_string(k), "must be finite");
   };
+  if (formulation_ == HandleFormulation::MovingFrame)
+    rejectParameter("handle positions", std::to_string(positions.size()) + " values",
+                    "the handles move as one rigid body in the moving frame (handle_formulation: moving_frame): "
+                    "prescribe that body's motion with setHandleFrameMotion");
   check("handle positions", positions, false);
   check("handle velocities", velocities, true);
   check("handle accelerations", accelerations, true);
@@ -456,26 +493,144 @@ void Simulation::setHandleMotion(const Eigen::VectorXd& positions, const Eigen::
   handle_pending_ = true;
 }
 
+void Simulation::placeFrame(const FrameMotion& m)
+{
+  if (formulation_ != HandleFormulation::MovingFrame)
+    return;
+  checkFrameMotion(m);
+  frame_current_ = frame_target_ = m;
+  frame_pending_ = false;
+  // The same state in B, its acceleration from B's new forces.
+  install(params_.method, bodyDisplacement(), bodyVelocity(), Remainder::Keep);
+  handles_moved_ = handles_moved_ || !m.atRest();
+}
+
+void Simulation::checkFrameMotion(const FrameMotion& m) const
+{
+  if (grid_.numHandleDofs() == 0)
+    rejectParameter("handle frame motion", "a frame", "the grid has no handles to move");
+  const std::vector<std::pair<std::string, Eigen::VectorXd>> parts{
+      {"translation", m.translation},         {"velocity", m.velocity},
+      {"acceleration", m.acceleration},       {"angular velocity", m.angular_velocity},
+      {"angular acceleration", m.angular_acceleration}, {"rotation", m.rotation.reshaped()}};
+  for (const auto& [name, values] : parts)
+    if (!values.allFinite())
+      rejectParameter("handle frame " + name, "a non-finite value", "must be finite");
+  const double orthogonality = (m.rotation.transpose() * m.rotation - Eigen::Matrix3d::Identity()).norm();
+  if (orthogonality > 1e-9 || m.rotation.determinant() <= 0.0)
+  {
+    std::ostringstream value;
+    value << "|R^T R - I| = " << orthogonality << ", det R = " << m.rotation.determinant();
+    rejectParameter("handle frame rotation", value.str(), "must be a rotation (R^T R = I to 1e-9, det R = 1)");
+  }
+  if (grid_.dimension() == 2)
+  {
+    // Only a turn about y keeps the x-z plane; a 2D grid has no y to move along, which is dropped.
+    const double scale = 1.0 + m.angular_velocity.norm() + m.angular_acceleration.norm();
+    const double off_plane = std::abs(m.rotation(0, 1)) + std::abs(m.rotation(1, 0)) + std::abs(m.rotation(1, 2)) +
+                             std::abs(m.rotation(2, 1)) +
+                             (std::abs(m.angular_velocity.x()) + std::abs(m.angular_velocity.z()) +
+                              std::abs(m.angular_acceleration.x()) + std::abs(m.angular_acceleration.z())) /
+                                 scale;
+    if (off_plane > 1e-9)
+      rejectParameter("handle frame rotation", "a turn out of the x-z plane",
+                      "a 2D grid's frame may only turn about y (its plane's normal)");
+  }
+}
+
+void Simulation::setHandleFrameMotion(const FrameMotion& m)
+{
+  checkFrameMotion(m);
+  if (formulation_ == HandleFormulation::MovingFrame)
+  {
+    frame_target_ = m;
+    frame_pending_ = true;
+    return;
+  }
+  // Constraint modes: the handle particles' rigid motion.
+  const int dim = grid_.dimension();
+  const std::vector<int> rows = dim == 3 ? std::vector<int>{0, 1, 2} : std::vector<int>{0, 2};
+  const std::vector<int>& dofs = grid_.handleDofs();
+  const Eigen::Index n = static_cast<Eigen::Index>(dofs.size()) / dim;
+  const Eigen::Matrix3Xd all = grid_.toPoints(x_ref_);
+  Eigen::Matrix3Xd points(3, n);
+  for (Eigen::Index p = 0; p < n; ++p)
+    points.col(p) = all.col(dofs[dim * p] / dim);
+  const RigidPointMotion motion = pointMotion(m, points);
+  Eigen::VectorXd x(dofs.size()), v(dofs.size()), a(dofs.size());
+  for (Eigen::Index p = 0; p < n; ++p)
+    for (int c = 0; c < dim; ++c)
+    {
+      x[dim * p + c] = motion.position(rows[c], p);
+      v[dim * p + c] = motion.velocity(rows[c], p);
+      a[dim * p + c] = motion.acceleration(rows[c], p);
+    }
+  setHandleMotion(x, v, a);
+}
+
+FrameForces Simulation::frameForcesOf(const FrameMotion& motion) const
+{
+  return frameForces(motion, grid_.dimension(), grid_.params().gravity, params_.alpha);
+}
+
+Eigen::VectorXd Simulation::handlePositions() const
+{
+  const std::vector<int>& dofs = grid_.handleDofs();
+  Eigen::VectorXd x(static_cast<Eigen::Index>(dofs.size()));
+  for (size_t k = 0; k < dofs.size(); ++k)
+    x[static_cast<Eigen::Index>(k)] = x_ref_[dofs[k]];
+  if (handle_current_.displacement.size() > 0)
+    x += handle_current_.displacement;
+  return x;
+}
+
+void Simulation::setHandleState(const Eigen::VectorXd& positions, const Eigen::VectorXd& velocities,
+                                const Eigen::VectorXd& accelerations)
+{
+  setHandleMotion(positions, velocities, accelerations);  // checks them
+  const Eigen::VectorXd u = displacement(), v = velocity();
+  handle_current_ = handle_target_;
+  handle_pending_ = false;
+  // Once a handle has moved it can do work on the grid: the energy check stays off.
+  handles_moved_ = handles_moved_ || !handle_current_.atRest();
+  // The method splits the same free-dof motion again around the handles' new place (a divergence
+  // stays: only a reset or a method switch clears it).
+  const double rise = methodEnergy() - start_energy_;
+  const bool diverged = diverged_;
+  const std::string message = divergence_message_;
+  install(params_.method, u, v, Remainder::Keep);
+  diverged_ = diverged;
+  divergence_message_ = message;
+  start_energy_ = methodEnergy() - rise;
+}
+
 void Simulation::reset()
 {
   // The handles go back to rest at the linearization point with the grid.
   handle_current_ = handle_target_ = HandleMotion{};
   handle_pending_ = false;
+  frame_current_ = frame_target_ = FrameMotion{};
+  frame_pending_ = false;
   setPhysicalState(u_start_, Eigen::VectorXd::Zero(u_start_.size()));
   step_count_ = 0;
 }
 
 std::string Simulation::divergence(bool integrator_ok, const State& next)
 {
+  if (!integrator_ok && params_.integrator == IntegratorKind::Explicit)
+    return "the explicit scheme's velocity with the Coriolis forces of the turning handle frame did not converge: "
+           "the frame turns too fast for time_step (time_step times its angular velocity must stay well below 1)";
   if (!integrator_ok)
     return "the implicit Newton iteration did not converge in newton_max_iterations = " +
            std::to_string(params_.newton_max_iterations) + ", even in 1/16 of the step";
   if (!next.q.allFinite() || !next.v.allFinite() || !next.a.allFinite())
     return "non-finite state";
+  // O(r) for a modal method, like the energy below (the force evaluation of the step left it cached):
+  // nothing here grows with the grid. The message is built only for a step that fails.
   const double distance = std::sqrt(model_->anchorDistanceSquared(next.q) / total_mass_);
-  std::ostringstream msg;
   if (distance > limit_)
   {
+    std::ostringstream msg;
     msg << "mass-weighted RMS displacement from the start " << distance << " m beyond divergence_limit " << limit_
         << " m";
     return msg.str();
@@ -487,6 +642,7 @@ std::string Simulation::divergence(bool integrator_ok, const State& next)
   const double energy = model_->energy(next);
   if (!std::isfinite(energy) || energy > start_energy_ + params_.energy_tolerance * energy_scale_)
   {
+    std::ostringstream msg;
     msg << "energy " << energy << " J rose above its start " << start_energy_ << " J by more than energy_tolerance "
         << params_.energy_tolerance << " x the energy scale " << energy_scale_ << " J";
     return msg.str();
@@ -513,12 +669,20 @@ StepResult Simulation::step(int steps)
       model_->setHandleMotion(handle_target_);
       handles_moved_ = handles_moved_ || !handle_target_.atRest();
     }
+    const bool turning = frame_pending_;
+    if (turning)
+    {
+      model_->setFrameForces(frameForcesOf(frame_target_));
+      handles_moved_ = handles_moved_ || !frame_target_.atRest();
+    }
     const bool ok = model_->step();
     const std::string why = divergence(ok, model_->next());
     if (!why.empty())
     {
       if (moving)
         model_->setHandleMotion(handle_current_);  // the last good state, with its handles
+      if (turning)
+        model_->setFrameForces(frameForcesOf(frame_current_));
       diverged_ = true;
       result.diverged = true;
       std::ostringstream msg;
@@ -538,15 +702,74 @@ StepResult Simulation::step(int steps)
       handle_current_ = handle_target_;
       handle_pending_ = false;
     }
+    if (turning)
+    {
+      frame_current_ = frame_target_;
+      frame_pending_ = false;
+    }
     ++step_count_;
     ++result.steps_taken;
   }
   return result;
 }
 
-Eigen::VectorXd Simulation::displacement() const { return model_->displacement(model_->state()); }
+namespace
+{
 
-Eigen::VectorXd Simulation::velocity() const { return model_->velocity(model_->state()); }
+// B's translation, its velocity and the angular velocity in the grid's coordinates (x, z in 2D).
+struct PlanarFrame
+{
+  Eigen::MatrixXd rotation, spin;
+  Eigen::VectorXd translation, velocity;
+};
+
+PlanarFrame restrict(const FrameMotion& m, int dim)
+{
+  const std::vector<int> rows = dim == 3 ? std::vector<int>{0, 1, 2} : std::vector<int>{0, 2};
+  Eigen::Matrix3d spin;
+  const Eigen::Vector3d& w = m.angular_velocity;
+  spin << 0.0, -w.z(), w.y(), w.z(), 0.0, -w.x(), -w.y(), w.x(), 0.0;
+  return PlanarFrame{m.rotation(rows, rows), spin(rows, rows), m.translation(rows), m.velocity(rows)};
+}
+
+}  // namespace
+
+void Simulation::toBody(Eigen::VectorXd& u, Eigen::VectorXd& v) const
+{
+  if (formulation_ != HandleFormulation::MovingFrame || frame_current_.atRest())
+    return;
+  // y = R^T (x - p), y' = R^T (x' - p' - omega x (x - p)).
+  const int dim = grid_.dimension();
+  const PlanarFrame f = restrict(frame_current_, dim);
+  const Eigen::VectorXd x_ref = grid_.gatherFree(x_ref_);
+  for (Eigen::Index p = 0; p + dim <= u.size(); p += dim)
+  {
+    const Eigen::VectorXd r = x_ref.segment(p, dim) + u.segment(p, dim) - f.translation;
+    u.segment(p, dim) = f.rotation.transpose() * r - x_ref.segment(p, dim);
+    v.segment(p, dim) = f.rotation.transpose() * (v.segment(p, dim) - f.velocity - f.spin * r);
+  }
+}
+
+Eigen::VectorXd Simulation::displacement() const
+{
+  if (formulation_ != HandleFormulation::MovingFrame || frame_current_.atRest())
+    return bodyDisplacement();
+  return grid_.gatherFree(positions() - x_ref_);
+}
+
+Eigen::VectorXd Simulation::velocity() const
+{
+  if (formulation_ != HandleFormulation::MovingFrame || frame_current_.atRest())
+    return bodyVelocity();
+  // x' = p' + omega x R y + R y'.
+  const int dim = grid_.dimension();
+  const PlanarFrame f = restrict(frame_current_, dim);
+  const Eigen::VectorXd y = grid_.gatherFree(x_ref_) + bodyDisplacement();
+  Eigen::VectorXd v = bodyVelocity();
+  for (Eigen::Index p = 0; p + dim <= v.size(); p += dim)
+    v.segment(p, dim) = f.velocity + f.spin * (f.rotation * y.segment(p, dim)) + f.rotation * v.segment(p, dim);
+  return v;
+}
 
 Eigen::VectorXd Simulation::positions() const
 {
@@ -554,17 +777,31 @@ Eigen::VectorXd Simulation::positions() const
   if (handle_current_.displacement.size() > 0)
     for (int k = 0; k < grid_.numHandleDofs(); ++k)
       x[grid_.handleDofs()[k]] += handle_current_.displacement[k];
-  grid_.addFree(displacement(), x);
+  grid_.addFree(bodyDisplacement(), x);
+  if (formulation_ == HandleFormulation::MovingFrame && !frame_current_.atRest())
+  {
+    // x = p + R y, every particle (the handles' with them).
+    const int dim = grid_.dimension();
+    const PlanarFrame f = restrict(frame_current_, dim);
+    for (Eigen::Index p = 0; p + dim <= x.size(); p += dim)
+      x.segment(p, dim) = f.translation + f.rotation * x.segment(p, dim);
+  }
   return x;
 }
 
-double Simulation::kineticEnergy() const { return model_->kineticEnergy(model_->state()); }
+double Simulation::kineticEnergy() const
+{
+  if (formulation_ != HandleFormulation::MovingFrame || frame_current_.atRest())
+    return model_->kineticEnergy(model_->state());
+  return 0.5 * velocity().cwiseAbs2().dot(mass_);
+}
 
 double Simulation::methodEnergy() const { return model_->energy(model_->state()); }
 
-double Simulation::totalEnergy() const
+double Simulation::totalEnergy() const { return totalEnergy(positions()); }
+
+double Simulation::totalEnergy(const Eigen::VectorXd& x) const
 {
-  const Eigen::VectorXd x = positions();
   return kineticEnergy() + springEnergy(grid_, x) + gravityEnergy(grid_, x);
 }
 

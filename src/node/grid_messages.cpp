@@ -108,7 +108,8 @@ std::vector<int> surfaceLines(int count, int stride)
 }
 
 visualization_msgs::MarkerArray makeMarkers(const Grid& grid, const MarkerOptions& options,
-                                            const Eigen::Matrix3Xd& points, const ros::Time& stamp)
+                                            const Eigen::Matrix3Xd& points, const ros::Time& stamp,
+                                            const Eigen::VectorXd& particle_strains)
 {
   using visualization_msgs::Marker;
   visualization_msgs::MarkerArray array;
@@ -166,7 +167,9 @@ visualization_msgs::MarkerArray makeMarkers(const Grid& grid, const MarkerOption
     surface.color = rest;
     const int stride = surfaceStride(g.rows, g.cols, options.surface_max_cells);
     const std::vector<int> rows = surfaceLines(g.rows, stride), cols = surfaceLines(g.cols, stride);
-    const Eigen::VectorXd strains = strain_colours ? particleStrains(grid, points) : Eigen::VectorXd();
+    const Eigen::VectorXd strains = !strain_colours             ? Eigen::VectorXd()
+                                    : particle_strains.size() > 0 ? particle_strains
+                                                                  : particleStrains(grid, points);
     const size_t vertices = 12 * (rows.size() - 1) * (cols.size() - 1);
     surface.points.reserve(vertices);
     if (strain_colours)

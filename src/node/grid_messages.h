@@ -42,9 +42,11 @@ std::vector<int> surfaceLines(int count, int stride);
 int surfaceStride(int rows, int cols, int max_cells);
 
 // Markers of one grid at `points` (3 x N, grid coordinates; drawn at points + offset). A namespace
-// that is switched off is sent as a DELETE so that a viewer drops what it drew before.
+// that is switched off is sent as a DELETE so that a viewer drops what it drew before. `particle_strains`:
+// particleStrains(grid, points) when the caller has them (a pass over every spring), else computed here.
 visualization_msgs::MarkerArray makeMarkers(const Grid& grid, const MarkerOptions& options,
-                                            const Eigen::Matrix3Xd& points, const ros::Time& stamp);
+                                            const Eigen::Matrix3Xd& points, const ros::Time& stamp,
+                                            const Eigen::VectorXd& particle_strains = Eigen::VectorXd());
 
 // One point per particle at points + offset: x, y, z and strain, all float32.
 sensor_msgs::PointCloud2 makePointCloud(const Eigen::Matrix3Xd& points, const Eigen::VectorXd& strains,

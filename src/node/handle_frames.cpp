@@ -77,6 +77,19 @@ void HandleFrames::motion(double duration, double s, Eigen::VectorXd& x, Eigen::
   }
 }
 
+FrameMotion HandleFrames::frameMotion(double duration, double s) const
+{
+  const Handle& handle = handles_.front();
+  if (!handle.found)
+    return FrameMotion{};
+  // The poses in grid coordinates: the grid's origin sits at grid_offset_ in the fixed frame.
+  auto inGrid = [this](FramePose pose) {
+    pose.translation -= grid_offset_;
+    return pose;
+  };
+  return interpolateFrameMotion(inGrid(handle.start_pose), inGrid(handle.current), inGrid(handle.target), duration, s);
+}
+
 void HandleFrames::finishTick(double s)
 {
   for (auto& handle : handles_)

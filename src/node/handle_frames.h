@@ -33,6 +33,10 @@ public:
   // The handle dofs' positions (grid coordinates), velocities and accelerations at the fraction s of
   // a tick lasting `duration` seconds, in Grid::handleDofs() order.
   void motion(double duration, double s, Eigen::VectorXd& x, Eigen::VectorXd& v, Eigen::VectorXd& a) const;
+  // When every handle names one frame (the moving-frame formulation): that frame's motion at the
+  // fraction s of the tick relative to its pose at the first lookup, in grid coordinates, from the
+  // same interpolation as motion(); at rest before the first lookup.
+  FrameMotion frameMotion(double duration, double s) const;
   // The tick's stepping ended at the fraction s: the handles are there now.
   void finishTick(double s);
   // Back to the start (Simulation::reset puts the handles at rest at x_ref); offsets are kept.

@@ -19,6 +19,8 @@ SimulationConfig SimulationNode::tuningOf(const NodeConfiguration& c) const
   config.show_springs = c.node.show_springs;
   config.show_labels = c.node.show_labels;
   config.show_shadow = c.node.show_shadow;
+  config.drag_stiffness = c.node.drag_stiffness;
+  config.poke_impulse = c.node.poke_impulse;
   config.alpha = c.simulation.alpha;
   config.beta = c.simulation.beta;
   config.structural_stiffness = c.grid.structural_stiffness;
@@ -53,6 +55,8 @@ void SimulationNode::reconfigure(SimulationConfig& config, uint32_t)
   params["show_springs"] = static_cast<bool>(config.show_springs);
   params["show_labels"] = static_cast<bool>(config.show_labels);
   params["show_shadow"] = static_cast<bool>(config.show_shadow);
+  params["drag_stiffness"] = config.drag_stiffness;
+  params["poke_impulse"] = config.poke_impulse;
   params["alpha"] = config.alpha;
   params["beta"] = config.beta;
   params["structural_stiffness"] = config.structural_stiffness;
@@ -88,6 +92,10 @@ void SimulationNode::reconfigure(SimulationConfig& config, uint32_t)
   node.show_springs = candidate.node.show_springs;
   node.show_labels = candidate.node.show_labels;
   node.show_shadow = candidate.node.show_shadow;
+  node.drag_stiffness = candidate.node.drag_stiffness;
+  node.poke_impulse = candidate.node.poke_impulse;
+  hand_forces_->configure(node.drag_stiffness, config_.grid.mass, config_.simulation.time_step);
+  showDragMarker();
   if (node.publish_rate != old_rate)
   {
     timer_.setPeriod(ros::Duration(1.0 / node.publish_rate));
@@ -193,8 +201,13 @@ void SimulationNode::swapRebuilt()
     Simulation& next = *rebuilt_[k];
     if (next.method() != old.method())
       next.setMethod(old.method());  // switched while it was built
-    // The motion carries over: the same positions and velocities, measured from the new
-    // linearization point (a modal method takes their projection onto the new modes).
+    // The motion carries over: the handles where they are (in a moving frame, the frame where it has
+    // gone), then the same positions and velocities around them, measured from the new linearization
+    // point (a modal method takes their projection onto the new modes).
+    if (next.handleFormulation() == HandleFormulation::MovingFrame)
+      next.placeFrame(old.frameMotion());
+    else if (next.grid().numHandleDofs() > 0)
+      next.setHandleState(old.handlePositions(), old.handleMotion().velocity, old.handleMotion().acceleration);
     next.setPhysicalState(next.grid().gatherFree(old.positions() - next.linearizationPositions()), old.velocity());
     track.step_offset += old.stepCount();
     track.simulation = std::move(rebuilt_[k]);
@@ -203,6 +216,7 @@ void SimulationNode::swapRebuilt()
   rebuilt_.clear();
   config_.grid = rebuilt_config_.grid;
   config_.simulation = rebuilt_config_.simulation;
+  hand_forces_->configure(config_.node.drag_stiffness, config_.grid.mass, config_.simulation.time_step);
   ROS_INFO("dynamic_reconfigure: rebuilt model swapped in at step %ld, motion carried over", steps(primary()));
 }
 

@@ -1,6 +1,8 @@
 // Every node parameter, its default and its range, in one place.
 #include "node_params.h"
 
+#include "drag_and_poke.h"
+
 #include "modal_mass_spring/cache.h"
 #include "modal_mass_spring/validation.h"
 
@@ -193,6 +195,13 @@ NodeParams loadNodeParams(const NodeParameterSource& s, const GridParams& grid, 
                     "must be false when methods is set (list full among the methods to compare with it)");
   p.status_log_period = nonNegative(s, "status_log_period", p.status_log_period, 86400.0, " s (0: no status lines)");
   p.diagnostic_period = positive(s, "diagnostic_period", p.diagnostic_period, 3600.0, " s");
+  // The spring acts from the state at the start of each step: a stiffer one than this the step cannot hold.
+  p.drag_stiffness = nonNegative(s, "drag_stiffness", defaultDragStiffness(grid, sim.time_step),
+                                 maxDragStiffness(grid, sim.time_step),
+                                 " N/m (mass / time_step^2: the spring is applied once per step, a stiffer one is "
+                                 "unstable; 0: no dragging)");
+  p.poke_impulse = nonNegative(s, "poke_impulse", defaultPokeImpulse(grid), maxPokeImpulse(grid),
+                               " N s (the grid's momentum at 10 m/s; 0: no poking)");
   // Any path: one that cannot be written is a warning at start-up, not an error.
   p.cache_dir = s.getString("cache_dir").value_or(defaultCacheDirectory());
   return p;
@@ -217,6 +226,15 @@ std::vector<HandleParam> loadHandles(const NodeParameterSource& s)
 
 }  // namespace
 
+std::vector<std::string> handleFrames(const std::vector<HandleParam>& handles)
+{
+  std::vector<std::string> frames;
+  for (const auto& handle : handles)
+    if (std::find(frames.begin(), frames.end(), handle.frame) == frames.end())
+      frames.push_back(handle.frame);
+  return frames;
+}
+
 NodeConfiguration loadNodeConfiguration(const NodeParameterSource& source, const std::vector<std::string>& present_keys)
 {
   const RecordingSource recording(source);
@@ -227,6 +245,19 @@ NodeConfiguration loadNodeConfiguration(const NodeParameterSource& source, const
   const std::vector<HandleParam> handles = loadHandles(recording);
   for (const auto& handle : handles)
     c.grid.handles.push_back(handle.particles);
+  // Handles on one TF frame move as one rigid body: the core may then simulate in that frame.
+  const std::vector<std::string> frames = handleFrames(handles);
+  c.simulation.handles_one_body = frames.size() == 1;
+  if (c.simulation.handle_formulation == HandleFormulation::MovingFrame && frames.size() > 1)
+  {
+    std::string names;
+    for (const auto& frame : frames)
+      names += (names.empty() ? "'" : ", '") + frame + "'";
+    rejectParameter("handle_formulation", "moving_frame",
+                    "needs every handle on one TF frame (one rigid body), but the handles name " +
+                        std::to_string(frames.size()) + " frames: " + names +
+                        "; use auto or constraint_modes for handles that move apart");
+  }
   // The node's own checks (tf_particles, steps per tick) rely on a valid grid and time step.
   validateParameters(c.grid, c.simulation);
   c.node = loadNodeParams(recording, c.grid, c.simulation);

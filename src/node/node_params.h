@@ -66,6 +66,10 @@ struct NodeParams
   std::string cache_dir;
   // Particles held rigidly by TF frames (their groups also go to GridParams::handles).
   std::vector<HandleParam> handles;
+  // By hand in rviz: the interactive marker's spring (N/m) on the particle it grabs, and the impulse
+  // (N s) of a /clicked_point poke; 0 turns either off. Defaults from the grid (drag_and_poke.h).
+  double drag_stiffness = 0.0;
+  double poke_impulse = 0.0;
 };
 
 // Reads and validates the node's own parameters, each named once here with its range; defaults that
@@ -85,9 +89,13 @@ struct NodeConfiguration
 
 // Reads and validates every parameter of the node, builds nothing, so a bad parameter fails at once
 // whatever the grid's size: the core's (loadGridParams, loadSimulationParams, validateParameters),
-// then the node's (loadNodeParams). `present_keys` are the keys set for the node; the ones no getter
+// then the node's (loadNodeParams). SimulationParams::handles_one_body is set when every handle names
+// one TF frame; handle_formulation moving_frame with handles on several frames is refused. `present_keys` are the keys set for the node; the ones no getter
 // asked for end in unknown_keys. Throws std::invalid_argument naming the first bad parameter.
 NodeConfiguration loadNodeConfiguration(const NodeParameterSource& source, const std::vector<std::string>& present_keys);
+
+// The distinct TF frames of the handles, in the order they first appear.
+std::vector<std::string> handleFrames(const std::vector<HandleParam>& handles);
 
 // Where the grid of `methods[index]` is drawn in a lockstep comparison: centred on `offset` along x.
 Eigen::Vector3d methodOffset(const NodeParams& params, size_t index);

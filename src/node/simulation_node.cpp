@@ -190,11 +190,12 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
     for (size_t h = 0; h < params.handles.size(); ++h)
       frames += (h ? ", '" : "'") + params.handles[h].frame + "' (" +
                 std::to_string(params.handles[h].particles.size()) + " particles)";
-    ROS_INFO("handles following the TF frames %s relative to '%s', offsets taken at each frame's first lookup; "
-             "formulation: Craig-Bampton constraint modes for the modal methods, prescribed positions for full",
+    ROS_INFO("handles following the TF frames %s relative to '%s', offsets taken at each frame's first lookup",
              frames.c_str(), params.fixed_frame.c_str());
+    ROS_INFO("%s", describeHandleFormulation(config_.grid, config_.simulation, handleFrames(params.handles)).c_str());
   }
   apply_force_sub_ = private_nh_.subscribe("apply_force", 10, &SimulationNode::applyForce, this);
+  startInteraction();
   service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
   service_spinner_->start();
 
@@ -366,6 +367,24 @@ void SimulationNode::setHandleMotion(double duration, double s)
 {
   if (handle_frames_->empty())
     return;
+  if (primary().simulation->handleFormulation() == HandleFormulation::MovingFrame)
+  {
+    // Every track simulates in the frame: its motion, from the same interpolation.
+    const FrameMotion motion = handle_frames_->frameMotion(duration, s);
+    try
+    {
+      for (Track& track : tracks_)
+        if (!track.simulation->diverged())
+          track.simulation->setHandleFrameMotion(motion);
+    }
+    catch (const std::invalid_argument& error)
+    {
+      // A 2D grid's frame that turns out of the grid's plane: held where it was.
+      ROS_WARN_THROTTLE(5.0, "handle frame '%s' refused, its particles hold where they are: %s",
+                        handle_frames_->frame(0).c_str(), error.what());
+    }
+    return;
+  }
   Eigen::VectorXd x, v, a;
   handle_frames_->motion(duration, s, x, v, a);
   for (Track& track : tracks_)
@@ -376,10 +395,15 @@ void SimulationNode::setHandleMotion(double duration, double s)
 bool SimulationNode::stepAll()
 {
   bool any_running = false;
-  for (Track& track : tracks_)
+  for (size_t k = 0; k < tracks_.size(); ++k)
   {
+    Track& track = tracks_[k];
     if (track.simulation->diverged())
+    {
+      hand_forces_->skip(k);
       continue;
+    }
+    applyHandForce(k);
     const auto start = Clock::now();
     const StepResult result = track.simulation->step(1);
     track.tick_seconds += secondsSince(start);
@@ -424,6 +448,7 @@ void SimulationNode::onTick()
   std::vector<std::string> divergences;
   std::string status_line;
   double period = 0.0;
+  std::optional<Eigen::Vector3d> drag_marker;
   {
     std::unique_lock<std::mutex> lock(mutex_);
     swapRebuilt();
@@ -497,6 +522,7 @@ void SimulationNode::onTick()
     clock_seconds_ += tick_steps_ * dt;
     achieved_factor_ = tick_steps_ * dt / std::max(wall, 1e-9);
     output = snapshot(stamp());
+    drag_marker = dragMarkerTarget();
 
     if (params.status_log_period > 0.0 && (ros::WallTime::now() - last_status_log_).toSec() >= params.status_log_period)
     {
@@ -516,6 +542,8 @@ void SimulationNode::onTick()
     ROS_ERROR("%s", divergence.c_str());
 
   send(output);
+  if (drag_marker)
+    placeDragMarker(*drag_marker);
 
   // A tick is late when its stepping alone takes longer than the period: the timer cannot keep up.
   ++diag_ticks_;
@@ -534,12 +562,15 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
   Output output;
   output.stamp = stamp;
   // The core keeps the last good state on divergence; never publish a non-finite one anyway.
+  // The positions are reconstructed here, once per published tick (x_ref + Phi X costs O(n r)), not
+  // at every step.
   for (Track& track : tracks_)
   {
-    const Eigen::Matrix3Xd points = track.simulation->points();
+    const Eigen::VectorXd positions = track.simulation->positions();
+    const Eigen::Matrix3Xd points = track.simulation->grid().toPoints(positions);
     if (points.allFinite())
       track.last_points = points;
-    const double energy = track.simulation->totalEnergy();
+    const double energy = track.simulation->totalEnergy(positions);
     if (std::isfinite(energy))
       track.last_energy = energy;
   }
@@ -584,7 +615,9 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
         options.label += pace;
       }
     }
-    grid.markers = makeMarkers(simulation.grid(), options, track.last_points, stamp);
+    // One pass over the springs for both the surface's colours and the cloud.
+    const Eigen::VectorXd strains = particleStrains(simulation.grid(), track.last_points);
+    grid.markers = makeMarkers(simulation.grid(), options, track.last_points, stamp, strains);
     if (measured && ref->shadow)
     {
       // The reference drawn faintly where the method is: the gap between them is the error.
@@ -597,7 +630,7 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
       const auto shadow = makeMarkers(simulation.grid(), ghost, ref->last_points, stamp);
       grid.markers.markers.insert(grid.markers.markers.end(), shadow.markers.begin(), shadow.markers.end());
     }
-    grid.points = makePointCloud(track.last_points, particleStrains(simulation.grid(), track.last_points),
+    grid.points = makePointCloud(track.last_points, strains,
                                  track.offset, params.fixed_frame, stamp);
 
     Status& status = grid.status;
@@ -615,6 +648,8 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     status.state = state(track);
     status.message = simulation.diverged() ? track.divergence_message : "";
     status.handles = handle_frames_->status();
+    status.handle_formulation =
+        handle_frames_->empty() ? "" : toString(simulation.handleFormulation());
     status.reference = measured ? "full" : "";
     status.rms_distance = track.rms_distance;
     status.max_distance = track.max_distance;
@@ -633,6 +668,10 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
       status.cubature_heldout_error = cubature->heldout_error;
       status.cubature_training_seconds = cubature->training_seconds;
     }
+    const CacheReport& cache = simulation.cacheReport();
+    status.basis_from_cache = cache.basis_loaded;
+    status.cubature_from_cache = cache.cubature_loaded;
+    status.cache = describeCache(cache);
 
     if (send_tf)
       for (int particle : params.tf_particles)
@@ -900,6 +939,7 @@ bool SimulationNode::clearForces(std_srvs::Trigger::Request&, std_srvs::Trigger:
 {
   ServiceLock lock(*this);
   const size_t count = applied_forces_->clear();
+  hand_forces_->release();  // a drag whose release never came ends too
   updateExternalForces();
   response.success = true;
   response.message = "cleared " + std::to_string(count) + (count == 1 ? " force" : " forces");
@@ -910,9 +950,10 @@ void SimulationNode::updateExternalForces()
 {
   applied_forces_->update(simTime(primary()), external_force_);
   // A rebuilt simulation starts without them: every track is brought to the current total.
-  for (Track& track : tracks_)
-    if (track.simulation->externalForce() != external_force_)
-      track.simulation->setExternalForce(external_force_);
+  // A track under the hand's force gets the total before its next step (applyHandForce).
+  for (size_t k = 0; k < tracks_.size(); ++k)
+    if (!(hand_forces_ && hand_forces_->active(k)) && tracks_[k].simulation->externalForce() != external_force_)
+      tracks_[k].simulation->setExternalForce(external_force_);
 }
 
 }  // namespace modal_mass_spring

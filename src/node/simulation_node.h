@@ -3,6 +3,7 @@
 #pragma once
 
 #include "applied_forces.h"
+#include "drag_and_poke.h"
 #include "handle_frames.h"
 #include "modal_mass_spring/ApplyForce.h"
 #include "modal_mass_spring/SetMethod.h"
@@ -14,6 +15,8 @@
 #include <boost/thread/recursive_mutex.hpp>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <dynamic_reconfigure/server.h>
+#include <geometry_msgs/PointStamped.h>
+#include <interactive_markers/interactive_marker_server.h>
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <std_srvs/SetBool.h>
@@ -120,6 +123,23 @@ private:
   // Prescribes the handles' motion at the fraction s of a tick of `duration` s on every track.
   void setHandleMotion(double duration, double s);  // with mutex_ held
 
+  // By hand in rviz (interaction.cpp): the drag marker (~drag/update, ~drag/feedback) and pokes from
+  // /clicked_point, both on the global queue (between ticks); their force joins track k's external
+  // force before each of its steps.
+  void startInteraction();
+  void showDragMarker();  // with mutex_ held: shown while drag_stiffness > 0
+  void onDragFeedback(const visualization_msgs::InteractiveMarkerFeedbackConstPtr& feedback);
+  void onClickedPoint(const geometry_msgs::PointStamped::ConstPtr& message);
+  // A point of a message in the fixed frame (tf2 for another frame); false and why for a bad one.
+  bool toFixedFrame(const std::string& frame_id, const geometry_msgs::Point& point, Eigen::Vector3d& result,
+                    std::string& why);
+  // The free particle nearest to a fixed-frame point over the drawn tracks, its track and distance.
+  int nearestOnTracks(const Eigen::Vector3d& point, size_t& track, double& distance) const;  // with mutex_ held
+  void applyHandForce(size_t k);  // with mutex_ held, before track k's step
+  // Where the marker goes this tick (on its particle while not dragged), if it moved; then placeDragMarker.
+  std::optional<Eigen::Vector3d> dragMarkerTarget();  // with mutex_ held
+  void placeDragMarker(const Eigen::Vector3d& position);
+
   ros::NodeHandle nh_, private_nh_;
   NodeConfiguration config_;
 
@@ -157,6 +177,13 @@ private:
   tf2_ros::Buffer tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   std::unique_ptr<HandleFrames> handle_frames_;     // with mutex_
+  std::unique_ptr<HandForces> hand_forces_;         // with mutex_
+  std::unique_ptr<interactive_markers::InteractiveMarkerServer> drag_server_;
+  ros::Subscriber clicked_point_sub_;
+  int selected_particle_ = -1;  // the marker's particle, on selected_track_
+  size_t selected_track_ = 0;
+  bool placing_ = false;        // the marker is moved by its arrows
+  Eigen::Vector3d marker_position_ = Eigen::Vector3d::Zero();  // where it was last placed
   // Live tuning: the private parameters as last accepted, the configuration they give, the rebuild.
   XmlRpc::XmlRpcValue private_params_;
   NodeConfiguration accepted_;

@@ -86,6 +86,32 @@ std::string describeBasis(const SimulationParams& params, const DerivativeBasisI
   return out.str();
 }
 
+std::string describeHandleFormulation(const GridParams& grid, const SimulationParams& params,
+                                      const std::vector<std::string>& frames)
+{
+  const bool asked = params.handle_formulation != HandleFormulation::Auto;
+  const std::string why = asked ? "handle_formulation: " + toString(params.handle_formulation)
+                                : std::string("handle_formulation: auto");
+  if (resolveHandleFormulation(grid, params) == HandleFormulation::MovingFrame)
+    return "handles: moving frame of '" + frames.front() +
+           "' (one rigid body holds every held particle and nothing is fixed: every method simulates in its frame, "
+           "whose motion enters exactly at any turn; " + why + ")";
+  std::ostringstream line;
+  line << "handles: constraint modes (Craig-Bampton) for the modal methods, prescribed positions for full; "
+       << grid.handles.size() << (grid.handles.size() == 1 ? " handle" : " handles") << " on " << frames.size()
+       << (frames.size() == 1 ? " frame" : " frames") << " (";
+  const size_t fixed = effectiveFixed(grid).size();
+  if (asked)
+    line << "as " << why << " asks";
+  else if (frames.size() > 1)
+    line << "they can move apart; the moving frame needs one rigid body";
+  else
+    line << fixed << " fixed " << (fixed == 1 ? "particle cannot" : "particles cannot")
+         << " move with the frame; the moving frame needs none fixed";
+  line << "; large turns distort the constraint modes)";
+  return line.str();
+}
+
 std::string describeStage(const std::string& stage)
 {
   if (stage == "equilibrium")

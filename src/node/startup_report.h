@@ -10,6 +10,7 @@
 #include <functional>
 #include <mutex>
 #include <string>
+#include <vector>
 
 namespace modal_mass_spring
 {
@@ -29,6 +30,12 @@ std::string describeStartupTimes(const LinearizationInfo& linearization, const M
 // (from 21 derivatives) in 12.3 ms, frequencies up to 126 rad/s; singular values (relative) smallest
 // kept 0.12, largest dropped 0.081".
 std::string describeBasis(const SimulationParams& params, const DerivativeBasisInfo& info, const ModalBasis& physical_basis);
+
+// The start-up line on the handles' formulation and why it was chosen: "handles: moving frame of
+// 'gripper' (...)" or "handles: constraint modes (Craig-Bampton) ..., 2 handles on 2 frames ...".
+// `frames`: the handles' distinct TF frames.
+std::string describeHandleFormulation(const GridParams& grid, const SimulationParams& params,
+                                      const std::vector<std::string>& frames);
 
 // "solving the static equilibrium under gravity" for "equilibrium", and so on for the core's stages.
 std::string describeStage(const std::string& stage);

@@ -55,7 +55,7 @@ void distances(const Grid& grid, const Eigen::Matrix3Xd& a, const Eigen::Matrix3
   int count = 0;
   for (int p = 0; p < grid.numParticles(); ++p)
   {
-    if (grid.isFixed(p))
+    if (grid.isFixed(p) || grid.isHandle(p))
       continue;
     const double d = (a.col(p) - b.col(p)).norm();
     max = std::max(max, d);
@@ -227,13 +227,22 @@ struct AccuracyRun
   bool timed = false;  // its wall time per step is reported
   bool diverged = false;
   double step_seconds = 0.0;
+  std::unique_ptr<HandleDriver> driver = nullptr;  // moves the handles of a handle scenario, one step at a time
 
   void advance(const std::string& variant, std::vector<std::string>& messages)
   {
     if (diverged)
       return;
     const auto start = Clock::now();
-    const StepResult r = sim->step(steps_per_sample);
+    StepResult r;
+    if (driver)
+      for (int k = 0; k < steps_per_sample && !r.diverged; ++k)
+      {
+        driver->drive(*sim);
+        r = sim->step();
+      }
+    else
+      r = sim->step(steps_per_sample);
     step_seconds = seconds(start) / steps_per_sample;
     if (r.diverged)
     {
@@ -252,6 +261,8 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
     SimulationParams p = withMethod(setup.sim, Method::Full);
     p.integrator = IntegratorKind::Explicit;
     p.linearization = Linearization::Rest;
+    // In the world, handles prescribed: the same reference whichever formulation the methods use.
+    p.handle_formulation = HandleFormulation::ConstraintModes;
     p.time_step = setup.sim.time_step / divide;
     return p;
   };
@@ -275,6 +286,13 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
     runs.push_back({toString(m), std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, m), StageFn{}, options.cache),
                     options.sample,
                     true});
+  if (setup.handle_scenario)
+  {
+    for (AccuracyRun& run : runs)
+      run.driver = std::make_unique<HandleDriver>(*setup.handle_scenario, *run.sim);
+    if (check)
+      check->driver = std::make_unique<HandleDriver>(*setup.handle_scenario, *check->sim);
+  }
   return runs;
 }
 
@@ -679,6 +697,15 @@ void writeCubatureCsv(std::ostream& out, const std::vector<CubatureRow>& rows)
     out << r.variant << ',' << r.springs << ',' << r.grid_springs << ',' << r.training_poses << ','
         << Field{r.tolerance} << ',' << Field{r.training_error} << ',' << Field{r.heldout_error} << ','
         << Field{r.training_seconds} << '\n';
+}
+
+void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummary>& rows)
+{
+  precise(out) << "variant,method,mean_rms,max_rms,mean_max,final_rms,step_seconds_median,step_seconds_mean,diverged\n";
+  for (const AccuracySummary& s : rows)
+    out << s.variant << ',' << s.method << ',' << Field{s.mean_rms} << ',' << Field{s.max_rms} << ','
+        << Field{s.mean_max} << ',' << Field{s.final_rms} << ',' << Field{s.step_seconds_median} << ','
+        << Field{s.step_seconds_mean} << ',' << (s.diverged ? 1 : 0) << '\n';
 }
 
 void writeSnapshotCsv(std::ostream& out, const Grid& grid, const std::vector<Snapshot>& snapshots)

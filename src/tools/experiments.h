@@ -1,6 +1,8 @@
 // The paper's experiments on the core: cost, accuracy against `full`, and the largest stable step.
 #pragma once
 
+#include "handle_scenarios.h"
+
 #include "modal_mass_spring/simulation.h"
 
 #include <Eigen/Core>
@@ -24,6 +26,9 @@ struct ExperimentSetup
   SimulationParams sim;
   // The varied keys and their values (YAML text), in --vary order; empty for "base".
   std::vector<std::pair<std::string, std::string>> settings;
+  // With a scenario, grid.handles are its particle groups and every run of the accuracy experiment
+  // moves them along it, one step at a time (HandleDriver).
+  std::optional<HandleScenario> handle_scenario;
 };
 
 // The setup among `setups` that differs from `setup` only in running the explicit integrator: every
@@ -78,7 +83,8 @@ struct AccuracyOptions
 };
 
 // One method at one step, against `full` at the same step. Distances are per particle, between the
-// method's and full's positions: the largest and the RMS over the free particles.
+// method's and full's positions: the largest and the RMS over the free particles (neither fixed nor
+// held by a handle: handles sit where they are put under every method).
 struct ErrorSample
 {
   std::string variant, method;
@@ -227,6 +233,7 @@ struct AccuracySummary
   bool diverged = false;
 };
 std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& rows);
+void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummary>& rows);
 void writeSnapshotCsv(std::ostream& out, const Grid& grid, const std::vector<Snapshot>& snapshots);
 void writeStabilityCsv(std::ostream& out, const std::vector<StabilityRow>& rows);
 

@@ -40,7 +40,8 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
 
   --config FILE         YAML map of parameters (rows, cols, dimension, mass, ..., num_modes, alpha,
                         beta, time_step); the node's own keys are ignored, other unknown keys warned about
-  --experiment LIST     comma-separated: cost, accuracy, stability, or all (default: all)
+  --experiment LIST     comma-separated: cost, accuracy, stability, handles, or all (default: all, the
+                        paper's three: cost, accuracy and stability; handles runs only when named)
   --output DIR          folder for the CSV files (default: .)
   --tag NAME            file name tag, <experiment>_<tag>.csv (default: the config file's stem); no '/'
   --methods LIST        comma-separated of full, linear, physical, cubature (default: all four;
@@ -69,6 +70,14 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
               --check-factor F (0: off; needs --vary integrator=explicit,implicit: each implicit
                 method is also run at F times the largest stable step of the same method under
                 the explicit integrator, and the summary says whether it stayed stable)
+  handles:    every scenario of the config's handle_scenarios (a list of {name, handles: [{particles,
+                translation, rotation_axis, rotation_deg}], move_time, hold_time}; see config/compare/
+                held_cloth.yaml): the grid's handles are the scenario's particle groups, each moved as a
+                rigid frame over move_time s along a smooth ramp, then held for hold_time s; every method
+                against the reference as in accuracy (--sample, --reference-time-step, --methods), each
+                scenario run for its move_time + hold_time; writes handles_<tag>_error.csv,
+                handles_<tag>_summary.csv and (unless --no-snapshots) handles_<tag>_snapshots.csv,
+                every particle of every run where the move ends (of the first --vary combination)
   cost:       --sizes LIST (5,10,20,40; square grids)  --repeats R (7)  --min-repeat-seconds T (0.02)
 )";
 
@@ -84,7 +93,9 @@ std::string fmt(double value, int precision = 3)
   return s.str();
 }
 
+// `all`: the paper's experiments. `handles` needs handle_scenarios in the config, so it runs only when named.
 const std::vector<std::string> kExperiments{"cost", "accuracy", "stability"};
+const std::vector<std::string> kAllExperiments{"cost", "accuracy", "stability", "handles"};
 
 // Splits on commas outside brackets, so "fixed=[0,4],[1,3]" keeps its lists.
 std::vector<std::string> splitList(const std::string& text)
@@ -200,13 +211,14 @@ void setExperiments(Options& o, const std::string& text)
   {
     if (name == "all")
       o.experiments = kExperiments;
-    else if (std::find(kExperiments.begin(), kExperiments.end(), name) != kExperiments.end())
+    else if (std::find(kAllExperiments.begin(), kAllExperiments.end(), name) != kAllExperiments.end())
     {
       if (!o.runs(name))
         o.experiments.push_back(name);
     }
     else
-      rejectParameter("--experiment", "'" + name + "'", "unknown experiment: must be cost, accuracy, stability or all");
+      rejectParameter("--experiment", "'" + name + "'",
+                      "unknown experiment: must be cost, accuracy, stability, handles or all");
   }
 }
 
@@ -401,8 +413,9 @@ void warnAboutUnknownKeys(const YamlParameterSource& source)
                 << "' ignored (neither the core nor the node reads it)\n";
 }
 
-// Every combination of the --vary values, each loaded from its own copy of the config.
-std::vector<ExperimentSetup> buildSetups(const Options& o)
+// Every combination of the --vary values, each loaded from its own copy of the config; the config's
+// handle scenarios (none when it has no handle_scenarios) go to `scenarios`.
+std::vector<ExperimentSetup> buildSetups(const Options& o, std::vector<HandleScenario>& scenarios)
 {
   YamlParameterSource base = YamlParameterSource::fromFile(o.config);
   if (base.keys().empty())
@@ -432,6 +445,8 @@ std::vector<ExperimentSetup> buildSetups(const Options& o)
     {
       setup.grid = loadGridParams(source);
       setup.sim = loadSimulationParams(source);
+      if (const YAML::Node node = source.getNode("handle_scenarios"); node.IsDefined())
+        scenarios = parseHandleScenarios(node, "handle_scenarios");
     }
     catch (const std::invalid_argument& e)
     {
@@ -450,6 +465,48 @@ std::vector<ExperimentSetup> buildSetups(const Options& o)
     setups.push_back(setup);
   }
   return setups;
+}
+
+// The handles experiment's setups: every scenario on every setup, the grid's handles the scenario's,
+// the variant the scenario's name followed by the setup's varied settings.
+std::vector<ExperimentSetup> handleSetups(const Options& o, const std::vector<ExperimentSetup>& setups,
+                                          const std::vector<HandleScenario>& scenarios)
+{
+  std::vector<ExperimentSetup> out;
+  for (const HandleScenario& scenario : scenarios)
+    for (const ExperimentSetup& setup : setups)
+    {
+      ExperimentSetup s = setup;
+      try
+      {
+        s.grid = gridWithHandles(setup.grid, scenario);
+      }
+      catch (const std::invalid_argument& e)
+      {
+        throw std::invalid_argument("config '" + o.config + "': " + e.what());
+      }
+      // One handle is one rigid body: with `auto` and nothing fixed, the methods simulate in its frame.
+      s.sim.handles_one_body = scenario.handles.size() == 1;
+      s.variant = scenario.name + (setup.settings.empty() ? "" : " " + setup.variant);
+      s.handle_scenario = scenario;
+      out.push_back(s);
+    }
+  return out;
+}
+
+// Steps a handle scenario runs on a setup: its move and hold (or its move alone), rounded up to whole
+// samples.
+int handleSteps(const Options& o, const ExperimentSetup& setup, bool move_only = false)
+{
+  const HandleScenario& scenario = *setup.handle_scenario;
+  const double seconds = move_only ? scenario.move_time : scenario.duration();
+  const double steps = std::ceil(seconds / setup.sim.time_step - 1e-9);
+  const double samples = std::ceil(steps / o.accuracy.sample);
+  if (!(samples * o.accuracy.sample <= 100000000.0))
+    rejectParameter("time_step", setup.sim.time_step,
+                    "handle scenario '" + setup.handle_scenario->name + "' of " +
+                        std::to_string(setup.handle_scenario->duration()) + " s would take more than 1e8 steps");
+  return static_cast<int>(samples) * o.accuracy.sample;
 }
 
 // The core's checks of one setup (validateParameters: ranges, sizes, the memory estimate), which
@@ -481,6 +538,26 @@ void validateStabilitySetups(const Options& o, const std::vector<ExperimentSetup
   if (!paired)
     rejectParameter("--check-factor", o.check_factor,
                     "needs an implicit setup and its explicit twin: --vary integrator=explicit,implicit");
+}
+
+void validateHandleSetups(const Options& o, const std::vector<ExperimentSetup>& handle_setups)
+{
+  if (handle_setups.empty())
+    rejectParameter("handle_scenarios", "(absent)",
+                    "the handles experiment needs a list of scenarios in the config '" + o.config +
+                        "' (see config/compare/held_cloth.yaml)");
+  for (const ExperimentSetup& setup : handle_setups)
+  {
+    validateSetup(o, setup, setup.grid, "");
+    handleSteps(o, setup);
+    if (o.accuracy.reference_time_step > 0.0)
+    {
+      const int substeps = referenceSubsteps(setup.sim.time_step, o.accuracy.reference_time_step);
+      if (2LL * o.accuracy.sample * substeps > std::numeric_limits<int>::max())
+        rejectParameter("--reference-time-step", o.accuracy.reference_time_step,
+                        "with --sample " + std::to_string(o.accuracy.sample) + " too many reference steps per sample");
+    }
+  }
 }
 
 // Fails before any experiment runs.
@@ -739,6 +816,59 @@ std::string windowsText(const std::vector<StableWindow>& windows)
   return text.empty() ? "none" : text;
 }
 
+void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& setups, Progress& progress)
+{
+  const std::string reference = o.accuracy.reference_time_step > 0.0 ? "reference" : "full";
+  std::vector<ErrorSample> errors;
+  std::vector<Snapshot> snapshots;
+  std::vector<std::string> messages;
+  for (const ExperimentSetup& setup : setups)
+  {
+    AccuracyOptions options = o.accuracy;
+    options.steps = handleSteps(o, setup);
+    options.interval = handleSteps(o, setup, true);
+    const AccuracyResult result = runAccuracy(setup, options, std::ref(progress));
+    // The shapes where the move ends, where the methods differ most; of the first --vary combination
+    // only, to keep the file small.
+    for (const Snapshot& snapshot : result.snapshots)
+      if (snapshot.step == options.interval && setup.settings == setups.front().settings)
+        snapshots.push_back(snapshot);
+    errors.insert(errors.end(), result.errors.begin(), result.errors.end());
+    errors.insert(errors.end(), result.reference_check.begin(), result.reference_check.end());
+    messages.insert(messages.end(), result.messages.begin(), result.messages.end());
+    const HandleScenario& scenario = *setup.handle_scenario;
+    std::cout << "handle scenario " << setup.variant << ": " << scenario.handles.size() << " handle(s), "
+              << setup.grid.rows << "x" << setup.grid.cols << " grid, moved over " << fmt(scenario.move_time)
+              << " s, held " << fmt(scenario.hold_time) << " s, " << options.steps << " steps of "
+              << fmt(setup.sim.time_step) << " s";
+    if (o.accuracy.reference_time_step > 0.0)
+      std::cout << "; reference full, explicit, dt = " << fmt(o.accuracy.reference_time_step)
+                << " s, against dt / 2: largest RMS distance " << fmt(result.reference_check_max_rms) << " m";
+    std::cout << "\n";
+  }
+  std::ofstream out = openCsv(o, "handles_" + o.tag + "_error.csv");
+  writeErrorCsv(out, errors);
+  const std::vector<AccuracySummary> summaries = summarizeAccuracy(errors);
+  std::ofstream summary_out = openCsv(o, "handles_" + o.tag + "_summary.csv");
+  writeAccuracySummaryCsv(summary_out, summaries);
+  if (o.accuracy.snapshots && !setups.empty())
+  {
+    std::ofstream snap = openCsv(o, "handles_" + o.tag + "_snapshots.csv");
+    writeSnapshotCsv(snap, Grid(setups.front().grid), snapshots);
+  }
+  std::vector<std::vector<std::string>> table{
+      {"scenario", "method", "mean RMS m", "largest RMS m", "RMS at the end m", "step us (median)"}};
+  for (const AccuracySummary& s : summaries)
+    if (s.method != reference && s.method != "reference_half_step")
+      table.push_back({s.variant, s.method, fmt(s.mean_rms), fmt(s.max_rms),
+                       s.diverged ? "diverged" : fmt(s.final_rms), fmt(1e6 * s.step_seconds_median)});
+  printTable("handles (" + o.tag + "): distance of the free particles to " + reference +
+                 " over every sample after step 0; wall time per step while running",
+             table);
+  for (const std::string& m : messages)
+    std::cout << "note: " << m << "\n";
+}
+
 void runStabilityExperiment(const Options& o, const std::vector<ExperimentSetup>& setups, Progress& progress)
 {
   std::vector<std::vector<StabilityRow>> per_setup;
@@ -778,12 +908,18 @@ void runStabilityExperiment(const Options& o, const std::vector<ExperimentSetup>
 int main(int argc, char** argv)
 {
   Options options;
-  std::vector<ExperimentSetup> setups;
+  std::vector<ExperimentSetup> setups, handle_setups;
   try
   {
     options = parseArguments(argc, argv);
-    setups = buildSetups(options);
+    std::vector<HandleScenario> scenarios;
+    setups = buildSetups(options, scenarios);
     validate(options, setups);
+    if (options.runs("handles"))
+    {
+      handle_setups = handleSetups(options, setups, scenarios);
+      validateHandleSetups(options, handle_setups);
+    }
     prepareOutput(options);
   }
   catch (const std::bad_alloc&)
@@ -807,6 +943,8 @@ int main(int argc, char** argv)
         runCostExperiment(options, setups, progress);
       else if (experiment == "accuracy")
         runAccuracyExperiment(options, setups, progress);
+      else if (experiment == "handles")
+        runHandlesExperiment(options, handle_setups, progress);
       else
         runStabilityExperiment(options, setups, progress);
     }

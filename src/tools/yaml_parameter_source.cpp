@@ -18,6 +18,8 @@ const std::set<std::string> kNodeParameters{
     "cache_dir",
     "handles"};  // the node moves their particles with TF frames; the tool does not read them
 
+const std::set<std::string> kToolParameters{"handle_scenarios"};
+
 YamlParameterSource::YamlParameterSource(YAML::Node root, std::string origin)
   : root_(std::move(root)), origin_(std::move(origin))
 {
@@ -92,7 +94,7 @@ std::vector<std::string> YamlParameterSource::unknownKeys() const
 {
   std::vector<std::string> unknown;
   for (const std::string& key : keys())
-    if (!queried_.count(key) && !kNodeParameters.count(key))
+    if (!queried_.count(key) && !kNodeParameters.count(key) && !kToolParameters.count(key))
       unknown.push_back(key);
   return unknown;
 }

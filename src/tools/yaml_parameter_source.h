@@ -15,6 +15,8 @@ namespace modal_mass_spring
 // The node's own parameters (README, "Parameters"): a config shared with the node holds them, and
 // the tools ignore them without a warning.
 extern const std::set<std::string> kNodeParameters;
+// Keys only the tools read, in shapes of their own (modal_compare's handle_scenarios).
+extern const std::set<std::string> kToolParameters;
 
 // Keys the core does not ask for (the node's publish_rate, frame names, ...) are ignored, so one file
 // serves the node and the tools; keys() and queried() tell which those were. A key given twice is
@@ -41,7 +43,8 @@ public:
   std::vector<std::string> keys() const;
 
   // The keys that neither the core asked for (queried(), so after loadGridParams and
-  // loadSimulationParams) nor the node reads (kNodeParameters): most likely misspelled.
+  // loadSimulationParams) nor the node (kNodeParameters) nor the tools (kToolParameters) read: most
+  // likely misspelled.
   std::vector<std::string> unknownKeys() const;
 
   std::optional<int> getInt(const std::string& key) const override;
@@ -50,6 +53,8 @@ public:
   std::optional<std::string> getString(const std::string& key) const override;
   std::optional<std::vector<int>> getIntList(const std::string& key) const override;
   std::optional<std::vector<double>> getDoubleList(const std::string& key) const override;
+  // The YAML of a key the tools read in a shape of their own (handle_scenarios); undefined when absent.
+  YAML::Node getNode(const std::string& key) const { return lookup(key); }
 
   // Every key a getter was asked for: after loadGridParams/loadSimulationParams these are the names
   // the core knows, which tells a mistyped override from a real parameter.

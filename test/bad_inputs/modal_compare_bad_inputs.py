@@ -32,6 +32,12 @@ def cases(configs):
         return Case(name, ["--quiet", "--config", "{work}/bad.yaml", "--output", OUT] + list(args), named,
                     files={"bad.yaml": text})
 
+    # A 4 x 4 sheet in 3D held by its top row, one scenario; the cases add a line to its handle or
+    # scenario map, or replace a part.
+    held = ("rows: 4\ncols: 4\ndimension: 3\nfixed: []\nlinearization: equilibrium\nnum_modes: 4\n"
+            "handle_scenarios:\n  - name: lift\n    handles:\n      - particles: [0, 1, 2, 3]\n"
+            "        translation: [0, 0, 0.1]\n")
+
     table = [
         # ------------------------------------------------ the command line
         Case("no_config", ["--quiet", "--output", OUT, "--experiment", "accuracy"], "--config"),
@@ -157,6 +163,8 @@ def cases(configs):
         setting("memory_limit_gb", "0"),
         setting("memory_limit_gb", "-1"),
         setting("basis", "derivatives"),
+        setting("handle_formulation", "frame"),
+        setting("handle_formulation", "moving_frame"),  # no handles
         setting("num_derivative_modes", "2"),  # with basis: linear_modes
         tool("num_derivative_modes_negative", "num_derivative_modes", "--set", "basis=modal_derivatives",
              "--set", "num_derivative_modes=-1"),
@@ -207,6 +215,21 @@ def cases(configs):
         config("config_out_of_range", "num_modes: 0\n", "num_modes"),
         config("config_fixed_out_of_range", "rows: 3\ncols: 3\nfixed: [9]\n", "fixed"),
         config("config_gravity_short", "gravity: [0, -9.81]\n", "gravity"),
+        # ------------------------------------------------ handle scenarios (the handles experiment)
+        tool("handles_without_scenarios", "handle_scenarios", "--experiment", "handles"),
+        config("handles_scenarios_a_map", "handle_scenarios: {name: a}\n", "handle_scenarios", "--experiment", "handles"),
+        config("handles_unknown_key", held + "    speed: 2\n", "handle_scenarios[0].speed", "--experiment", "handles"),
+        config("handles_particle_outside", held.replace("[0, 1, 2, 3]", "[0, 1, 2, 16]"), "handles[0]",
+               "--experiment", "handles"),
+        config("handles_particle_fixed", held.replace("fixed: []", "fixed: [3]"), "also be fixed",
+               "--experiment", "handles"),
+        config("handles_axis_zero", held + "        rotation_axis: [0, 0, 0]\n", "rotation_axis",
+               "--experiment", "handles"),
+        config("handles_angle_too_large", held + "        rotation_deg: 361\n", "rotation_deg",
+               "--experiment", "handles"),
+        # also refused when another experiment runs: the config is read whole
+        config("handles_bad_in_accuracy_run", held.replace("name: lift", "name: 'lift,now'"),
+               "handle_scenarios[0].name", "--experiment", "accuracy"),
     ]
     return table
 

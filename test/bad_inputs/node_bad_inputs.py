@@ -117,6 +117,11 @@ CASES = [
     ({"shadow_full": "yes"}, [], ["shadow_full"]),
     ({}, ["_diagnostic_period:=-1"], ["diagnostic_period"]),
     ({"diagnostic_period": 0.0}, [], ["diagnostic_period"]),
+    ({"drag_stiffness": -1.0}, [], ["drag_stiffness"]),
+    ({"drag_stiffness": 1e5}, [], ["drag_stiffness"]),  # the paper grid's step takes at most 1e4 N/m
+    ({"drag_stiffness": "stiff"}, [], ["drag_stiffness"]),
+    ({"poke_impulse": -0.01}, [], ["poke_impulse"]),
+    ({"poke_impulse": NAN}, [], ["poke_impulse"]),
     ({"handles": [{"frame": "gripper", "particles": [25]}]}, [], ["handles"]),
     ({"handles": [{"frame": "gripper", "particles": [0, 1]}, {"frame": "finger", "particles": [1]}]}, [],
      ["handles"]),
@@ -132,6 +137,13 @@ CASES = [
     ({"handles": [{"frame": "world", "particles": [0]}]}, [], ["handles"]),
     ({}, ["_handles:=[{frame: gripper, particles: [0]}"], ["handles"]),
     ({}, ["_handles:=[{frame: gripper, particles: [0, x]}]"], ["handles"]),
+    ({"handle_formulation": "frame"}, [], ["handle_formulation"]),
+    ({"handle_formulation": "moving_frame"}, [], ["handle_formulation"]),  # no handles
+    ({"handle_formulation": "moving_frame", "fixed": [0], "handles": [{"frame": "gripper", "particles": [24]}]},
+     [], ["handle_formulation"]),  # a fixed particle
+    ({"handle_formulation": "moving_frame", "fixed": [],
+      "handles": [{"frame": "left", "particles": [0]}, {"frame": "right", "particles": [4]}]}, [],
+     ["handle_formulation"]),  # two frames
     # A grid whose equilibrium and basis would take minutes: the node parameter fails at once.
     ({"rows": 600, "cols": 600, "dimension": 3, "num_modes": 30, "linearization": "equilibrium",
       "tf_particles": [360000]}, [], ["tf_particles"]),

@@ -201,6 +201,48 @@ TEST(Handles, MethodSwitchesWithMovedHandlesMoveNoParticle)
   EXPECT_FALSE(sim.energyCheckSuspended());
 }
 
+// A simulation that takes over another's run (a rebuild with stiffer springs) starts with the
+// handles where the other left them, and the grid around them: exactly for `full`; and setting the
+// handles' state moves no free particle.
+TEST(Handles, ATakenOverRunKeepsItsHandles)
+{
+  Eigen::VectorXd acceleration(2);
+  acceleration << 5.0, 2.5;
+  GridParams stiffer = heldGrid({{24}});
+  stiffer.structural_stiffness *= 1.2;
+  for (Method method : {Method::Full, Method::Linear, Method::Physical, Method::Cubature})
+  {
+    SCOPED_TRACE(toString(method));
+    Simulation old(heldGrid({{24}}), simParams(method, 8, 0.5));
+    shakeHandles(old, acceleration, 200);
+    ASSERT_GT(largestDifference(old.handlePositions(), handleReference(old)), 0.01) << "the handle must have moved";
+    Simulation next(stiffer, simParams(method, 8, 0.5));
+    next.setHandleState(old.handlePositions(), old.handleMotion().velocity, old.handleMotion().acceleration);
+    next.setPhysicalState(next.grid().gatherFree(old.positions() - next.linearizationPositions()), old.velocity());
+    EXPECT_LT(largestDifference(next.handlePositions(), old.handlePositions()), 1e-15);
+    for (int dof : next.grid().handleDofs())
+      EXPECT_LT(std::abs(next.positions()[dof] - old.positions()[dof]), 1e-15);
+    if (method == Method::Full)
+    {
+      EXPECT_LT(largestDifference(next.positions(), old.positions()), 1e-15);
+    }
+    EXPECT_TRUE(next.energyCheckSuspended());
+    shakeHandles(next, acceleration, 100);  // goes on from the handles' motion taken over
+    EXPECT_FALSE(next.diverged());
+
+    // Moving the handles in place re-splits the motion around them: no free particle moves.
+    const Eigen::VectorXd before = next.positions();
+    const Eigen::VectorXd moved = next.handlePositions() + Eigen::Vector2d(0.01, -0.02);
+    next.setHandleState(moved);
+    EXPECT_LT(largestDifference(next.grid().gatherFree(next.positions()), next.grid().gatherFree(before)), 1e-12);
+    EXPECT_LT(largestDifference(next.handlePositions(), moved), 1e-15);
+    // A wrong size is refused by name, changing nothing.
+    const std::string why = refusal([&] { next.setHandleState(Eigen::VectorXd::Zero(3)); });
+    EXPECT_TRUE(contains(why, "handle positions")) << why;
+    EXPECT_LT(largestDifference(next.handlePositions(), moved), 1e-15);
+  }
+}
+
 TEST(Handles, BadHandlesAreNamed)
 {
   auto build = [](std::vector<std::vector<int>> handles, std::vector<int> fixed) {

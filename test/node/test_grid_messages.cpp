@@ -96,6 +96,10 @@ TEST(GridMessages, StretchedParticlesAreColouredRedAndRestOnesNot)
     EXPECT_GT(c.r, c.b);
     EXPECT_LT(c.g, rest_surface->colors[0].g);
   }
+  // The strains the caller already has give the same colours (the node computes them once a tick).
+  const auto given = makeMarkers(grid, options, points, ros::Time(1.0), strains);
+  EXPECT_EQ(find(given, "surface")->colors, surface->colors);
+  EXPECT_EQ(find(given, "surface")->points, surface->points);
 }
 
 TEST(GridMessages, NamespacesCanBeSwitchedOffAndArePrefixed)

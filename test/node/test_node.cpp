@@ -5,6 +5,7 @@
 #include "modal_mass_spring/Status.h"
 #include "modal_mass_spring/Step.h"
 
+#include <Eigen/Core>
 #include <diagnostic_msgs/DiagnosticArray.h>
 #include <gtest/gtest.h>
 #include <ros/ros.h>
@@ -17,6 +18,8 @@
 #include <tf2_ros/buffer.h>
 #include <tf2_ros/static_transform_broadcaster.h>
 #include <tf2_ros/transform_listener.h>
+#include <geometry_msgs/PointStamped.h>
+#include <visualization_msgs/InteractiveMarkerFeedback.h>
 #include <visualization_msgs/MarkerArray.h>
 
 #include <array>
@@ -1031,6 +1034,248 @@ TEST_F(ExternalForces, BadMessagesAreDroppedWithAWarningNamingTheProblem)
   }
   // Nothing of them was taken, and the node runs on.
   EXPECT_LT(maxDistance(afterSteps(node, 100), free), 1e-12);
+  ASSERT_TRUE(node.pause(false));
+  EXPECT_TRUE(node.status([](const Status& s) { return s.state == Status::RUNNING && s.tick_steps > 0; }));
+}
+
+// ---------------------------------------------------------------- by hand: the drag marker and pokes (drag_and_poke.test)
+// A 5 x 5 sheet hanging at rest from its equilibrium; /modal_mass_spring runs one method at a time,
+// /compare_methods the four in lockstep. Runs are stepped with ~step on the paused node, so a run with
+// the hand and one without differ by the hand alone.
+
+geometry_msgs::Point point(const Eigen::Vector3d& p)
+{
+  geometry_msgs::Point q;
+  q.x = p.x();
+  q.y = p.y();
+  q.z = p.z();
+  return q;
+}
+
+Eigen::Vector3d vec(const geometry_msgs::Point& p) { return Eigen::Vector3d(p.x, p.y, p.z); }
+
+class ByHand : public ::testing::Test
+{
+protected:
+  void SetUp() override
+  {
+    ros::NodeHandle nh;
+    feedback_pub = nh.advertise<visualization_msgs::InteractiveMarkerFeedback>(node.topic("drag/feedback"), 10);
+    compare_feedback_pub = nh.advertise<visualization_msgs::InteractiveMarkerFeedback>(compare.topic("drag/feedback"), 10);
+    click_pub = nh.advertise<geometry_msgs::PointStamped>("/clicked_point", 10);
+    const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(15.0);
+    while ((feedback_pub.getNumSubscribers() == 0 || compare_feedback_pub.getNumSubscribers() == 0 ||
+            click_pub.getNumSubscribers() < 2) &&
+           ros::WallTime::now() < end)
+      ros::WallDuration(0.02).sleep();
+    ASSERT_GT(feedback_pub.getNumSubscribers(), 0u);
+    ASSERT_GT(compare_feedback_pub.getNumSubscribers(), 0u);
+    ASSERT_GE(click_pub.getNumSubscribers(), 2u);
+  }
+  void TearDown() override
+  {
+    drag(feedback_pub, visualization_msgs::InteractiveMarkerFeedback::MOUSE_UP, Eigen::Vector3d::Zero());
+    drag(compare_feedback_pub, visualization_msgs::InteractiveMarkerFeedback::MOUSE_UP, Eigen::Vector3d::Zero());
+    node.pause(false);
+    compare.pause(false);
+  }
+  // As rviz sends it: the marker's pose in the fixed frame, from one client; waits for the node to take it.
+  static void drag(const ros::Publisher& publisher, uint8_t event, const Eigen::Vector3d& at,
+                   const std::string& frame = "world", const std::string& control = "pull")
+  {
+    visualization_msgs::InteractiveMarkerFeedback feedback;
+    feedback.header.frame_id = frame;
+    feedback.client_id = "/test_node/rviz";
+    feedback.marker_name = "drag";
+    feedback.control_name = control;
+    feedback.event_type = event;
+    feedback.pose.position = point(at);
+    feedback.pose.orientation.w = 1.0;
+    publisher.publish(feedback);
+    ros::WallDuration(0.3).sleep();
+  }
+  void click(const Eigen::Vector3d& at, const std::string& frame = "world") const
+  {
+    geometry_msgs::PointStamped message;
+    message.header.frame_id = frame;
+    message.header.stamp = ros::Time::now();
+    message.point = point(at);
+    click_pub.publish(message);
+    ros::WallDuration(0.3).sleep();
+  }
+  // The particles after `steps` steps from the reset state of the paused node, with `before` done
+  // after the reset (a grab, a click).
+  static std::vector<geometry_msgs::Point> run(const NodeUnderTest& node, uint32_t steps,
+                                               const std::function<void()>& before = {},
+                                               const std::vector<NodeUnderTest>& methods = {})
+  {
+    EXPECT_TRUE(node.pause(true));
+    EXPECT_TRUE(node.reset().success);
+    ros::WallDuration(0.2).sleep();  // a tick's snapshot of the reset state: what a grab sees
+    if (before)
+      before();
+    const auto response = stepBy(node, steps);
+    EXPECT_TRUE(response.success) << response.message;
+    std::vector<geometry_msgs::Point> all;
+    for (const NodeUnderTest& shown : methods.empty() ? std::vector<NodeUnderTest>{node} : methods)
+    {
+      const auto tick =
+          shown.tick([&](const Status& s) { return s.state == Status::PAUSED && s.step_count == steps; });
+      if (!tick.first)
+        return {};
+      const std::string method = shown.name.substr(shown.name.rfind('/') + 1);
+      const auto points = particles(*tick.first, methods.empty() ? "particles" : method + "/particles");
+      all.insert(all.end(), points.begin(), points.end());
+    }
+    return all;
+  }
+  bool logged(const Recorder<rosgraph_msgs::Log>& log, uint8_t level, const std::string& text) const
+  {
+    for (const auto& entry : log.messages())
+      if (entry->level == level && entry->msg.find(text) != std::string::npos)
+        return true;
+    return false;
+  }
+
+  NodeUnderTest node{"/modal_mass_spring"};
+  NodeUnderTest compare{"/compare_methods"};
+  ros::Publisher feedback_pub, compare_feedback_pub, click_pub;
+  const int corner = 24;  // the bottom-right corner of the 5 x 5 sheet
+};
+
+TEST_F(ByHand, DragPullsTheNearestFreeParticleTowardTheMarkerWithEveryMethodUntilReleased)
+{
+  using Feedback = visualization_msgs::InteractiveMarkerFeedback;
+  for (const std::string method : {"full", "linear", "physical", "cubature"})
+  {
+    ASSERT_TRUE(node.setMethod(method).success) << method;
+    const auto free = run(node, 100);
+    ASSERT_EQ(free.size(), 25u);
+    const Eigen::Vector3d start = vec(free[corner]);
+    const Eigen::Vector3d target = start + Eigen::Vector3d(0.0, 0.1, 0.05);
+    Recorder<rosgraph_msgs::Log> log("/rosout");
+    const auto pulled = run(node, 100, [&] {
+      drag(feedback_pub, Feedback::MOUSE_DOWN, start + Eigen::Vector3d(0.02, 0.01, -0.02));
+      drag(feedback_pub, Feedback::POSE_UPDATE, target);
+    });
+    ASSERT_EQ(pulled.size(), 25u);
+    EXPECT_TRUE(logged(log, rosgraph_msgs::Log::INFO, "particle 24 grabbed")) << method;
+    const Eigen::Vector3d moved = vec(pulled[corner]) - start;
+    EXPECT_LT((vec(pulled[corner]) - target).norm(), 0.7 * (start - target).norm()) << method << ": toward the marker";
+    EXPECT_GT(moved.y(), 0.02) << method;
+    EXPECT_GT(moved.dot(target - start), 0.7 * moved.norm() * (target - start).norm()) << method << ": along the pull";
+
+    // Let go, the run is the one without the hand again, to the bit.
+    drag(feedback_pub, Feedback::MOUSE_UP, target);
+    EXPECT_LT(maxDistance(run(node, 100), free), 1e-12) << method;
+  }
+}
+
+TEST_F(ByHand, DragGrabsOnlyFreeParticlesAndItsArrowsDoNotPull)
+{
+  using Feedback = visualization_msgs::InteractiveMarkerFeedback;
+  ASSERT_TRUE(node.setMethod("physical").success);
+  const auto free = run(node, 50);
+  ASSERT_EQ(free.size(), 25u);
+  // On particle 2, fixed in the top row: the free particle below it is taken.
+  Recorder<rosgraph_msgs::Log> log("/rosout");
+  ros::WallDuration(0.3).sleep();
+  run(node, 1, [&] { drag(feedback_pub, Feedback::MOUSE_DOWN, vec(free[2]) + Eigen::Vector3d(0.0, 0.0, 0.01)); });
+  drag(feedback_pub, Feedback::MOUSE_UP, vec(free[2]));
+  EXPECT_TRUE(logged(log, rosgraph_msgs::Log::INFO, "particle 7 grabbed"));
+  // Moved by an arrow, the marker pulls nothing.
+  const auto placed = run(node, 50, [&] {
+    drag(feedback_pub, Feedback::MOUSE_DOWN, vec(free[corner]), "world", "move_x");
+    drag(feedback_pub, Feedback::POSE_UPDATE, vec(free[corner]) + Eigen::Vector3d(0.2, 0.0, 0.0), "world", "move_x");
+  });
+  drag(feedback_pub, Feedback::MOUSE_UP, vec(free[corner]) + Eigen::Vector3d(0.2, 0.0, 0.0), "world", "move_x");
+  EXPECT_LT(maxDistance(placed, free), 1e-12);
+}
+
+TEST_F(ByHand, DragPullsEveryMethodOfALockstepComparison)
+{
+  using Feedback = visualization_msgs::InteractiveMarkerFeedback;
+  std::vector<NodeUnderTest> methods;
+  for (const std::string method : {"full", "linear", "physical", "cubature"})
+    methods.emplace_back("/compare_methods/" + method);
+  const auto free = run(compare, 100, {}, methods);
+  ASSERT_EQ(free.size(), 100u);
+  // Grabbed on physical's grid (the third); every grid is pulled toward the same place relative to it.
+  const Eigen::Vector3d start = vec(free[2 * 25 + corner]);
+  const Eigen::Vector3d pull(0.0, 0.1, 0.05);
+  const auto pulled = run(compare, 100, [&] {
+    drag(compare_feedback_pub, Feedback::MOUSE_DOWN, start);
+    drag(compare_feedback_pub, Feedback::POSE_UPDATE, start + pull);
+  }, methods);
+  drag(compare_feedback_pub, Feedback::MOUSE_UP, start + pull);
+  ASSERT_EQ(pulled.size(), 100u);
+  for (size_t k = 0; k < methods.size(); ++k)
+  {
+    const Eigen::Vector3d before = vec(free[k * 25 + corner]), after = vec(pulled[k * 25 + corner]);
+    EXPECT_LT((after - (before + pull)).norm(), 0.7 * pull.norm()) << methods[k].name;
+    EXPECT_GT((after - before).y(), 0.02) << methods[k].name;
+  }
+}
+
+TEST_F(ByHand, ClickedPointPokesTheNearestParticleAlongTheSheetsNormalWithEveryMethod)
+{
+  // A frame shifted from the world: the same click given in it pokes the same particle the same way.
+  tf2_ros::StaticTransformBroadcaster broadcaster;
+  geometry_msgs::TransformStamped shifted;
+  shifted.header.stamp = ros::Time::now();
+  shifted.header.frame_id = "world";
+  shifted.child_frame_id = "shifted";
+  shifted.transform.translation.x = 1.0;
+  shifted.transform.translation.y = -2.0;
+  shifted.transform.translation.z = 0.5;
+  shifted.transform.rotation.w = 1.0;
+  broadcaster.sendTransform(shifted);
+  ros::WallDuration(0.5).sleep();
+  const Eigen::Vector3d shift(1.0, -2.0, 0.5);
+  const int centre = 12;
+  for (const std::string method : {"full", "linear", "physical", "cubature"})
+  {
+    ASSERT_TRUE(node.setMethod(method).success) << method;
+    const auto free = run(node, 6);
+    ASSERT_EQ(free.size(), 25u);
+    const Eigen::Vector3d on_cloth = vec(free[centre]) + Eigen::Vector3d(0.02, 0.01, -0.01);
+    const auto poked = run(node, 6, [&] { click(on_cloth); });
+    ASSERT_EQ(poked.size(), 25u);
+    // The sheet hangs in the x-z plane: its normal is +y (drag_and_poke.h).
+    const Eigen::Vector3d moved = vec(poked[centre]) - vec(free[centre]);
+    EXPECT_GT(moved.y(), 1e-4) << method;
+    EXPECT_GT(moved.y(), 0.9 * moved.norm()) << method << ": along the normal";
+    EXPECT_LT(maxDistance(run(node, 6, [&] { click(on_cloth - shift, "shifted"); }), poked), 1e-9) << method;
+  }
+}
+
+TEST_F(ByHand, BadClicksAndDragsAreDroppedWithAWarningNamingTheProblem)
+{
+  using Feedback = visualization_msgs::InteractiveMarkerFeedback;
+  ASSERT_TRUE(node.setMethod("physical").success);
+  const auto free = run(node, 50);
+  ASSERT_EQ(free.size(), 25u);
+  Recorder<rosgraph_msgs::Log> log("/rosout");
+  ros::WallDuration(0.3).sleep();
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  const auto hit = run(node, 50, [&] {
+    click(Eigen::Vector3d(nan, 0.0, 0.0));
+    ros::WallDuration(1.1).sleep();  // each warning is throttled to one a second
+    click(vec(free[corner]), "no_such_frame");
+    ros::WallDuration(1.1).sleep();
+    click(vec(free[corner]) + Eigen::Vector3d(0.0, 1.0, 0.0));
+    ros::WallDuration(1.1).sleep();
+    drag(feedback_pub, Feedback::MOUSE_DOWN, vec(free[corner]), "no_such_frame");
+    drag(feedback_pub, Feedback::POSE_UPDATE, Eigen::Vector3d(nan, 0.0, 0.0));
+  });
+  drag(feedback_pub, Feedback::MOUSE_UP, vec(free[corner]));
+  for (const std::string expected :
+       {"/clicked_point: point dropped: the point (nan", "/clicked_point: point dropped: frame 'no_such_frame'",
+        "from the nearest free particle, beyond the 0.3 m (3 spacings) a poke reaches",
+        "drag: marker pose dropped: frame 'no_such_frame'"})
+    EXPECT_TRUE(logged(log, rosgraph_msgs::Log::WARN, expected)) << "no warning naming: " << expected;
+  // None of them did anything, and the node runs on.
+  EXPECT_LT(maxDistance(hit, free), 1e-12);
   ASSERT_TRUE(node.pause(false));
   EXPECT_TRUE(node.status([](const Status& s) { return s.state == Status::RUNNING && s.tick_steps > 0; }));
 }

@@ -453,6 +453,43 @@ TEST(NodeParams, HandlesAreCheckedAndReachTheGrid)
             std::string::npos);
 }
 
+// handle_formulation: the node tells the core whether every handle is on one frame (one rigid
+// body); moving_frame with handles on two frames is refused naming them.
+TEST(NodeParams, HandlesOnOneFrameAreOneBody)
+{
+  auto config = [](std::vector<HandleParam> list, const std::string& formulation) {
+    std::map<std::string, Value> values{{"handles", Value(list)}, {"fixed", std::vector<int>{}}};
+    if (!formulation.empty())
+      values["handle_formulation"] = formulation;
+    return values;
+  };
+  const FakeSource one(config({{"gripper", {0, 1}}, {"gripper", {3}}}, ""));
+  const NodeConfiguration c = loadNodeConfiguration(one, one.keys());
+  EXPECT_TRUE(c.simulation.handles_one_body);
+  EXPECT_EQ(c.simulation.handle_formulation, HandleFormulation::Auto);
+  EXPECT_EQ(resolveHandleFormulation(c.grid, c.simulation), HandleFormulation::MovingFrame);
+  EXPECT_EQ(handleFrames(c.node.handles), std::vector<std::string>{"gripper"});
+  const FakeSource two(config({{"gripper", {0, 1}}, {"finger", {3}}}, "auto"));
+  const NodeConfiguration d = loadNodeConfiguration(two, two.keys());
+  EXPECT_FALSE(d.simulation.handles_one_body);
+  EXPECT_EQ(resolveHandleFormulation(d.grid, d.simulation), HandleFormulation::ConstraintModes);
+  const FakeSource asked(config({{"gripper", {0, 1}}}, "constraint_modes"));
+  EXPECT_EQ(loadNodeConfiguration(asked, asked.keys()).simulation.handle_formulation,
+            HandleFormulation::ConstraintModes);
+
+  EXPECT_EQ(refusal(config({{"gripper", {0, 1}}, {"finger", {3}}}, "moving_frame")),
+            "invalid parameter 'handle_formulation' = moving_frame: needs every handle on one TF frame (one rigid "
+            "body), but the handles name 2 frames: 'gripper', 'finger'; use auto or constraint_modes for handles "
+            "that move apart");
+  auto fixed = config({{"gripper", {0, 1}}}, "moving_frame");
+  fixed["fixed"] = std::vector<int>{4};
+  EXPECT_NE(refusal(fixed).find("invalid parameter 'handle_formulation' = moving_frame: needs a grid with no fixed "
+                                "particles (it has 1)"),
+            std::string::npos);
+  EXPECT_EQ(refusal(config({{"gripper", {0}}}, "frame")),
+            "invalid parameter 'handle_formulation' = 'frame': must be one of auto, constraint_modes, moving_frame");
+}
+
 // `handles` from the parameter server (a list of structs) or from the command line (YAML text),
 // and every other shape refused naming the element.
 TEST(XmlRpcParameterSource, HandlesAsListsOfMapsOrTheirText)
@@ -568,6 +605,46 @@ TEST(HandleFrames, ParticlesFollowTheirFrame)
   frames.setTargets({std::nullopt});
   frames.motion(0.1, 1.0, x, v, a);
   EXPECT_LT((x - expected(first, first)).norm(), 1e-12) << "a reset puts them back at the start";
+}
+
+// The one frame's motion for the moving-frame formulation moves the handle particles exactly as
+// motion() does: the same lookups, the same interpolation, in grid coordinates.
+TEST(HandleFrames, OneFrameMotionIsTheParticlesMotion)
+{
+  GridParams grid_params;
+  grid_params.rows = 3;
+  grid_params.cols = 3;
+  grid_params.dimension = 3;
+  grid_params.handles = {{0, 2}, {1}};
+  const Grid grid(grid_params);
+  const Eigen::Vector3d grid_offset(1.0, 2.0, 3.0);
+  HandleFrames frames({{"gripper", {0, 2}}, {"gripper", {1}}}, grid, grid.initialPositions(), grid_offset);
+  EXPECT_TRUE(frames.frameMotion(0.1, 0.5).atRest()) << "before the first lookup";
+  const Eigen::Matrix3Xd all = grid.toPoints(grid.initialPositions());
+  Eigen::Matrix3Xd held(3, 3);
+  held << all.col(0), all.col(2), all.col(1);
+  auto pose = [](const Eigen::Vector3d& t, double angle, const Eigen::Vector3d& axis) {
+    FramePose p;
+    p.translation = t;
+    p.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(angle, axis.normalized()));
+    return p;
+  };
+  frames.setTargets({pose({0.5, 0.0, 1.0}, 0.3, {0, 0, 1}), pose({0.5, 0.0, 1.0}, 0.3, {0, 0, 1})});
+  frames.finishTick(1.0);
+  EXPECT_LT(frames.frameMotion(0.1, 1.0).translation.norm(), 1e-15) << "the first pose is B's start";
+  frames.setTargets({pose({0.7, 0.2, 0.8}, 1.1, {1, 1, 0}), pose({0.7, 0.2, 0.8}, 1.1, {1, 1, 0})});
+  for (double s : {0.25, 1.0})
+  {
+    Eigen::VectorXd x, v, a;
+    frames.motion(0.1, s, x, v, a);
+    const RigidPointMotion m = pointMotion(frames.frameMotion(0.1, s), held);
+    for (int k = 0; k < 3; ++k)
+    {
+      EXPECT_LT((m.position.col(k) - x.segment<3>(3 * k)).norm(), 1e-14) << s;
+      EXPECT_LT((m.velocity.col(k) - v.segment<3>(3 * k)).norm(), 1e-12) << s;
+      EXPECT_LT((m.acceleration.col(k) - a.segment<3>(3 * k)).norm(), 1e-10) << s;
+    }
+  }
 }
 
 // A YAML node as the parameter server would hold it (scalars: integer, number, bool or string).

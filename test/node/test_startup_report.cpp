@@ -142,3 +142,33 @@ TEST(StartupProgress, ASlowStartUpSaysWhatItIsDoing)
 }
 
 }  // namespace
+
+TEST(StartupReport, HandleFormulationAndWhy)
+{
+  GridParams grid;
+  grid.fixed.clear();
+  grid.handles = {{0, 1, 2, 3, 4}};
+  SimulationParams params;
+  params.handles_one_body = true;
+  EXPECT_EQ(describeHandleFormulation(grid, params, {"gripper"}),
+            "handles: moving frame of 'gripper' (one rigid body holds every held particle and nothing is fixed: every "
+            "method simulates in its frame, whose motion enters exactly at any turn; handle_formulation: auto)");
+  params.handle_formulation = HandleFormulation::ConstraintModes;
+  EXPECT_EQ(describeHandleFormulation(grid, params, {"gripper"}),
+            "handles: constraint modes (Craig-Bampton) for the modal methods, prescribed positions for full; 1 handle "
+            "on 1 frame (as handle_formulation: constraint_modes asks; large turns distort the constraint modes)");
+  params.handle_formulation = HandleFormulation::Auto;
+  params.handles_one_body = false;
+  grid.handles = {{0, 1}, {3, 4}};
+  EXPECT_EQ(describeHandleFormulation(grid, params, {"left", "right"}),
+            "handles: constraint modes (Craig-Bampton) for the modal methods, prescribed positions for full; 2 "
+            "handles on 2 frames (they can move apart; the moving frame needs one rigid body; large turns distort "
+            "the constraint modes)");
+  params.handles_one_body = true;
+  grid.handles = {{24}};
+  grid.fixed = {0, 1, 2, 3, 4};
+  EXPECT_EQ(describeHandleFormulation(grid, params, {"gripper"}),
+            "handles: constraint modes (Craig-Bampton) for the modal methods, prescribed positions for full; 1 handle "
+            "on 1 frame (5 fixed particles cannot move with the frame; the moving frame needs none fixed; large turns "
+            "distort the constraint modes)");
+}

@@ -12,6 +12,7 @@
 #include <iterator>
 #include <sstream>
 #include <cstdlib>
+#include <set>
 #include <string>
 
 namespace fs = std::filesystem;
@@ -213,6 +214,118 @@ TEST_F(ModalCompareTool, UnknownConfigKeysAreWarnedAbout)
             std::string::npos)
       << r.output;
   EXPECT_EQ(r.output.find("publish_rate"), std::string::npos) << r.output;
+}
+
+// A small held sheet for the handles experiment: 4 x 4 in 3D, hanging from its handles, two scenarios.
+const char* const kHeldSheet = R"(rows: 4
+cols: 4
+dimension: 3
+mass: 0.005
+structural_stiffness: 50.0
+shear_stiffness: 20.0
+fixed: []
+num_modes: 6
+linearization: equilibrium
+initial_state: equilibrium
+alpha: 0.5
+time_step: 0.002
+handle_scenarios:
+  - name: shift
+    move_time: 0.2
+    hold_time: 0.1
+    handles:
+      - {particles: [0, 1, 2, 3], translation: [0.1, 0.0, 0.0]}
+  - name: apart
+    move_time: 0.2
+    hold_time: 0.1
+    handles:
+      - {particles: [0], translation: [-0.02, 0.0, 0.0]}
+      - {particles: [3], translation: [0.02, 0.0, 0.0]}
+)";
+
+TEST_F(ModalCompareTool, HandlesExperimentMeasuresEveryScenarioAndMethodAgainstTheReference)
+{
+  std::ofstream(dir_ / "held.yaml") << kHeldSheet;
+  const CommandResult r = run(tool("--config " + (dir_ / "held.yaml").string() +
+                                   " --experiment handles --sample 10 --reference-time-step 0.0005"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  std::ifstream in(dir_ / "data" / "handles_held_summary.csv");
+  ASSERT_TRUE(in) << r.output;
+  std::string line;
+  std::getline(in, line);
+  EXPECT_EQ(line.rfind("variant,method,mean_rms,max_rms", 0), 0u) << line;
+  std::set<std::string> rows;
+  while (std::getline(in, line))
+    rows.insert(line.substr(0, line.find(',', line.find(',') + 1)));
+  for (const char* scenario : {"shift", "apart"})
+    for (const char* method : {"reference", "full", "linear", "physical", "cubature", "reference_half_step"})
+      EXPECT_TRUE(rows.count(std::string(scenario) + "," + method)) << scenario << " " << method << "\n" << r.output;
+  // 0.3 s of 2 ms steps, sampled every 10 steps: 15 samples and step 0 per scenario and run.
+  std::ifstream errors(dir_ / "data" / "handles_held_error.csv");
+  int samples = 0;
+  while (std::getline(errors, line))
+    samples += line.rfind("shift,physical,", 0) == 0;
+  EXPECT_EQ(samples, 16);
+  EXPECT_NE(r.output.find("handle scenario apart: 2 handle(s)"), std::string::npos) << r.output;
+  // Every particle of every run (reference, full and the three modal methods) where the move ends, at
+  // step 100 (0.2 s of 2 ms steps); the handle particles where the frame put them.
+  std::ifstream shapes(dir_ / "data" / "handles_held_snapshots.csv");
+  std::getline(shapes, line);
+  ASSERT_EQ(line, "variant,method,step,time,particle,row,col,fixed,x,y,z");
+  int points = 0, handle_points = 0;
+  while (std::getline(shapes, line))
+  {
+    ++points;
+    EXPECT_NE(line.find(",100,0.2,"), std::string::npos) << line;
+    // shift: particle 1 of the top row starts at x = 0.1 and moves by 0.1 with its handle.
+    if (line.rfind("shift,", 0) == 0 && line.find(",1,0,1,0,") != std::string::npos)
+    {
+      ++handle_points;
+      EXPECT_NE(line.find(",0,0.2,"), std::string::npos) << line;
+    }
+  }
+  EXPECT_EQ(points, 2 * 5 * 16);
+  EXPECT_EQ(handle_points, 5);
+
+  const fs::path figures = dir_ / "figures";
+  const CommandResult plot = run("MPLBACKEND=Agg /usr/bin/python3 " + std::string(MODAL_SOURCE_DIR) +
+                                 "/scripts/plot_comparison.py --data " + (dir_ / "data").string() + " --out " +
+                                 figures.string());
+  ASSERT_EQ(plot.status, 0) << plot.output;
+  for (const char* name : {"handles_held.png", "handles_held_shapes.png"})
+  {
+    ASSERT_TRUE(fs::exists(figures / name)) << name << "\n" << plot.output;
+    EXPECT_GT(fs::file_size(figures / name), 5000u) << name;
+  }
+}
+
+TEST_F(ModalCompareTool, BadHandleScenariosStopBeforeAnyWorkWithAMessageNamingThem)
+{
+  struct Case
+  {
+    std::string replace, with, named;
+  };
+  for (const Case& c : {Case{"translation: [0.1, 0.0, 0.0]", "translation: [0.1, 0.0]", "handle_scenarios[0].handles[0].translation"},
+                        Case{"move_time: 0.2\n    hold", "move_tme: 0.2\n    hold", "handle_scenarios[0].move_tme"},
+                        Case{"name: apart", "name: shift", "handle_scenarios[1].name"},
+                        Case{"particles: [3]", "particles: [16]", "handles[1]' = 16"},
+                        Case{"fixed: []", "fixed: [0]", "also be fixed"}})
+  {
+    std::string text = kHeldSheet;
+    const size_t at = text.find(c.replace);
+    ASSERT_NE(at, std::string::npos) << c.replace;
+    text.replace(at, c.replace.size(), c.with);
+    std::ofstream(dir_ / "bad.yaml") << text;
+    const CommandResult r = run(tool("--config " + (dir_ / "bad.yaml").string() + " --experiment handles"));
+    EXPECT_EQ(r.status, 2) << c.with << "\n" << r.output;
+    EXPECT_NE(r.output.find(c.named), std::string::npos) << c.with << "\n" << r.output;
+    EXPECT_FALSE(fs::exists(dir_ / "data")) << c.with << ": wrote output before refusing";
+    fs::remove_all(dir_ / "data");
+  }
+  // The experiment needs scenarios.
+  const CommandResult r = run(tool("--config " + config("paper_2d.yaml") + " --experiment handles"));
+  EXPECT_EQ(r.status, 2) << r.output;
+  EXPECT_NE(r.output.find("'handle_scenarios'"), std::string::npos) << r.output;
 }
 
 // Item 1: when the memory estimate passes but the machine cannot give the memory, the tool says so.

@@ -148,7 +148,7 @@ TEST(YamlParameterSource, EveryShippedConfigLoads)
   const std::string dir = MODAL_SOURCE_DIR;
   for (const char* name : {"/config/cloth.yaml", "/config/paper_2d.yaml", "/config/paper_3d.yaml",
                            "/config/compare/paper_2d.yaml", "/config/compare/paper_3d.yaml",
-                           "/config/compare/cloth_50.yaml"})
+                           "/config/compare/cloth_50.yaml", "/config/compare/held_cloth.yaml"})
     EXPECT_TRUE(std::binary_search(found.begin(), found.end(), dir + name)) << name << " is missing";
   for (const std::string& path : found)
   {

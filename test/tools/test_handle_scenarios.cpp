@@ -1,0 +1,323 @@
+// Handle scenarios: the ramp and the rigid motion against their derivatives and closed forms, the
+// YAML refused by name, and every interior mode under `physical` against `full` moved the same way.
+#include "experiments.h"
+#include "handle_scenarios.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <stdexcept>
+#include <string>
+
+using namespace modal_mass_spring;
+
+namespace
+{
+
+std::string invalidArgument(const std::function<void()>& f)
+{
+  try
+  {
+    f();
+  }
+  catch (const std::invalid_argument& e)
+  {
+    return e.what();
+  }
+  return "(no std::invalid_argument)";
+}
+
+std::vector<HandleScenario> parse(const std::string& yaml)
+{
+  return parseHandleScenarios(YAML::Load(yaml), "handle_scenarios");
+}
+
+// A 4 x 4 sheet in 3D held by its top row, hanging at rest: small enough to keep every interior mode.
+ExperimentSetup heldSheet(const HandleScenario& scenario)
+{
+  ExperimentSetup setup;
+  setup.grid.rows = 4;
+  setup.grid.cols = 4;
+  setup.grid.dimension = 3;
+  setup.grid.spacing = 0.1;
+  setup.grid.mass = 0.005;
+  setup.grid.structural_stiffness = 50.0;
+  setup.grid.shear_stiffness = 20.0;
+  setup.grid.bending = true;
+  setup.grid.bending_stiffness = 5.0;
+  setup.sim.linearization = Linearization::Equilibrium;
+  setup.sim.initial_state = InitialState::Equilibrium;
+  setup.sim.integrator = IntegratorKind::Explicit;
+  setup.sim.time_step = 5e-4;
+  setup.sim.alpha = 0.5;
+  setup.grid = gridWithHandles(setup.grid, scenario);
+  setup.sim.num_modes = 3 * 12;  // every interior dof
+  setup.handle_scenario = scenario;
+  setup.variant = scenario.name;
+  return setup;
+}
+
+// The largest distance to the reference of `physical` and of `linear`, and the largest displacement
+// of the reference, over a run's samples; fails on a divergence.
+struct Worst
+{
+  double physical = 0.0, linear = 0.0, moved = 0.0;
+};
+
+Worst worstOf(const AccuracyResult& result)
+{
+  Worst w;
+  for (const ErrorSample& e : result.errors)
+  {
+    EXPECT_FALSE(e.diverged) << e.method << " at step " << e.step;
+    if (e.method == "physical")
+      w.physical = std::max(w.physical, e.max_distance);
+    else if (e.method == "linear")
+      w.linear = std::max(w.linear, e.max_distance);
+    else
+      w.moved = std::max(w.moved, e.max_displacement);
+  }
+  return w;
+}
+
+}  // namespace
+
+TEST(HandleScenarios, RampStartsAndEndsAtRestAndItsRatesAreItsDerivatives)
+{
+  const double move = 0.8, h = 1e-5;
+  EXPECT_EQ(moveRamp(0.0, move).s, 0.0);
+  EXPECT_EQ(moveRamp(-1.0, move).s, 0.0);
+  EXPECT_NEAR(moveRamp(move, move).s, 1.0, 1e-15);
+  EXPECT_NEAR(moveRamp(5.0, move).s, 1.0, 1e-15);
+  for (double t : {0.0, move})
+  {
+    EXPECT_NEAR(moveRamp(t, move).ds, 0.0, 1e-15);
+    EXPECT_NEAR(moveRamp(t, move).dds, 0.0, 1e-12);
+  }
+  EXPECT_NEAR(moveRamp(0.5 * move, move).s, 0.5, 1e-15);  // symmetric
+  for (double t : {0.05, 0.2, 0.4, 0.61, 0.79})
+  {
+    const Ramp r = moveRamp(t, move);
+    EXPECT_NEAR(r.ds, (moveRamp(t + h, move).s - moveRamp(t - h, move).s) / (2 * h), 1e-7) << t;
+    EXPECT_NEAR(r.dds, (moveRamp(t + h, move).ds - moveRamp(t - h, move).ds) / (2 * h), 1e-5) << t;
+  }
+}
+
+TEST(HandleScenarios, ParticlesOnAMovingFrameHaveTheDerivativesOfTheirPathAndEndWhereTheFrameWent)
+{
+  HandlePath path;
+  path.translation = Eigen::Vector3d(0.3, -0.1, 0.2);
+  path.rotation_axis = Eigen::Vector3d(1.0, 1.0, 0.5).normalized();
+  path.rotation_deg = 120.0;
+  const Eigen::Vector3d start(0.1, 0.2, -0.3);
+  Eigen::Matrix3Xd offsets(3, 3);
+  offsets << 0.1, -0.2, 0.0,  //
+      0.0, 0.05, 0.3,         //
+      -0.1, 0.0, 0.2;
+  const double move = 1.0, h = 1e-5;
+  auto at = [&](double t) { return pointsOnFrame(frameMotion(path, start, move, t), offsets); };
+  for (double t : {0.1, 0.37, 0.5, 0.83})
+  {
+    const RigidPointMotion m = at(t);
+    const Eigen::Matrix3Xd velocity = (at(t + h).position - at(t - h).position) / (2 * h);
+    const Eigen::Matrix3Xd acceleration = (at(t + h).velocity - at(t - h).velocity) / (2 * h);
+    EXPECT_LT((m.velocity - velocity).cwiseAbs().maxCoeff(), 1e-7) << t;
+    EXPECT_LT((m.acceleration - acceleration).cwiseAbs().maxCoeff(), 1e-6) << t;
+    // A rigid motion keeps the distances between the particles.
+    EXPECT_NEAR((m.position.col(0) - m.position.col(2)).norm(), (offsets.col(0) - offsets.col(2)).norm(), 1e-14);
+  }
+
+  // A quarter turn about z ends with (x, y) -> (-y, x) about the moved origin, and then holds still.
+  HandlePath turn;
+  turn.translation = Eigen::Vector3d(0.5, 0.0, 0.0);
+  turn.rotation_deg = 90.0;
+  for (double t : {1.0, 2.5})
+  {
+    const RigidPointMotion m = pointsOnFrame(frameMotion(turn, start, move, t), offsets);
+    for (int k = 0; k < 3; ++k)
+    {
+      const Eigen::Vector3d expected =
+          start + turn.translation + Eigen::Vector3d(-offsets(1, k), offsets(0, k), offsets(2, k));
+      EXPECT_LT((m.position.col(k) - expected).norm(), 1e-14);
+      EXPECT_LT(m.velocity.col(k).norm(), 1e-14);
+      EXPECT_LT(m.acceleration.col(k).norm(), 1e-12);
+    }
+  }
+}
+
+TEST(HandleScenarios, ParsesEveryKeyWithItsDefaults)
+{
+  const auto scenarios = parse(R"(
+- name: turn
+  move_time: 0.5
+  hold_time: 0
+  handles:
+    - {particles: [0, 1], translation: [0.1, 0, -0.2], rotation_axis: [0, 0, 2], rotation_deg: -45}
+- name: still
+  handles:
+    - particles: [3]
+)");
+  ASSERT_EQ(scenarios.size(), 2u);
+  EXPECT_EQ(scenarios[0].name, "turn");
+  EXPECT_EQ(scenarios[0].move_time, 0.5);
+  EXPECT_EQ(scenarios[0].hold_time, 0.0);
+  ASSERT_EQ(scenarios[0].handles.size(), 1u);
+  EXPECT_EQ(scenarios[0].handles[0].particles, (std::vector<int>{0, 1}));
+  EXPECT_EQ(scenarios[0].handles[0].translation, Eigen::Vector3d(0.1, 0.0, -0.2));
+  EXPECT_EQ(scenarios[0].handles[0].rotation_axis, Eigen::Vector3d::UnitZ());  // normalised
+  EXPECT_EQ(scenarios[0].handles[0].rotation_deg, -45.0);
+  EXPECT_EQ(scenarios[1].move_time, 1.0);
+  EXPECT_EQ(scenarios[1].hold_time, 2.0);
+  EXPECT_EQ(scenarios[1].handles[0].translation, Eigen::Vector3d::Zero());
+  EXPECT_EQ(scenarios[1].handles[0].rotation_deg, 0.0);
+}
+
+TEST(HandleScenarios, BadScenariosAreRefusedNamingTheElement)
+{
+  struct Case
+  {
+    std::string yaml, named;
+  };
+  const std::string h = "handles: [{particles: [0]}]";
+  for (const Case& c : {
+           Case{"{name: a, " + h + "}", "'handle_scenarios'"},  // not a list
+           Case{"[]", "'handle_scenarios'"},
+           Case{"[5]", "'handle_scenarios[0]'"},
+           Case{"[{" + h + "}]", "'handle_scenarios[0].name'"},
+           Case{"[{name: 'a,b', " + h + "}]", "'handle_scenarios[0].name'"},
+           Case{"[{name: a, " + h + "}, {name: a, " + h + "}]", "'handle_scenarios[1].name'"},
+           Case{"[{name: a, " + h + ", speed: 3}]", "'handle_scenarios[0].speed'"},
+           Case{"[{name: a}]", "'handle_scenarios[0].handles'"},
+           Case{"[{name: a, handles: []}]", "'handle_scenarios[0].handles'"},
+           Case{"[{name: a, handles: [[0, 1]]}]", "'handle_scenarios[0].handles[0]'"},
+           Case{"[{name: a, handles: [{translation: [0, 0, 1]}]}]", "'handle_scenarios[0].handles[0]'"},
+           Case{"[{name: a, handles: [{particles: []}]}]", "'handle_scenarios[0].handles[0].particles'"},
+           Case{"[{name: a, handles: [{particles: [0.5]}]}]", "'handle_scenarios[0].handles[0].particles'"},
+           Case{"[{name: a, handles: [{particles: [0], particle: [1]}]}]", "'handle_scenarios[0].handles[0].particle'"},
+           Case{"[{name: a, handles: [{particles: [0], translation: [1, 2]}]}]",
+                "'handle_scenarios[0].handles[0].translation'"},
+           Case{"[{name: a, handles: [{particles: [0], translation: [1, .nan, 2]}]}]",
+                "'handle_scenarios[0].handles[0].translation'"},
+           Case{"[{name: a, handles: [{particles: [0], rotation_axis: [0, 0, 0]}]}]",
+                "'handle_scenarios[0].handles[0].rotation_axis'"},
+           Case{"[{name: a, handles: [{particles: [0], rotation_deg: 400}]}]",
+                "'handle_scenarios[0].handles[0].rotation_deg'"},
+           Case{"[{name: a, handles: [{particles: [0], rotation_deg: quarter}]}]",
+                "'handle_scenarios[0].handles[0].rotation_deg'"},
+           Case{"[{name: a, move_time: 0, " + h + "}]", "'handle_scenarios[0].move_time'"},
+           Case{"[{name: a, hold_time: -1, " + h + "}]", "'handle_scenarios[0].hold_time'"},
+       })
+  {
+    const std::string message = invalidArgument([&] { parse(c.yaml); });
+    EXPECT_NE(message.find("invalid parameter " + c.named), std::string::npos) << c.yaml << "\n" << message;
+  }
+}
+
+TEST(HandleScenarios, TheCoreChecksTheParticleGroupsAgainstTheGrid)
+{
+  GridParams grid;  // 5 x 5 in 2D, the top row fixed
+  grid.fixed = {20, 21, 22, 23, 24};
+  auto message = [&](const std::string& yaml) {
+    return invalidArgument([&] { gridWithHandles(grid, parse(yaml).front()); });
+  };
+  std::string m = message("[{name: twice, handles: [{particles: [0, 1]}, {particles: [1]}]}]");
+  EXPECT_NE(m.find("handle scenario 'twice'"), std::string::npos) << m;
+  EXPECT_NE(m.find("'handles[1]' = 1"), std::string::npos) << m;
+  m = message("[{name: outside, handles: [{particles: [25]}]}]");
+  EXPECT_NE(m.find("'handles[0]' = 25"), std::string::npos) << m;
+  m = message("[{name: fixed, handles: [{particles: [20]}]}]");
+  EXPECT_NE(m.find("also be fixed"), std::string::npos) << m;
+  m = message("[{name: off_plane, handles: [{particles: [0], translation: [0, 0.1, 0]}]}]");
+  EXPECT_NE(m.find("'handles[0].translation'"), std::string::npos) << m;
+  m = message("[{name: tilt, handles: [{particles: [0], rotation_axis: [1, 0, 0], rotation_deg: 10}]}]");
+  EXPECT_NE(m.find("'handles[0].rotation_axis'"), std::string::npos) << m;
+  // In the plane it is taken, with the groups as the grid's handles.
+  const GridParams ok =
+      gridWithHandles(grid, parse("[{name: ok, handles: [{particles: [0, 1], rotation_axis: [0, 1, 0], "
+                                  "rotation_deg: 30}, {particles: [4]}]}]")
+                                .front());
+  EXPECT_EQ(ok.handles, (std::vector<std::vector<int>>{{0, 1}, {4}}));
+}
+
+// With every interior mode, `physical` is `full` in other coordinates: moved by the same handles (a
+// turn about the vertical and a translation at once), it must follow full closely, while `linear`
+// (forces linearized at the hanging equilibrium) visibly cannot follow a quarter turn.
+TEST(HandleScenarios, EveryInteriorModeUnderPhysicalFollowsFullThroughALargeMove)
+{
+  HandleScenario scenario = parse(R"(
+- name: turn_and_shift
+  move_time: 0.5
+  hold_time: 0.25
+  handles:
+    - {particles: [0, 1, 2, 3], translation: [0.1, 0.0, 0.05], rotation_axis: [0, 0, 1], rotation_deg: 90}
+)")
+                                .front();
+  const ExperimentSetup setup = heldSheet(scenario);
+  AccuracyOptions options;
+  options.methods = {Method::Linear, Method::Physical};
+  options.sample = 50;
+  options.steps = options.interval = 1500;  // move and hold
+  options.snapshots = false;
+  const AccuracyResult result = runAccuracy(setup, options);
+  ASSERT_TRUE(result.messages.empty()) << result.messages.front();
+  const auto [physical, linear, moved] = worstOf(result);
+  EXPECT_GT(moved, 0.25) << "the handles did not move the sheet far";
+  EXPECT_LT(physical, 1e-6) << "physical with every interior mode against full (m)";
+  EXPECT_GT(linear, 1e-3) << "linear with every interior mode against full (m)";
+}
+
+TEST(HandleScenarios, TheBodyFrameCarriesTheHandleParticlesAlongTheirPath)
+{
+  const HandleScenario scenario = parse(R"(
+- name: turn_and_shift
+  move_time: 0.5
+  handles:
+    - {particles: [0, 1, 2, 3], translation: [0.1, -0.2, 0.05], rotation_axis: [1, 0, 1], rotation_deg: 120}
+)")
+                                      .front();
+  ExperimentSetup setup = heldSheet(scenario);
+  setup.sim.handles_one_body = true;
+  Simulation sim(setup.grid, setup.sim);
+  ASSERT_EQ(sim.handleFormulation(), HandleFormulation::MovingFrame);
+  const HandleDriver driver(scenario, sim);
+  const Eigen::Matrix3Xd start = sim.grid().toPoints(sim.positions()).leftCols(4);
+  for (double t : {0.0, 0.13, 0.25, 0.41, 0.5, 0.7})
+  {
+    Eigen::VectorXd x, v, a;
+    driver.particleMotion(t, x, v, a);
+    const RigidPointMotion body = pointMotion(driver.bodyFrameMotion(t), start);
+    for (int k = 0; k < 4; ++k)
+    {
+      EXPECT_LT((body.position.col(k) - x.segment<3>(3 * k)).norm(), 1e-12) << "t = " << t << ", particle " << k;
+      EXPECT_LT((body.velocity.col(k) - v.segment<3>(3 * k)).norm(), 1e-12) << "t = " << t << ", particle " << k;
+      EXPECT_LT((body.acceleration.col(k) - a.segment<3>(3 * k)).norm(), 1e-10) << "t = " << t << ", particle " << k;
+    }
+  }
+}
+
+TEST(HandleScenarios, InTheMovingFrameEveryInteriorModeUnderPhysicalFollowsFullThroughALargeTurn)
+{
+  const HandleScenario scenario = parse(R"(
+- name: turn_and_shift
+  move_time: 0.5
+  hold_time: 0.25
+  handles:
+    - {particles: [0, 1, 2, 3], translation: [0.1, 0.0, 0.05], rotation_axis: [0, 0, 1], rotation_deg: 90}
+)")
+                                      .front();
+  ExperimentSetup setup = heldSheet(scenario);
+  setup.sim.handles_one_body = true;  // auto: the moving frame
+  AccuracyOptions options;
+  options.methods = {Method::Linear, Method::Physical};
+  options.sample = 50;
+  options.steps = options.interval = 1500;
+  options.snapshots = false;
+  const AccuracyResult result = runAccuracy(setup, options);
+  ASSERT_TRUE(result.messages.empty()) << result.messages.front();
+  const auto [physical, linear, moved] = worstOf(result);
+  EXPECT_GT(moved, 0.25) << "the frame did not move the sheet far";
+  EXPECT_LT(physical, 1e-6) << "physical with every interior mode against full, both in the frame (m)";
+  // The frame's forces swing the sheet far from its linearization: the linear force is not enough.
+  EXPECT_GT(linear, 1e-3) << "linear with every interior mode against full in the frame (m)";
+}
