@@ -1,11 +1,11 @@
-// Shift-invert Lanczos with partial reorthogonalisation (Spectra as a fallback) over a sparse LDLT
-// factorisation solved by supernodes.
+// Shift-invert Lanczos with partial reorthogonalisation (Spectra as a fallback) over a supernodal
+// Cholesky factorisation.
 #include "modal_mass_spring/modal_basis.h"
+#include "modal_mass_spring/supernodal_cholesky.h"
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/QR>
-#include <Eigen/SparseCholesky>
 #include <Spectra/SymEigsShiftSolver.h>
 
 #include <algorithm>
@@ -29,172 +29,20 @@ namespace
 // (Spectra's and ARPACK's criterion).
 constexpr double kTolerance = 1e-12;
 
-// Eigen's sparse LDLT factor of A - sigma I (its ordering and numbers unchanged) regrouped into
-// supernodes for the solves: runs of columns whose rows below the diagonal are the same, each kept as
-// a dense block with one list of row indices. Eigen's own solve reads a row index with every entry of
-// L; here the index list is read once per supernode and the entries are contiguous, which matters
-// because the solves, memory-bound, are most of the basis's time (about 1.8x faster per solve on a
-// 100 x 100 2D grid, where the columns come in pairs or wider).
-class SupernodalSolve
-{
-public:
-  explicit SupernodalSolve(const Eigen::SimplicialLDLT<SparseMatrix>& ldlt)
-    : n_(static_cast<int>(ldlt.rows())), d_(ldlt.vectorD()), p_(ldlt.permutationP()), p_inverse_(ldlt.permutationPinv())
-  {
-    const SparseMatrix& l = ldlt.matrixL().nestedExpression();  // strictly lower, unit diagonal implied
-    const int* start = l.outerIndexPtr();
-    const int* row = l.innerIndexPtr();
-    const double* value = l.valuePtr();
-    // Column j joins the supernode of column j - 1 when column j - 1 holds exactly row j and the rows of
-    // column j below it.
-    auto continues = [&](int j) {
-      const int previous = start[j] - start[j - 1];
-      const int count = start[j + 1] - start[j];
-      return previous == count + 1 && row[start[j - 1]] == j &&
-             std::equal(row + start[j], row + start[j + 1], row + start[j - 1] + 1);
-    };
-    rows_.reserve(l.nonZeros());
-    values_.reserve(l.nonZeros() + l.nonZeros() / 4);  // and the triangles' upper halves, zero
-    for (int first = 0; first < n_;)
-    {
-      int last = first;
-      while (last + 1 < n_ && continues(last + 1))
-        ++last;
-      Supernode s;
-      s.first = first;
-      s.width = last - first + 1;
-      s.rows = static_cast<int>(rows_.size());
-      s.height = start[last + 1] - start[last];
-      s.values = static_cast<std::ptrdiff_t>(values_.size());
-      rows_.insert(rows_.end(), row + start[last], row + start[last + 1]);
-      // Row-major: the strictly lower width x width triangle, then the height x width block below.
-      values_.resize(values_.size() + static_cast<std::size_t>(s.width) * (s.width + s.height), 0.0);
-      double* triangle = values_.data() + s.values;
-      double* below = triangle + s.width * s.width;
-      for (int c = 0; c < s.width; ++c)
-      {
-        const int column = first + c;
-        const int inside = last - column;  // entries of this column within the supernode's triangle
-        for (int k = 0; k < inside; ++k)
-          triangle[(c + 1 + k) * s.width + c] = value[start[column] + k];
-        for (int k = 0; k < s.height; ++k)
-          below[k * s.width + c] = value[start[column] + inside + k];
-      }
-      supernodes_.push_back(s);
-      first = last + 1;
-    }
-  }
-
-  // x <- (L D L^T)^-1 x with the factor's permutation.
-  void solveInPlace(Eigen::Ref<Eigen::VectorXd> x) const
-  {
-    work_ = p_ * x;
-    double* y = work_.data();
-    for (const Supernode& s : supernodes_)  // L z = y
-    {
-      double* ys = y + s.first;
-      const double* triangle = values_.data() + s.values;
-      const double* below = triangle + s.width * s.width;
-      const int* rows = rows_.data() + s.rows;
-      for (int i = 1; i < s.width; ++i)
-      {
-        double sum = ys[i];
-        for (int c = 0; c < i; ++c)
-          sum -= triangle[i * s.width + c] * ys[c];
-        ys[i] = sum;
-      }
-      if (s.width == 1)
-        for (int k = 0; k < s.height; ++k)
-          y[rows[k]] -= below[k] * ys[0];
-      else if (s.width == 2)
-        for (int k = 0; k < s.height; ++k)
-          y[rows[k]] -= below[2 * k] * ys[0] + below[2 * k + 1] * ys[1];
-      else
-        for (int k = 0; k < s.height; ++k)
-        {
-          const double* entries = below + static_cast<std::ptrdiff_t>(k) * s.width;
-          double sum = 0.0;
-          for (int c = 0; c < s.width; ++c)
-            sum += entries[c] * ys[c];
-          y[rows[k]] -= sum;
-        }
-    }
-    work_.array() /= d_.array();
-    for (auto s = supernodes_.rbegin(); s != supernodes_.rend(); ++s)  // L^T z = y
-    {
-      double* ys = y + s->first;
-      const double* triangle = values_.data() + s->values;
-      const double* below = triangle + s->width * s->width;
-      const int* rows = rows_.data() + s->rows;
-      if (s->width == 1)
-      {
-        double sum = ys[0];
-        for (int k = 0; k < s->height; ++k)
-          sum -= below[k] * y[rows[k]];
-        ys[0] = sum;
-      }
-      else if (s->width == 2)
-      {
-        double sum0 = ys[0], sum1 = ys[1];
-        for (int k = 0; k < s->height; ++k)
-        {
-          const double yk = y[rows[k]];
-          sum0 -= below[2 * k] * yk;
-          sum1 -= below[2 * k + 1] * yk;
-        }
-        ys[0] = sum0;
-        ys[1] = sum1;
-      }
-      else
-        for (int k = 0; k < s->height; ++k)
-        {
-          const double* entries = below + static_cast<std::ptrdiff_t>(k) * s->width;
-          const double yk = y[rows[k]];
-          for (int c = 0; c < s->width; ++c)
-            ys[c] -= entries[c] * yk;
-        }
-      for (int i = s->width - 1; i >= 1; --i)
-        for (int c = 0; c < i; ++c)
-          ys[c] -= triangle[i * s->width + c] * ys[i];
-    }
-    x = p_inverse_ * work_;
-  }
-
-private:
-  struct Supernode
-  {
-    int first;   // its columns are first .. first + width - 1
-    int width;
-    int rows;    // offset in rows_ of the rows below it
-    int height;  // how many rows below it
-    std::ptrdiff_t values;  // offset in values_
-  };
-  int n_;
-  Eigen::VectorXd d_;
-  Eigen::PermutationMatrix<Eigen::Dynamic, Eigen::Dynamic, int> p_, p_inverse_;
-  std::vector<Supernode> supernodes_;
-  std::vector<int> rows_;
-  std::vector<double> values_;
-  mutable Eigen::VectorXd work_;
-};
-
 // y = P (A - sigma I)^-1 P x, P = I - Q Q^T the projector onto the complement of the
 // modes found so far (none at first). Spectra's own SparseSymShiftSolve uses SparseLU; A - sigma I is
-// symmetric positive definite here (sigma < 0, A semi-definite), so a simplicial LDLT is enough and
-// several times faster. It is factorised once and reused by every deflated pass.
-class ShiftInvertLDLT
+// symmetric positive definite here (sigma < 0, A semi-definite), so a Cholesky factorisation is
+// enough and several times faster. It is factorised once and reused by every deflated pass.
+class ShiftInvert
 {
 public:
   using Scalar = double;
 
-  ShiftInvertLDLT(const SparseMatrix& a, double sigma) : n_(a.rows())
+  ShiftInvert(const SparseMatrix& a, double sigma)
+    : n_(a.rows()), cholesky_(std::make_shared<const SupernodalCholesky>(a, sigma))
   {
-    SparseMatrix identity(a.rows(), a.cols());
-    identity.setIdentity();
-    Eigen::SimplicialLDLT<SparseMatrix> ldlt(a - sigma * identity);
-    if (ldlt.info() != Eigen::Success)
+    if (cholesky_->info() != Eigen::Success)
       throw std::runtime_error("modal basis: factorising K - sigma M failed (sigma = " + std::to_string(sigma) + ")");
-    solve_ = std::make_shared<const SupernodalSolve>(ldlt);
   }
   Eigen::Index rows() const { return n_; }
   Eigen::Index cols() const { return n_; }
@@ -213,17 +61,17 @@ public:
     if (q_.cols() == 0)
     {
       y = x;
-      solve_->solveInPlace(y);
+      cholesky_->solveInPlace(y);
       return;
     }
     y = x - q_ * (q_.transpose() * x);
-    solve_->solveInPlace(y);
+    cholesky_->solveInPlace(y);
     y -= q_ * (q_.transpose() * y);
   }
 
 private:
   Eigen::Index n_;
-  std::shared_ptr<const SupernodalSolve> solve_;  // shared: Spectra may copy the operator
+  std::shared_ptr<const SupernodalCholesky> cholesky_;  // shared: Spectra may copy the operator
   Eigen::MatrixXd q_;
 };
 
@@ -234,7 +82,7 @@ private:
 // reorthogonalised only when it passes sqrt(eps) (every third step there), which keeps them
 // semi-orthogonal: enough for Ritz values to working precision. The Ritz vectors are orthonormalised
 // afterwards.
-bool partialLanczos(const ShiftInvertLDLT& op, int nev, int max_steps, Eigen::MatrixXd& vectors)
+bool partialLanczos(const ShiftInvert& op, int nev, int max_steps, Eigen::MatrixXd& vectors)
 {
   const int n = static_cast<int>(op.rows());
   const int m = std::min(n, max_steps);
@@ -382,7 +230,7 @@ void orthonormalRayleighRitz(const SparseMatrix& a, Eigen::VectorXd& values, Eig
 // The nev eigenpairs of A nearest sigma in the complement the operator is deflated to: Lanczos with
 // partial reorthogonalisation; Spectra's restarted Lanczos (full reorthogonalisation, a bounded
 // space) when that has not converged within maxLanczosVectors(nev) - 1 steps.
-void lanczos(const SparseMatrix& a, ShiftInvertLDLT& op, int nev, double sigma, Eigen::VectorXd& values,
+void lanczos(const SparseMatrix& a, ShiftInvert& op, int nev, double sigma, Eigen::VectorXd& values,
              Eigen::MatrixXd& vectors)
 {
   if (partialLanczos(op, nev, maxLanczosVectors(nev) - 1, vectors))
@@ -392,7 +240,7 @@ void lanczos(const SparseMatrix& a, ShiftInvertLDLT& op, int nev, double sigma, 
   }
   const int n = static_cast<int>(op.rows());
   const int ncv = std::min(n, std::max(2 * nev + 1, nev + 20));
-  Spectra::SymEigsShiftSolver<ShiftInvertLDLT> solver(op, nev, ncv, sigma);
+  Spectra::SymEigsShiftSolver<ShiftInvert> solver(op, nev, ncv, sigma);
   solver.init();
   solver.compute(Spectra::SortRule::LargestMagn, 1000, kTolerance);
   if (solver.info() != Spectra::CompInfo::Successful)
@@ -444,7 +292,7 @@ ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorX
     // A negative shift keeps A - sigma I positive definite even when A has zero eigenvalues.
     basis.shift = -1e-4 * scale;
     stage("factorisation");
-    ShiftInvertLDLT op(a, basis.shift);
+    ShiftInvert op(a, basis.shift);
     basis.factorization_seconds = seconds();
     stage("eigensolver");
     lanczos(a, op, r, basis.shift, values, vectors);
