@@ -52,7 +52,8 @@ private:
   std::vector<int> rows_;
   std::vector<double> values_;
   Eigen::VectorXd inverse_diagonal_;  // 1 / L_jj: the solves multiply
-  mutable Eigen::VectorXd work_;
+  int tallest_ = 0;  // rows of the tallest supernode
+  mutable Eigen::VectorXd work_, gathered_;
 };
 
 }  // namespace modal_mass_spring

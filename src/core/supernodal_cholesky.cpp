@@ -9,6 +9,12 @@
 
 namespace modal_mass_spring
 {
+namespace
+{
+// Supernodes at least this wide have their triangles solved by Eigen: the hand loops are
+// latency-bound there (a dependent chain of additions per row).
+constexpr int kWide = 8;
+}  // namespace
 
 SupernodalCholesky::SupernodalCholesky(const Eigen::SparseMatrix<double>& a, double sigma)
   : n_(static_cast<int>(a.rows()))
@@ -116,6 +122,7 @@ void SupernodalCholesky::factorise(const Eigen::SparseMatrix<double>& ap, double
   for (const Supernode& s : supernodes_)
     tallest = std::max(tallest, s.height);
   RowMajorMatrix update(tallest, tallest);
+  tallest_ = tallest;
   inverse_diagonal_.resize(n_);
   auto wait = [&](int k, int position) {
     const int target = supernode_of_[rows_[supernodes_[k].rows + position]];
@@ -187,6 +194,7 @@ void SupernodalCholesky::factorise(const Eigen::SparseMatrix<double>& ap, double
 void SupernodalCholesky::solveInPlace(Eigen::Ref<Eigen::VectorXd> x) const
 {
   work_ = p_ * x;
+  gathered_.resize(tallest_);
   double* y = work_.data();
   for (const Supernode& s : supernodes_)  // L z = y
   {
@@ -195,14 +203,18 @@ void SupernodalCholesky::solveInPlace(Eigen::Ref<Eigen::VectorXd> x) const
     const double* below = triangle + w * w;
     const int* rows = rows_.data() + s.rows + w;
     double* ys = y + s.first;
-    for (int i = 0; i < w; ++i)
-    {
-      double sum = ys[i];
-      for (int c = 0; c < i; ++c)
-        sum -= triangle[i * w + c] * ys[c];
-      ys[i] = sum * inverse_diagonal_[s.first + i];
-    }
-    // The narrow supernodes, most of a grid's, unrolled.
+    Eigen::Map<Eigen::VectorXd> y_s(ys, w);
+    if (w >= kWide)
+      Eigen::Map<const RowMajorMatrix>(triangle, w, w).triangularView<Eigen::Lower>().solveInPlace(y_s);
+    else
+      for (int i = 0; i < w; ++i)
+      {
+        double sum = ys[i];
+        for (int c = 0; c < i; ++c)
+          sum -= triangle[i * w + c] * ys[c];
+        ys[i] = sum * inverse_diagonal_[s.first + i];
+      }
+    // The narrow supernodes, most of a grid's, unrolled; the rest by Eigen's vectorised products.
     if (w == 1)
       for (int k = 0; k < h; ++k)
         y[rows[k]] -= below[k] * ys[0];
@@ -210,14 +222,12 @@ void SupernodalCholesky::solveInPlace(Eigen::Ref<Eigen::VectorXd> x) const
       for (int k = 0; k < h; ++k)
         y[rows[k]] -= below[2 * k] * ys[0] + below[2 * k + 1] * ys[1];
     else
+    {
+      auto product = gathered_.head(h);
+      product.noalias() = Eigen::Map<const RowMajorMatrix>(below, h, w) * y_s;
       for (int k = 0; k < h; ++k)
-      {
-        const double* entries = below + static_cast<std::ptrdiff_t>(k) * w;
-        double sum = 0.0;
-        for (int c = 0; c < w; ++c)
-          sum += entries[c] * ys[c];
-        y[rows[k]] -= sum;
-      }
+        y[rows[k]] -= product[k];
+    }
   }
   for (auto s = supernodes_.rbegin(); s != supernodes_.rend(); ++s)  // L^T z = y
   {
@@ -226,6 +236,7 @@ void SupernodalCholesky::solveInPlace(Eigen::Ref<Eigen::VectorXd> x) const
     const double* below = triangle + w * w;
     const int* rows = rows_.data() + s->rows + w;
     double* ys = y + s->first;
+    Eigen::Map<Eigen::VectorXd> y_s(ys, w);
     if (w == 1)
     {
       double sum = ys[0];
@@ -246,19 +257,21 @@ void SupernodalCholesky::solveInPlace(Eigen::Ref<Eigen::VectorXd> x) const
       ys[1] = sum1;
     }
     else
-      for (int k = 0; k < h; ++k)
-      {
-        const double* entries = below + static_cast<std::ptrdiff_t>(k) * w;
-        const double yk = y[rows[k]];
-        for (int c = 0; c < w; ++c)
-          ys[c] -= entries[c] * yk;
-      }
-    for (int i = w - 1; i >= 0; --i)
     {
-      ys[i] *= inverse_diagonal_[s->first + i];
-      for (int c = 0; c < i; ++c)
-        ys[c] -= triangle[i * w + c] * ys[i];
+      auto gathered = gathered_.head(h);
+      for (int k = 0; k < h; ++k)
+        gathered[k] = y[rows[k]];
+      y_s.noalias() -= Eigen::Map<const RowMajorMatrix>(below, h, w).transpose() * gathered;
     }
+    if (w >= kWide)
+      Eigen::Map<const RowMajorMatrix>(triangle, w, w).transpose().triangularView<Eigen::Upper>().solveInPlace(y_s);
+    else
+      for (int i = w - 1; i >= 0; --i)
+      {
+        ys[i] *= inverse_diagonal_[s->first + i];
+        for (int c = 0; c < i; ++c)
+          ys[c] -= triangle[i * w + c] * ys[i];
+      }
   }
   x = p_inverse_ * work_;
 }
