@@ -3,6 +3,7 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 
+#include <cstddef>
 #include <vector>
 
 namespace modal_mass_spring
@@ -55,5 +56,10 @@ private:
   int tallest_ = 0;  // rows of the tallest supernode
   mutable Eigen::VectorXd work_, gathered_;
 };
+
+// Asks the kernel to back [data, data + bytes) with 2 MB pages where it can: a large buffer written
+// once (the factor, the Lanczos vectors) otherwise takes a page fault every 4 kB, about a tenth of
+// the modal basis's time on a 100 x 100 grid. A hint only; nothing changes where it is refused.
+void adviseHugePages(void* data, std::size_t bytes);
 
 }  // namespace modal_mass_spring

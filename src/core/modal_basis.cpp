@@ -89,6 +89,7 @@ bool partialLanczos(const ShiftInvert& op, int nev, int max_steps, Eigen::Matrix
   const double eps = std::numeric_limits<double>::epsilon();
   const double limit = std::sqrt(eps);
   Eigen::MatrixXd v(n, m + 1);
+  adviseHugePages(v.data(), sizeof(double) * static_cast<std::size_t>(v.size()));
   Eigen::VectorXd alpha = Eigen::VectorXd::Zero(m), beta = Eigen::VectorXd::Zero(m);
   // omega[k] estimates v_j . v_k for the newest vector j, omega_previous for j - 1.
   Eigen::VectorXd omega = Eigen::VectorXd::Zero(m + 1), omega_previous = Eigen::VectorXd::Zero(m + 1);

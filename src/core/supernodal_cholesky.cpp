@@ -5,7 +5,10 @@
 #include <Eigen/Cholesky>
 #include <Eigen/OrderingMethods>
 
+#include <sys/mman.h>
+
 #include <algorithm>
+#include <cstdint>
 
 namespace modal_mass_spring
 {
@@ -93,6 +96,8 @@ void SupernodalCholesky::analyse(const Eigen::SparseMatrix<double>& ap)
     first = last + 1;
   }
   rows_.resize(rows);
+  values_.reserve(values);
+  adviseHugePages(values_.data(), values * sizeof(double));
   values_.assign(values, 0.0);
   std::vector<int> filled(supernodes_.size());
   for (std::size_t k = 0; k < supernodes_.size(); ++k)
@@ -274,6 +279,15 @@ void SupernodalCholesky::solveInPlace(Eigen::Ref<Eigen::VectorXd> x) const
       }
   }
   x = p_inverse_ * work_;
+}
+
+void adviseHugePages(void* data, std::size_t bytes)
+{
+  constexpr std::uintptr_t huge = std::uintptr_t{2} << 20;
+  const std::uintptr_t begin = (reinterpret_cast<std::uintptr_t>(data) + huge - 1) & ~(huge - 1);
+  const std::uintptr_t end = (reinterpret_cast<std::uintptr_t>(data) + bytes) & ~(huge - 1);
+  if (end > begin)
+    madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
 }
 
 }  // namespace modal_mass_spring
