@@ -18,6 +18,7 @@
 #include <numeric>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace modal_mass_spring
@@ -111,8 +112,33 @@ bool partialLanczos(const ShiftInvert& op, int nev, int max_steps, Eigen::Matrix
     v.col(cols) = x / x.norm();
     return true;
   };
-  auto reorthogonalise = [&](Eigen::VectorXd& w, int cols) {
-    w -= v.leftCols(cols) * (v.leftCols(cols).transpose() * w);
+  // Against the runs of earlier vectors whose estimated overlap passed eps^(3/4) (Larsen's refinement
+  // of Simon's scheme: the rest are orthogonal enough already), widened by one on each side.
+  std::vector<std::pair<int, int>> runs;  // [first, last)
+  const double eta = std::pow(eps, 0.75);
+  auto findRuns = [&](const Eigen::VectorXd& overlap, int cols) {
+    runs.clear();
+    for (int k = 0; k < cols;)
+    {
+      if (std::abs(overlap[k]) <= eta)
+      {
+        ++k;
+        continue;
+      }
+      int last = k;
+      while (last < cols && std::abs(overlap[last]) > eta)
+        ++last;
+      runs.emplace_back(std::max(0, k - 1), std::min(cols, last + 1));
+      k = last;
+    }
+  };
+  auto reorthogonalise = [&](Eigen::VectorXd& w, Eigen::VectorXd& overlap) {
+    for (const auto& run : runs)
+    {
+      const auto block = v.middleCols(run.first, run.second - run.first);
+      w -= block * (block.transpose() * w);
+      overlap.segment(run.first, run.second - run.first).setConstant(eps);
+    }
   };
 
   if (!fresh(0))
@@ -150,9 +176,13 @@ bool partialLanczos(const ShiftInvert& op, int nev, int max_steps, Eigen::Matrix
     const bool lost = omega_next.head(j).cwiseAbs().maxCoeff() > limit;
     if ((lost || reorthogonalise_next) && j + 1 < n)
     {
-      // Both this vector and the next, as Simon prescribes: the next inherits the error otherwise.
-      reorthogonalise(w, j + 1);
-      omega_next.head(j + 1).setConstant(eps);
+      // Both this vector and the next, as Simon prescribes: the next inherits the error otherwise,
+      // against the same runs (and the newest vector).
+      if (lost)
+        findRuns(omega_next, j + 1);
+      else
+        runs.emplace_back(j, j + 1);
+      reorthogonalise(w, omega_next);
       beta[j] = w.norm();
       reorthogonalise_next = lost;
     }
