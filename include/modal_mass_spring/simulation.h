@@ -233,6 +233,10 @@ public:
   // grid's (world) coordinates also in a moving frame.
   Eigen::VectorXd displacement() const;
   Eigen::VectorXd velocity() const;
+  // One free particle's position and velocity (dimension values each), what positions() and velocity()
+  // say of it, in O(r) rather than O(n r): for following a particle every step (a drag). A particle
+  // that is out of range, fixed or held is an std::invalid_argument naming it.
+  void particleState(int particle, Eigen::VectorXd& position, Eigen::VectorXd& velocity) const;
   // All particle positions as a flat vector (dimension values per particle), and as 3 x N points.
   Eigen::VectorXd positions() const;
   Eigen::Matrix3Xd points() const { return grid_.toPoints(positions()); }

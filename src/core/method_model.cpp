@@ -394,6 +394,16 @@ Eigen::VectorXd ModalMethod::velocity(const State& s) const
   return lin_.basis.phi * s.v;
 }
 
+double ModalMethod::displacementAt(const State& s, int k) const
+{
+  return offset_[k] + (lin_.constraint_modes ? psiDx()[k] : 0.0) + lin_.basis.phi.row(k).dot(s.q);
+}
+
+double ModalMethod::velocityAt(const State& s, int k) const
+{
+  return (lin_.constraint_modes ? psiV()[k] : 0.0) + lin_.basis.phi.row(k).dot(s.v);
+}
+
 const Eigen::VectorXd& ModalMethod::psiDx() const
 {
   if (psi_dx_stale_ || psi_dx_.size() == 0)

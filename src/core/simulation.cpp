@@ -789,6 +789,31 @@ Eigen::VectorXd Simulation::positions() const
   return x;
 }
 
+void Simulation::particleState(int particle, Eigen::VectorXd& position, Eigen::VectorXd& velocity) const
+{
+  const int dim = grid_.dimension();
+  if (particle < 0 || particle >= grid_.numParticles() || grid_.isFixed(particle) || grid_.isHandle(particle))
+    rejectParameter("particle", std::to_string(particle),
+                    "must be a free particle (neither fixed nor held by a handle) in [0, " +
+                        std::to_string(grid_.numParticles()) + ")");
+  position.resize(dim);
+  velocity.resize(dim);
+  for (int c = 0; c < dim; ++c)
+  {
+    const int k = grid_.freeIndex(particle * dim + c);
+    position[c] = x_ref_[particle * dim + c] + model_->displacementAt(model_->state(), k);
+    velocity[c] = model_->velocityAt(model_->state(), k);
+  }
+  if (formulation_ == HandleFormulation::MovingFrame && !frame_current_.atRest())
+  {
+    // As positions() and velocity(): x = p + R y, x' = p' + omega x R y + R y'.
+    const PlanarFrame f = restrict(frame_current_, dim);
+    const Eigen::VectorXd y = position;
+    position = f.translation + f.rotation * y;
+    velocity = f.velocity + f.spin * (f.rotation * y) + f.rotation * velocity;
+  }
+}
+
 double Simulation::kineticEnergy() const
 {
   if (formulation_ != HandleFormulation::MovingFrame || frame_current_.atRest())

@@ -16,8 +16,8 @@ std::string AppliedForces::add(const std::vector<uint32_t>& particles, const std
     return "no particles: 'particles' must list at least one index";
   if (forces.size() != particles.size() && forces.size() != 1)
   {
-    why << particles.size() << " particles but " << forces.size()
-        << " forces: give one force per particle, or one for all of them";
+    why << particles.size() << (particles.size() == 1 ? " particle but " : " particles but ") << forces.size()
+        << (forces.size() == 1 ? " force" : " forces") << ": give one force per particle, or one for all of them";
     return why.str();
   }
   if (!std::isfinite(duration) || duration < 0.0)

@@ -284,18 +284,25 @@ void SimulationNode::applyHandForce(size_t k)
   if (!hand_forces_->active(k))
     return;
   Simulation& simulation = *tracks_[k].simulation;
-  const bool state = hand_forces_->needsState();
-  const auto force = hand_forces_->nextForce(k, external_force_, state ? simulation.positions() : Eigen::VectorXd(),
-                                             state ? simulation.velocity() : Eigen::VectorXd());
-  if (!force)
-    return;
   try
   {
-    simulation.setExternalForce(*force);
+    // Only the dragged particle's state: reading the whole grid's every step would cost more than
+    // the step itself on a large grid.
+    Eigen::Vector3d position = Eigen::Vector3d::Zero(), velocity = Eigen::Vector3d::Zero();
+    if (hand_forces_->needsState())
+    {
+      Eigen::VectorXd x, v;
+      simulation.particleState(hand_forces_->draggedParticle(), x, v);
+      position = gridPoint(simulation.grid(), x);
+      velocity = gridPoint(simulation.grid(), v);
+    }
+    if (const auto force = hand_forces_->nextForce(k, external_force_, position, velocity))
+      simulation.setExternalForce(*force);
   }
   catch (const std::invalid_argument& error)
   {
-    // Only a state gone non-finite could do it; the core keeps the last good one.
+    // Only a state gone non-finite (or a particle no longer free) could do it; the core keeps the last
+    // good state.
     ROS_WARN_THROTTLE(1.0, "drag: the hand's force was refused (%s); the drag ends", error.what());
     hand_forces_->release();
   }

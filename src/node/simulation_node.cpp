@@ -360,6 +360,12 @@ void SimulationNode::updateHandleTargets()
   }
   if (!missing.empty())
     ROS_WARN_THROTTLE(5.0, "handle frame %s: its particles hold where they are", missing.c_str());
+  // A frame found (at last, or again) is said once, so that a run whose broadcaster starts after the
+  // node does not end its log on the warning.
+  for (size_t h = 0; h < poses.size(); ++h)
+    if (poses[h] && !handle_frames_->following(h))
+      ROS_INFO("handle frame '%s' found: its %zu particles follow it", handle_frames_->frame(h).c_str(),
+               handle_frames_->particles(h));
   handle_frames_->setTargets(poses);
 }
 
@@ -409,7 +415,7 @@ bool SimulationNode::stepAll()
     track.tick_seconds += secondsSince(start);
     track.tick_steps += result.steps_taken;
     if (result.diverged)
-      track.divergence_message = result.message;
+      track.divergence_message = result.message + externalForcesNote(k);
     else
       any_running = true;
   }
@@ -749,6 +755,9 @@ void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& statu
                     "falling behind real time: %.2f ms of stepping per %.2f ms tick, %d of %d ticks late "
                     "(stepping longer than the period)",
                     1e3 * mean_cost, 1e3 * period, diag_late_ticks_, diag_ticks_);
+  else if (!handle_frames_->status().empty())
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
+                   "handles " + handle_frames_->status() + " (their particles hold where they are)");
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, paused_ ? "paused" : "stepping");
   status.add("state", stateName(first));
@@ -827,6 +836,12 @@ bool SimulationNode::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Respo
   response.message = "reset to the initial state at rest (method " +
                      (lockstep() ? std::string("s in lockstep") : toString(primary().simulation->method())) +
                      (paused_ ? ", still paused)" : ")");
+  // Forces from ~apply_force act on across a reset (as a wrench applied in Gazebo does); a reset after
+  // a divergence they caused would diverge again, so the reply says they are there.
+  const size_t forces = applied_forces_->size();
+  if (forces > 0)
+    response.message += "; " + std::to_string(forces) + (forces == 1 ? " force from ~apply_force acts" : " forces from ~apply_force act") +
+                        " on (~clear_forces ends them)";
   ROS_INFO("%s", response.message.c_str());
   return true;
 }
@@ -944,6 +959,19 @@ bool SimulationNode::clearForces(std_srvs::Trigger::Request&, std_srvs::Trigger:
   response.success = true;
   response.message = "cleared " + std::to_string(count) + (count == 1 ? " force" : " forces");
   return true;
+}
+
+std::string SimulationNode::externalForcesNote(size_t track) const
+{
+  const size_t applied = applied_forces_->size();
+  const bool hand = hand_forces_ && hand_forces_->active(track);
+  if (applied == 0 && !hand)
+    return "";
+  std::string acting = applied > 0 ? std::to_string(applied) + " from ~apply_force" : "";
+  if (hand)
+    acting += std::string(applied > 0 ? " and " : "") + (hand_forces_->dragging() ? "a drag" : "a poke");
+  return "; forces from outside were acting (" + acting +
+         "): too large a force diverges too; ~clear_forces ends them, then ~reset starts again";
 }
 
 void SimulationNode::updateExternalForces()

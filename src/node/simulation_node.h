@@ -118,6 +118,8 @@ private:
   void applyForce(const ApplyForce::ConstPtr& message);
   bool clearForces(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   void updateExternalForces();  // with mutex_ held: drops the forces whose time is up, sets the rest
+  // What a divergence message of `track` adds when forces from outside acted on it (they may be why).
+  std::string externalForcesNote(size_t track) const;
   // Handles: looks every handle frame up (the latest pose in tf_buffer_), warns for the missing ones.
   void updateHandleTargets();   // with mutex_ held
   // Prescribes the handles' motion at the fraction s of a tick of `duration` s on every track.

@@ -556,3 +556,48 @@ TEST(MovingFrame, SwitchesResetsAndExternalForcesInAMovedFrame)
   EXPECT_LT(largestDifference(sim.positions(), sim.startPositions()), 1e-15);
   EXPECT_FALSE(sim.energyCheckSuspended());
 }
+
+TEST(MovingFrame, OneParticlesStateIsWhatTheWholeGridsSays)
+{
+  // particleState reads one particle in O(r); it must agree with positions() and velocity() in both
+  // formulations, with the handles moved and the frame turning, for every method.
+  const Path motion = [](double t) {
+    return path(t, Eigen::Vector3d(0.2, 0.1, 0.0), Eigen::Vector3d::UnitZ(), M_PI / 2, Eigen::Vector3d(0.2, 0.0, 0.0));
+  };
+  for (int dimension : {2, 3})
+    for (HandleFormulation formulation : {HandleFormulation::ConstraintModes, HandleFormulation::MovingFrame})
+      for (Method method : {Method::Full, Method::Linear, Method::Physical, Method::Cubature})
+      {
+        SimulationParams params = frameParams(method, 10, formulation, 1e-3, 0.5);
+        params.linearization = Linearization::Equilibrium;  // a 3D sheet at rest has no Psi
+        Simulation sim(topHeld(dimension), params);
+        // 2D: a turn about z would leave the x-z plane; the frame turns about y there.
+        const Path planar = [&](double t) {
+          return dimension == 3 ? motion(t)
+                                : path(t, Eigen::Vector3d(0.2, 0.0, 0.1), Eigen::Vector3d::UnitY(), M_PI / 4,
+                                       Eigen::Vector3d(0.2, 0.0, 0.0));
+        };
+        drive(sim, planar, 0.6, formulation == HandleFormulation::ConstraintModes);
+        const std::string what = std::to_string(dimension) + "D " + toString(method) +
+                                 (formulation == HandleFormulation::MovingFrame ? " moving frame" : " constraint modes");
+        const Eigen::VectorXd x = sim.positions(), v = sim.velocity();
+        ASSERT_GT(v.cwiseAbs().maxCoeff(), 1e-3) << what << ": the grid moves";
+        const Grid& grid = sim.grid();
+        for (int p = 0; p < grid.numParticles(); ++p)
+        {
+          Eigen::VectorXd position, velocity;
+          if (grid.isHandle(p) || grid.isFixed(p))
+          {
+            EXPECT_THROW(sim.particleState(p, position, velocity), std::invalid_argument) << what << " particle " << p;
+            continue;
+          }
+          sim.particleState(p, position, velocity);
+          EXPECT_LT(largestDifference(position, x.segment(dimension * p, dimension)), 1e-12) << what << " particle " << p;
+          EXPECT_LT(largestDifference(velocity, v.segment(grid.freeIndex(dimension * p), dimension)), 1e-12)
+              << what << " particle " << p;
+        }
+        Eigen::VectorXd position, velocity;
+        EXPECT_THROW(sim.particleState(-1, position, velocity), std::invalid_argument);
+        EXPECT_THROW(sim.particleState(grid.numParticles(), position, velocity), std::invalid_argument);
+      }
+}

@@ -64,6 +64,7 @@ TEST(AppliedForces, BadRequestsAreRefusedByNameAndAddNothing)
   EXPECT_TRUE(contains(forces.add({2}, {f}, 0, 0), "particle 2 is fixed"));
   EXPECT_TRUE(contains(forces.add({9, 9}, {f}, 0, 0), "particle 9 is listed twice"));
   EXPECT_TRUE(contains(forces.add({9, 10, 11}, {f, f}, 0, 0), "3 particles but 2 forces"));
+  EXPECT_TRUE(contains(forces.add({9}, {}, 0, 0), "1 particle but 0 forces"));
   EXPECT_TRUE(contains(forces.add({}, {f}, 0, 0), "no particles"));
   EXPECT_TRUE(contains(forces.add({9}, {Eigen::Vector3d(nan, 0, 0)}, 0, 0), "the force on particle 9 is not finite"));
   EXPECT_TRUE(contains(forces.add({9}, {f}, -1.0, 0), "duration -1"));

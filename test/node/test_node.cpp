@@ -1038,6 +1038,29 @@ TEST_F(ExternalForces, BadMessagesAreDroppedWithAWarningNamingTheProblem)
   EXPECT_TRUE(node.status([](const Status& s) { return s.state == Status::RUNNING && s.tick_steps > 0; }));
 }
 
+TEST_F(ExternalForces, ADivergenceUnderAForceNamesItAndAResetSaysItActsOn)
+{
+  ASSERT_TRUE(node.setMethod("physical").success);
+  ASSERT_TRUE(node.pause(true));
+  ASSERT_TRUE(node.reset().success);
+  apply(force("", {corner}, {{1e12, 0.0, 0.0}}));  // finite, and far more than any step holds
+  stepBy(node, 100);
+  const auto diverged = node.status([](const Status& s) { return s.state == Status::DIVERGED; });
+  ASSERT_TRUE(diverged);
+  EXPECT_NE(diverged->message.find("forces from outside were acting (1 from ~apply_force)"), std::string::npos)
+      << diverged->message;
+  EXPECT_NE(diverged->message.find("~clear_forces"), std::string::npos) << diverged->message;
+  // The force acts on across a reset, and the reply says so; cleared, the run is an ordinary one.
+  const auto reset = node.reset();
+  EXPECT_TRUE(reset.success);
+  EXPECT_NE(reset.message.find("1 force from ~apply_force acts on (~clear_forces ends them)"), std::string::npos)
+      << reset.message;
+  clear();
+  EXPECT_EQ(node.reset().message.find("~apply_force"), std::string::npos);
+  ASSERT_TRUE(stepBy(node, 100).success);
+  EXPECT_TRUE(node.status([](const Status& s) { return s.state == Status::PAUSED && s.step_count == 100; }));
+}
+
 // ---------------------------------------------------------------- by hand: the drag marker and pokes (drag_and_poke.test)
 // A 5 x 5 sheet hanging at rest from its equilibrium; /modal_mass_spring runs one method at a time,
 // /compare_methods the four in lockstep. Runs are stepped with ~step on the paused node, so a run with
