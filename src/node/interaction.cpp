@@ -120,8 +120,7 @@ bool SimulationNode::toFixedFrame(const std::string& frame_id, const geometry_ms
   result = Eigen::Vector3d(point.x, point.y, point.z);
   if (!result.allFinite())
   {
-    why = "the point (" + std::to_string(point.x) + ", " + std::to_string(point.y) + ", " + std::to_string(point.z) +
-          ") is not finite";
+    why = "the point " + vectorText(result) + " is not finite";
     return false;
   }
   if (frame == fixed_frame)
@@ -182,8 +181,7 @@ void SimulationNode::onDragFeedback(const visualization_msgs::InteractiveMarkerF
     return;
   if (!known)
   {
-    ROS_WARN_THROTTLE(1.0, "drag: marker pose dropped: %s%s", why.c_str(),
-                      event == Feedback::MOUSE_UP ? "; the drag ends" : "");
+    warnDropped("drag: marker pose dropped: " + why + (event == Feedback::MOUSE_UP ? "; the drag ends" : ""));
     if (event == Feedback::MOUSE_UP)
     {
       hand_forces_->release();
@@ -252,7 +250,7 @@ void SimulationNode::onClickedPoint(const geometry_msgs::PointStamped::ConstPtr&
   }
   if (!known)
   {
-    ROS_WARN_THROTTLE(1.0, "/clicked_point: point dropped: %s", why.c_str());
+    warnDropped("/clicked_point: point dropped: " + why);
     return;
   }
   size_t track = 0;

@@ -931,8 +931,8 @@ void SimulationNode::applyForce(const ApplyForce::ConstPtr& message)
     }
     catch (const tf2::TransformException& e)
     {
-      ROS_WARN_THROTTLE(1.0, "~apply_force: message dropped: frame '%s' cannot be turned into '%s': %s", frame.c_str(),
-                        fixed_frame.c_str(), e.what());
+      warnDropped("~apply_force: message dropped: frame '" + frame + "' cannot be turned into '" + fixed_frame +
+                  "': " + e.what());
       return;
     }
   }
@@ -940,14 +940,31 @@ void SimulationNode::applyForce(const ApplyForce::ConstPtr& message)
   for (const geometry_msgs::Vector3& f : message->forces)
     forces.push_back(frame == fixed_frame ? Eigen::Vector3d(f.x, f.y, f.z) : rotation * Eigen::Vector3d(f.x, f.y, f.z));
   std::string why;
+  size_t acting = 0;
   {
     ServiceLock lock(*this);
     why = applied_forces_->add(message->particles, forces, message->duration, simTime(primary()));
     if (why.empty())
       updateExternalForces();
+    acting = applied_forces_->size();
   }
   if (!why.empty())
-    ROS_WARN_THROTTLE(1.0, "~apply_force: message dropped: %s", why.c_str());
+    warnDropped("~apply_force: message dropped: " + why);
+  else if (message->duration > 0.0)
+    ROS_INFO_THROTTLE(1.0, "~apply_force: taken: %zu %s for %g s; %zu %s", message->particles.size(),
+                      message->particles.size() == 1 ? "particle" : "particles", message->duration, acting,
+                      acting == 1 ? "force acts" : "forces act");
+  else
+    ROS_INFO_THROTTLE(1.0, "~apply_force: taken: %zu %s until ~clear_forces; %zu %s", message->particles.size(),
+                      message->particles.size() == 1 ? "particle" : "particles", acting,
+                      acting == 1 ? "force acts" : "forces act");
+}
+
+void SimulationNode::warnDropped(const std::string& text)
+{
+  std::lock_guard<std::mutex> lock(warnings_mutex_);
+  if (dropped_warnings_.allow(text, ros::WallTime::now().toSec()))
+    ROS_WARN("%s", text.c_str());
 }
 
 bool SimulationNode::clearForces(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response)
