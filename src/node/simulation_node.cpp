@@ -225,11 +225,12 @@ SimulationNode::~SimulationNode()
 }
 
 std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& grid_params,
-                                                            const SimulationParams& sim_params, bool report) const
+                                                            const SimulationParams& sim_params, bool report,
+                                                            const std::string& activity) const
 {
   const auto start = Clock::now();
   StartupProgress progress([](const std::string& line) { ROS_INFO("%s", line.c_str()); },
-                           [start] { return secondsSince(start); });
+                           [start] { return secondsSince(start); }, 1.0, 10.0, activity);
   std::unique_ptr<Simulation> simulation;
   {
     ProgressWatcher watcher(progress);

@@ -75,8 +75,10 @@ private:
   // What one tick publishes, built under the lock and sent after it.
   struct Output;
 
-  std::unique_ptr<Simulation> buildSimulation(const GridParams& grid, const SimulationParams& params,
-                                              bool report) const;
+  // Builds a simulation, logging its stages when slow ("<activity> for N s: ...") and, with `report`,
+  // the start-up line.
+  std::unique_ptr<Simulation> buildSimulation(const GridParams& grid, const SimulationParams& params, bool report,
+                                              const std::string& activity = "starting up") const;
   void buildTracks();
   // Puts every full track at the state of the first reduced one (the same state, the same time), so
   // that the distances measure the methods, not their start.
