@@ -657,6 +657,8 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     status.handles = handle_frames_->status();
     status.handle_formulation =
         handle_frames_->empty() ? "" : toString(simulation.handleFormulation());
+    status.applied_forces = static_cast<uint32_t>(applied_forces_->size());
+    status.dragged_particle = hand_forces_ ? hand_forces_->draggedParticle() : -1;
     status.reference = measured ? "full" : "";
     status.rms_distance = track.rms_distance;
     status.max_distance = track.max_distance;

@@ -1043,6 +1043,7 @@ TEST_F(ExternalForces, ADivergenceUnderAForceNamesItAndAResetSaysItActsOn)
   ASSERT_TRUE(node.pause(true));
   ASSERT_TRUE(node.reset().success);
   apply(force("", {corner}, {{1e12, 0.0, 0.0}}));  // finite, and far more than any step holds
+  EXPECT_TRUE(node.status([](const Status& s) { return s.applied_forces == 1; }));
   stepBy(node, 100);
   const auto diverged = node.status([](const Status& s) { return s.state == Status::DIVERGED; });
   ASSERT_TRUE(diverged);
@@ -1055,6 +1056,7 @@ TEST_F(ExternalForces, ADivergenceUnderAForceNamesItAndAResetSaysItActsOn)
   EXPECT_NE(reset.message.find("1 force from ~apply_force acts on (~clear_forces ends them)"), std::string::npos)
       << reset.message;
   clear();
+  EXPECT_TRUE(node.status([](const Status& s) { return s.applied_forces == 0; }));
   EXPECT_EQ(node.reset().message.find("~apply_force"), std::string::npos);
   ASSERT_TRUE(stepBy(node, 100).success);
   EXPECT_TRUE(node.status([](const Status& s) { return s.state == Status::PAUSED && s.step_count == 100; }));
@@ -1203,7 +1205,9 @@ TEST_F(ByHand, DragGrabsOnlyFreeParticlesAndItsArrowsDoNotPull)
   Recorder<rosgraph_msgs::Log> log("/rosout");
   ros::WallDuration(0.3).sleep();
   run(node, 1, [&] { drag(feedback_pub, Feedback::MOUSE_DOWN, vec(free[2]) + Eigen::Vector3d(0.0, 0.0, 0.01)); });
+  EXPECT_TRUE(node.status([](const Status& s) { return s.dragged_particle == 7; }));
   drag(feedback_pub, Feedback::MOUSE_UP, vec(free[2]));
+  EXPECT_TRUE(node.status([](const Status& s) { return s.dragged_particle == -1; }));
   EXPECT_TRUE(logged(log, rosgraph_msgs::Log::INFO, "particle 7 grabbed"));
   // Moved by an arrow, the marker pulls nothing.
   const auto placed = run(node, 50, [&] {
