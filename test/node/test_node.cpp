@@ -935,6 +935,19 @@ modal_mass_spring::ApplyForce force(const std::string& frame, std::vector<uint32
   return message;
 }
 
+// Whether `text` was logged at `level`, waiting up to 3 s for /rosout to bring it.
+bool loggedWithin(const Recorder<rosgraph_msgs::Log>& log, uint8_t level, const std::string& text)
+{
+  for (const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(3.0); ros::WallTime::now() < end;)
+  {
+    for (const auto& entry : log.messages())
+      if (entry->level == level && entry->msg.find(text) != std::string::npos)
+        return true;
+    ros::WallDuration(0.05).sleep();
+  }
+  return false;
+}
+
 class ExternalForces : public ::testing::Test
 {
 protected:
@@ -1026,10 +1039,7 @@ TEST_F(ExternalForces, BadMessagesAreDroppedWithAWarningNamingTheProblem)
   for (const auto& [message, expected] : cases)
   {
     apply(message);  // each different warning is told at once (throttled per text)
-    bool warned = false;
-    for (const auto& entry : log.messages())
-      warned |= entry->level == rosgraph_msgs::Log::WARN && entry->msg.find(expected) != std::string::npos;
-    EXPECT_TRUE(warned) << "no warning naming: " << expected;
+    EXPECT_TRUE(loggedWithin(log, rosgraph_msgs::Log::WARN, expected)) << "no warning naming: " << expected;
   }
   // Nothing of them was taken, and the node runs on.
   EXPECT_LT(maxDistance(afterSteps(node, 100), free), 1e-12);
@@ -1155,10 +1165,7 @@ protected:
   }
   bool logged(const Recorder<rosgraph_msgs::Log>& log, uint8_t level, const std::string& text) const
   {
-    for (const auto& entry : log.messages())
-      if (entry->level == level && entry->msg.find(text) != std::string::npos)
-        return true;
-    return false;
+    return loggedWithin(log, level, text);
   }
 
   NodeUnderTest node{"/modal_mass_spring"};
