@@ -1072,6 +1072,23 @@ TEST_F(ExternalForces, ADivergenceUnderAForceNamesItAndAResetSaysItActsOn)
   EXPECT_TRUE(node.status([](const Status& s) { return s.state == Status::PAUSED && s.step_count == 100; }));
 }
 
+TEST_F(ExternalForces, AForceLastsItsDurationOfSimulatedTimeAcrossAReset)
+{
+  ASSERT_TRUE(node.setMethod("linear").success);
+  ASSERT_TRUE(node.pause(true));
+  ASSERT_TRUE(node.reset().success);
+  ASSERT_TRUE(stepBy(node, 300).success);
+  modal_mass_spring::ApplyForce message = force("", {corner}, {{0.01, 0.0, 0.0}});
+  message.duration = 0.1;
+  apply(message);
+  EXPECT_TRUE(node.status([](const Status& s) { return s.applied_forces == 1; }));
+  // After a reset at 0.3 s and 0.2 s more of steps the force's 0.1 s are over, though the run's own
+  // time (0.2 s) has not reached where it was applied.
+  ASSERT_TRUE(node.reset().success);
+  ASSERT_TRUE(stepBy(node, 200).success);
+  EXPECT_TRUE(node.status([](const Status& s) { return s.applied_forces == 0; }));
+}
+
 // ---------------------------------------------------------------- by hand: the drag marker and pokes (drag_and_poke.test)
 // A 5 x 5 sheet hanging at rest from its equilibrium; /modal_mass_spring runs one method at a time,
 // /compare_methods the four in lockstep. Runs are stepped with ~step on the paused node, so a run with
