@@ -721,6 +721,14 @@ struct PlanarFrame
 {
   Eigen::MatrixXd rotation, spin;
   Eigen::VectorXd translation, velocity;
+
+  // Where a point at y in B, moving at y' there, is in the world and how fast it goes:
+  // x = p + R y, x' = p' + omega x R y + R y'.
+  Eigen::VectorXd worldPosition(const Eigen::VectorXd& y) const { return translation + rotation * y; }
+  Eigen::VectorXd worldVelocity(const Eigen::VectorXd& y, const Eigen::VectorXd& y_dot) const
+  {
+    return velocity + spin * (rotation * y) + rotation * y_dot;
+  }
 };
 
 PlanarFrame restrict(const FrameMotion& m, int dim)
@@ -767,7 +775,7 @@ Eigen::VectorXd Simulation::velocity() const
   const Eigen::VectorXd y = grid_.gatherFree(x_ref_) + bodyDisplacement();
   Eigen::VectorXd v = bodyVelocity();
   for (Eigen::Index p = 0; p + dim <= v.size(); p += dim)
-    v.segment(p, dim) = f.velocity + f.spin * (f.rotation * y.segment(p, dim)) + f.rotation * v.segment(p, dim);
+    v.segment(p, dim) = f.worldVelocity(y.segment(p, dim), v.segment(p, dim));
   return v;
 }
 
@@ -784,7 +792,7 @@ Eigen::VectorXd Simulation::positions() const
     const int dim = grid_.dimension();
     const PlanarFrame f = restrict(frame_current_, dim);
     for (Eigen::Index p = 0; p + dim <= x.size(); p += dim)
-      x.segment(p, dim) = f.translation + f.rotation * x.segment(p, dim);
+      x.segment(p, dim) = f.worldPosition(x.segment(p, dim));
   }
   return x;
 }
@@ -809,8 +817,8 @@ void Simulation::particleState(int particle, Eigen::VectorXd& position, Eigen::V
     // As positions() and velocity(): x = p + R y, x' = p' + omega x R y + R y'.
     const PlanarFrame f = restrict(frame_current_, dim);
     const Eigen::VectorXd y = position;
-    position = f.translation + f.rotation * y;
-    velocity = f.velocity + f.spin * (f.rotation * y) + f.rotation * velocity;
+    position = f.worldPosition(y);
+    velocity = f.worldVelocity(y, velocity);
   }
 }
 

@@ -9,6 +9,7 @@
 
 #include <Eigen/Geometry>
 
+#include <cstdio>
 #include <limits>
 
 namespace modal_mass_spring
@@ -223,7 +224,7 @@ void SimulationNode::onDragFeedback(const visualization_msgs::InteractiveMarkerF
     const int p = nearestOnTracks(point, track, distance);
     if (p < 0)
     {
-      ROS_WARN_THROTTLE(1.0, "drag: the grid has no free particle to grab");
+      warnDropped("drag: the grid has no free particle to grab");
       return;
     }
     selected_particle_ = p;
@@ -258,17 +259,17 @@ void SimulationNode::onClickedPoint(const geometry_msgs::PointStamped::ConstPtr&
   const int p = nearestOnTracks(point, track, distance);
   if (p < 0)
   {
-    ROS_WARN_THROTTLE(1.0, "/clicked_point: point dropped: the grid has no free particle to poke");
+    warnDropped("/clicked_point: point dropped: the grid has no free particle to poke");
     return;
   }
   const Grid& grid = tracks_[track].simulation->grid();
   const double reach = kPokeReach * grid.params().spacing;
   if (distance > reach)
   {
-    ROS_WARN_THROTTLE(1.0,
-                      "/clicked_point: point dropped: (%g, %g, %g) in '%s' is %.3g m from the nearest free particle, "
-                      "beyond the %.3g m (3 spacings) a poke reaches: click on the cloth",
-                      point.x(), point.y(), point.z(), config_.node.fixed_frame.c_str(), distance, reach);
+    char text[160];
+    std::snprintf(text, sizeof text, " in '%s' is %.3g m from the nearest free particle, beyond the %.3g m (3 spacings)",
+                  config_.node.fixed_frame.c_str(), distance, reach);
+    warnDropped("/clicked_point: point dropped: " + vectorText(point) + text + " a poke reaches: click on the cloth");
     return;
   }
   const Eigen::Vector3d direction = pokeDirection(grid, tracks_[track].last_points, p);

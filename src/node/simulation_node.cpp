@@ -365,8 +365,8 @@ void SimulationNode::updateHandleTargets()
   // node does not end its log on the warning.
   for (size_t h = 0; h < poses.size(); ++h)
     if (poses[h] && !handle_frames_->following(h))
-      ROS_INFO("handle frame '%s' found: its %zu particles follow it", handle_frames_->frame(h).c_str(),
-               handle_frames_->particles(h));
+      ROS_INFO("handle frame '%s' found: its %zu %s it", handle_frames_->frame(h).c_str(),
+               handle_frames_->particles(h), handle_frames_->particles(h) == 1 ? "particle follows" : "particles follow");
   handle_frames_->setTargets(poses);
 }
 
@@ -657,6 +657,8 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     status.handles = handle_frames_->status();
     status.handle_formulation =
         handle_frames_->empty() ? "" : toString(simulation.handleFormulation());
+    status.applied_forces = static_cast<uint32_t>(applied_forces_->size());
+    status.dragged_particle = hand_forces_ ? hand_forces_->draggedParticle() : -1;
     status.reference = measured ? "full" : "";
     status.rms_distance = track.rms_distance;
     status.max_distance = track.max_distance;
@@ -756,11 +758,11 @@ void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& statu
                     "falling behind real time: %.2f ms of stepping per %.2f ms tick, %d of %d ticks late "
                     "(stepping longer than the period)",
                     1e3 * mean_cost, 1e3 * period, diag_late_ticks_, diag_ticks_);
-  else if (!handle_frames_->status().empty())
-    status.summary(diagnostic_msgs::DiagnosticStatus::WARN,
-                   "handles " + handle_frames_->status() + " (their particles hold where they are)");
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, paused_ ? "paused" : "stepping");
+  if (!handle_frames_->status().empty())  // whatever else is said
+    status.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
+                        "handles " + handle_frames_->status() + " (their particles hold where they are)");
   status.add("state", stateName(first));
   status.add("method", lockstep() ? "lockstep" : toString(simulation.method()));
   status.add("step count", steps(first));
@@ -841,7 +843,8 @@ bool SimulationNode::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Respo
   // a divergence they caused would diverge again, so the reply says they are there.
   const size_t forces = applied_forces_->size();
   if (forces > 0)
-    response.message += "; " + std::to_string(forces) + (forces == 1 ? " force from ~apply_force acts" : " forces from ~apply_force act") +
+    response.message += "; " + std::to_string(forces) +
+                        (forces == 1 ? " force from ~apply_force acts" : " forces from ~apply_force act") +
                         " on (~clear_forces ends them)";
   ROS_INFO("%s", response.message.c_str());
   return true;
@@ -944,7 +947,7 @@ void SimulationNode::applyForce(const ApplyForce::ConstPtr& message)
   size_t acting = 0;
   {
     ServiceLock lock(*this);
-    why = applied_forces_->add(message->particles, forces, message->duration, simTime(primary()));
+    why = applied_forces_->add(message->particles, forces, message->duration, clock_seconds_);
     if (why.empty())
       updateExternalForces();
     acting = applied_forces_->size();
@@ -964,7 +967,7 @@ void SimulationNode::applyForce(const ApplyForce::ConstPtr& message)
 void SimulationNode::warnDropped(const std::string& text)
 {
   std::lock_guard<std::mutex> lock(warnings_mutex_);
-  if (dropped_warnings_.allow(text, ros::WallTime::now().toSec()))
+  if (dropped_warnings_.allow(text, ros::SteadyTime::now().toSec()))
     ROS_WARN("%s", text.c_str());
 }
 
@@ -994,7 +997,9 @@ std::string SimulationNode::externalForcesNote(size_t track) const
 
 void SimulationNode::updateExternalForces()
 {
-  applied_forces_->update(simTime(primary()), external_force_);
+  // On /clock's seconds, which a reset does not take back: a force lasts its duration of simulated
+  // time across resets too.
+  applied_forces_->update(clock_seconds_, external_force_);
   // A rebuilt simulation starts without them: every track is brought to the current total.
   // A track under the hand's force gets the total before its next step (applyHandForce).
   for (size_t k = 0; k < tracks_.size(); ++k)

@@ -4,6 +4,7 @@
 // does not flood the log. ROS_WARN_THROTTLE throttles per call site, which hides the second mistake.
 #pragma once
 
+#include <iterator>
 #include <map>
 #include <string>
 

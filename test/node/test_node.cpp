@@ -935,6 +935,19 @@ modal_mass_spring::ApplyForce force(const std::string& frame, std::vector<uint32
   return message;
 }
 
+// Whether `text` was logged at `level`, waiting up to 3 s for /rosout to bring it.
+bool loggedWithin(const Recorder<rosgraph_msgs::Log>& log, uint8_t level, const std::string& text)
+{
+  for (const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(3.0); ros::WallTime::now() < end;)
+  {
+    for (const auto& entry : log.messages())
+      if (entry->level == level && entry->msg.find(text) != std::string::npos)
+        return true;
+    ros::WallDuration(0.05).sleep();
+  }
+  return false;
+}
+
 class ExternalForces : public ::testing::Test
 {
 protected:
@@ -1026,10 +1039,7 @@ TEST_F(ExternalForces, BadMessagesAreDroppedWithAWarningNamingTheProblem)
   for (const auto& [message, expected] : cases)
   {
     apply(message);  // each different warning is told at once (throttled per text)
-    bool warned = false;
-    for (const auto& entry : log.messages())
-      warned |= entry->level == rosgraph_msgs::Log::WARN && entry->msg.find(expected) != std::string::npos;
-    EXPECT_TRUE(warned) << "no warning naming: " << expected;
+    EXPECT_TRUE(loggedWithin(log, rosgraph_msgs::Log::WARN, expected)) << "no warning naming: " << expected;
   }
   // Nothing of them was taken, and the node runs on.
   EXPECT_LT(maxDistance(afterSteps(node, 100), free), 1e-12);
@@ -1043,6 +1053,7 @@ TEST_F(ExternalForces, ADivergenceUnderAForceNamesItAndAResetSaysItActsOn)
   ASSERT_TRUE(node.pause(true));
   ASSERT_TRUE(node.reset().success);
   apply(force("", {corner}, {{1e12, 0.0, 0.0}}));  // finite, and far more than any step holds
+  EXPECT_TRUE(node.status([](const Status& s) { return s.applied_forces == 1; }));
   stepBy(node, 100);
   const auto diverged = node.status([](const Status& s) { return s.state == Status::DIVERGED; });
   ASSERT_TRUE(diverged);
@@ -1055,9 +1066,27 @@ TEST_F(ExternalForces, ADivergenceUnderAForceNamesItAndAResetSaysItActsOn)
   EXPECT_NE(reset.message.find("1 force from ~apply_force acts on (~clear_forces ends them)"), std::string::npos)
       << reset.message;
   clear();
+  EXPECT_TRUE(node.status([](const Status& s) { return s.applied_forces == 0; }));
   EXPECT_EQ(node.reset().message.find("~apply_force"), std::string::npos);
   ASSERT_TRUE(stepBy(node, 100).success);
   EXPECT_TRUE(node.status([](const Status& s) { return s.state == Status::PAUSED && s.step_count == 100; }));
+}
+
+TEST_F(ExternalForces, AForceLastsItsDurationOfSimulatedTimeAcrossAReset)
+{
+  ASSERT_TRUE(node.setMethod("linear").success);
+  ASSERT_TRUE(node.pause(true));
+  ASSERT_TRUE(node.reset().success);
+  ASSERT_TRUE(stepBy(node, 300).success);
+  modal_mass_spring::ApplyForce message = force("", {corner}, {{0.01, 0.0, 0.0}});
+  message.duration = 0.1;
+  apply(message);
+  EXPECT_TRUE(node.status([](const Status& s) { return s.applied_forces == 1; }));
+  // After a reset at 0.3 s and 0.2 s more of steps the force's 0.1 s are over, though the run's own
+  // time (0.2 s) has not reached where it was applied.
+  ASSERT_TRUE(node.reset().success);
+  ASSERT_TRUE(stepBy(node, 200).success);
+  EXPECT_TRUE(node.status([](const Status& s) { return s.applied_forces == 0; }));
 }
 
 // ---------------------------------------------------------------- by hand: the drag marker and pokes (drag_and_poke.test)
@@ -1153,10 +1182,7 @@ protected:
   }
   bool logged(const Recorder<rosgraph_msgs::Log>& log, uint8_t level, const std::string& text) const
   {
-    for (const auto& entry : log.messages())
-      if (entry->level == level && entry->msg.find(text) != std::string::npos)
-        return true;
-    return false;
+    return loggedWithin(log, level, text);
   }
 
   NodeUnderTest node{"/modal_mass_spring"};
@@ -1203,7 +1229,9 @@ TEST_F(ByHand, DragGrabsOnlyFreeParticlesAndItsArrowsDoNotPull)
   Recorder<rosgraph_msgs::Log> log("/rosout");
   ros::WallDuration(0.3).sleep();
   run(node, 1, [&] { drag(feedback_pub, Feedback::MOUSE_DOWN, vec(free[2]) + Eigen::Vector3d(0.0, 0.0, 0.01)); });
+  EXPECT_TRUE(node.status([](const Status& s) { return s.dragged_particle == 7; }));
   drag(feedback_pub, Feedback::MOUSE_UP, vec(free[2]));
+  EXPECT_TRUE(node.status([](const Status& s) { return s.dragged_particle == -1; }));
   EXPECT_TRUE(logged(log, rosgraph_msgs::Log::INFO, "particle 7 grabbed"));
   // Moved by an arrow, the marker pulls nothing.
   const auto placed = run(node, 50, [&] {
