@@ -265,6 +265,8 @@ private:
   void precompute(const StageFn& on_stage);
   // Loads, or trains and stores, the cubature on the physical basis.
   void prepareCubature();
+  // The grid is simulated in a moving frame that has left its start: B's coordinates are not the world's.
+  bool frameMoved() const { return formulation_ == HandleFormulation::MovingFrame && !frame_current_.atRest(); }
   // In a moving frame: a world free-dof displacement and velocity in B and back (identity else).
   void toBody(Eigen::VectorXd& u, Eigen::VectorXd& v) const;
   Eigen::VectorXd bodyDisplacement() const { return model_->displacement(model_->state()); }

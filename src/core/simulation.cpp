@@ -549,7 +549,7 @@ void Simulation::setHandleFrameMotion(const FrameMotion& m)
   }
   // Constraint modes: the handle particles' rigid motion.
   const int dim = grid_.dimension();
-  const std::vector<int> rows = dim == 3 ? std::vector<int>{0, 1, 2} : std::vector<int>{0, 2};
+  const std::vector<int> rows = gridAxes(dim);
   const std::vector<int>& dofs = grid_.handleDofs();
   const Eigen::Index n = static_cast<Eigen::Index>(dofs.size()) / dim;
   const Eigen::Matrix3Xd all = grid_.toPoints(x_ref_);
@@ -733,10 +733,8 @@ struct PlanarFrame
 
 PlanarFrame restrict(const FrameMotion& m, int dim)
 {
-  const std::vector<int> rows = dim == 3 ? std::vector<int>{0, 1, 2} : std::vector<int>{0, 2};
-  Eigen::Matrix3d spin;
-  const Eigen::Vector3d& w = m.angular_velocity;
-  spin << 0.0, -w.z(), w.y(), w.z(), 0.0, -w.x(), -w.y(), w.x(), 0.0;
+  const std::vector<int> rows = gridAxes(dim);
+  const Eigen::Matrix3d spin = crossMatrix(m.angular_velocity);
   return PlanarFrame{m.rotation(rows, rows), spin(rows, rows), m.translation(rows), m.velocity(rows)};
 }
 
@@ -744,7 +742,7 @@ PlanarFrame restrict(const FrameMotion& m, int dim)
 
 void Simulation::toBody(Eigen::VectorXd& u, Eigen::VectorXd& v) const
 {
-  if (formulation_ != HandleFormulation::MovingFrame || frame_current_.atRest())
+  if (!frameMoved())
     return;
   // y = R^T (x - p), y' = R^T (x' - p' - omega x (x - p)).
   const int dim = grid_.dimension();
@@ -760,14 +758,14 @@ void Simulation::toBody(Eigen::VectorXd& u, Eigen::VectorXd& v) const
 
 Eigen::VectorXd Simulation::displacement() const
 {
-  if (formulation_ != HandleFormulation::MovingFrame || frame_current_.atRest())
+  if (!frameMoved())
     return bodyDisplacement();
   return grid_.gatherFree(positions() - x_ref_);
 }
 
 Eigen::VectorXd Simulation::velocity() const
 {
-  if (formulation_ != HandleFormulation::MovingFrame || frame_current_.atRest())
+  if (!frameMoved())
     return bodyVelocity();
   // x' = p' + omega x R y + R y'.
   const int dim = grid_.dimension();
@@ -786,7 +784,7 @@ Eigen::VectorXd Simulation::positions() const
     for (int k = 0; k < grid_.numHandleDofs(); ++k)
       x[grid_.handleDofs()[k]] += handle_current_.displacement[k];
   grid_.addFree(bodyDisplacement(), x);
-  if (formulation_ == HandleFormulation::MovingFrame && !frame_current_.atRest())
+  if (frameMoved())
   {
     // x = p + R y, every particle (the handles' with them).
     const int dim = grid_.dimension();
@@ -812,7 +810,7 @@ void Simulation::particleState(int particle, Eigen::VectorXd& position, Eigen::V
     position[c] = x_ref_[particle * dim + c] + model_->displacementAt(model_->state(), k);
     velocity[c] = model_->velocityAt(model_->state(), k);
   }
-  if (formulation_ == HandleFormulation::MovingFrame && !frame_current_.atRest())
+  if (frameMoved())
   {
     // As positions() and velocity(): x = p + R y, x' = p' + omega x R y + R y'.
     const PlanarFrame f = restrict(frame_current_, dim);
@@ -824,7 +822,7 @@ void Simulation::particleState(int particle, Eigen::VectorXd& position, Eigen::V
 
 double Simulation::kineticEnergy() const
 {
-  if (formulation_ != HandleFormulation::MovingFrame || frame_current_.atRest())
+  if (!frameMoved())
     return model_->kineticEnergy(model_->state());
   return 0.5 * velocity().cwiseAbs2().dot(mass_);
 }

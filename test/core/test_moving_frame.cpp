@@ -88,7 +88,7 @@ void handleMotion(const Simulation& sim, const FrameMotion& m, Eigen::VectorXd& 
                   Eigen::VectorXd& a)
 {
   const int dim = sim.grid().dimension();
-  const std::vector<int> rows = dim == 3 ? std::vector<int>{0, 1, 2} : std::vector<int>{0, 2};
+  const std::vector<int> rows = gridAxes(dim);
   const std::vector<int>& dofs = sim.grid().handleDofs();
   const Eigen::Matrix3Xd points = sim.grid().toPoints(sim.linearizationPositions());
   x.resize(dofs.size());
