@@ -11,7 +11,7 @@ set +u; source devel/setup.bash; set -u  # catkin's setup reads unset variables
 results="$WS_DIR/build/test_results/modal_mass_spring"
 # run_tests exits 0 when tests fail (catkin_test_results counts those) but not when a test does not
 # build: then that is a failure of its own, or the tests that did not build would go uncounted.
-if ! catkin_make -j2 run_tests; then
+if ! catkin_make -j"$JOBS" run_tests; then
   mkdir -p "$results"
   printf '<testsuites><testsuite name="build"><testcase classname="build" name="run_tests"><failure message="catkin_make run_tests failed: a test did not build (see the log above)"/></testcase></testsuite></testsuites>\n' \
     > "$results/build-run_tests.xml"
@@ -23,7 +23,7 @@ fi
 SANITIZE_WS="${WS_DIR}_sanitize"
 mkdir -p "$SANITIZE_WS/src" "$results"
 ln -sfn "$REPO_DIR" "$SANITIZE_WS/src/modal_mass_spring"
-if (cd "$SANITIZE_WS" && catkin_make -j2 -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSANITIZE=ON \
+if (cd "$SANITIZE_WS" && catkin_make -j"$JOBS" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DSANITIZE=ON \
       -DWARNINGS_AS_ERRORS=OFF test_core test_compare); then
   for test in test_core test_compare; do
     xml="$results/sanitized-$test.xml"

@@ -51,6 +51,11 @@ struct RigidPointMotion
 RigidPointMotion interpolateRigidMotion(const Eigen::Matrix3Xd& offsets, const FramePose& from, const FramePose& to,
                                         double duration, double s);
 
+// Which of x, y, z a grid's coordinates are: all three in 3D, x and z in 2D (the grid's plane).
+std::vector<int> gridAxes(int dimension);
+// The matrix [w]x of the cross product w x v.
+Eigen::Matrix3d crossMatrix(const Eigen::Vector3d& w);
+
 // The motion of a rigid frame B relative to its pose at the start, where it coincides with the grid's
 // coordinates: the point at y in B is at x = translation + rotation y. The velocity and acceleration
 // are those of `translation` (the point of B at the origin), the angular velocity and acceleration

@@ -80,6 +80,15 @@ private:
   Eigen::VectorXd force_, rhs_, gyroscopic_force_, velocity_;
 };
 
+// The sparsity pattern a factorisation was analysed for, so that it is analysed again only when the
+// pattern changes.
+struct SparsityPattern
+{
+  std::vector<int> outer, inner;
+  // True, and `m`'s pattern recorded, when it differs from the one recorded.
+  bool changedTo(const SparseMatrix& m);
+};
+
 // Implicit Newmark with the Hilber-Hughes-Taylor alpha: each step solves
 //   R(q') = M a' + (1 + alpha) (C v' - F(q')) - alpha (C v - F(q)) = 0,
 // beta = (1 - alpha)^2 / 4, gamma = 1/2 - alpha, by Newton with the tangent
@@ -111,7 +120,6 @@ private:
   void gyroscopicChanged() override;
   // a' and v' that the Newmark relations give for a trial q'.
   void kinematics(const State& s, State& next) const;
-  void analyzeIfNewPattern(const SparseMatrix& jacobian);
   // Sets next.v, next.a from next.q, stores R(q') in residual_ and returns its norm.
   double residual(ForceModel& model, const State& s, State& next);
   // The residual below which round-off hides any further progress.
@@ -126,11 +134,10 @@ private:
   SparseMatrix mass_matrix_;
   Eigen::SimplicialLDLT<SparseMatrix> ldlt_;
   Eigen::SparseLU<SparseMatrix> lu_;
-  std::vector<int> lu_outer_, lu_inner_;  // the pattern lu_ was analysed for
+  SparsityPattern ldlt_pattern_, lu_pattern_;  // what ldlt_ and lu_ were analysed for
   SparseMatrix damping_;  // C + G
   SparseMatrix inertia_;  // M / (beta h^2) + (1 + alpha) gamma / (beta h) (C + G)
   SparseMatrix tangent_;
-  std::vector<int> pattern_outer_, pattern_inner_;
   Eigen::VectorXd force_, residual_;
   Eigen::VectorXd old_terms_;  // alpha (C v - F(q)): the HHT part of R from the start of the step
   Eigen::VectorXd predicted_;  // y = q + h v + h^2 (1/2 - beta) a: q' = y + beta h^2 a

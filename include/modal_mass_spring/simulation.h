@@ -233,6 +233,10 @@ public:
   // grid's (world) coordinates also in a moving frame.
   Eigen::VectorXd displacement() const;
   Eigen::VectorXd velocity() const;
+  // One free particle's position and velocity (dimension values each), what positions() and velocity()
+  // say of it, in O(r) rather than O(n r): for following a particle every step (a drag). A particle
+  // that is out of range, fixed or held is an std::invalid_argument naming it.
+  void particleState(int particle, Eigen::VectorXd& position, Eigen::VectorXd& velocity) const;
   // All particle positions as a flat vector (dimension values per particle), and as 3 x N points.
   Eigen::VectorXd positions() const;
   Eigen::Matrix3Xd points() const { return grid_.toPoints(positions()); }
@@ -261,6 +265,8 @@ private:
   void precompute(const StageFn& on_stage);
   // Loads, or trains and stores, the cubature on the physical basis.
   void prepareCubature();
+  // The grid is simulated in a moving frame that has left its start: B's coordinates are not the world's.
+  bool frameMoved() const { return formulation_ == HandleFormulation::MovingFrame && !frame_current_.atRest(); }
   // In a moving frame: a world free-dof displacement and velocity in B and back (identity else).
   void toBody(Eigen::VectorXd& u, Eigen::VectorXd& v) const;
   Eigen::VectorXd bodyDisplacement() const { return model_->displacement(model_->state()); }

@@ -95,17 +95,15 @@ RigidPointMotion interpolateRigidMotion(const Eigen::Matrix3Xd& offsets, const F
 
 namespace modal_mass_spring
 {
-namespace
-{
 
-Eigen::Matrix3d cross(const Eigen::Vector3d& w)
+std::vector<int> gridAxes(int dimension) { return dimension == 3 ? std::vector<int>{0, 1, 2} : std::vector<int>{0, 2}; }
+
+Eigen::Matrix3d crossMatrix(const Eigen::Vector3d& w)
 {
   Eigen::Matrix3d m;
   m << 0.0, -w.z(), w.y(), w.z(), 0.0, -w.x(), -w.y(), w.x(), 0.0;
   return m;
 }
-
-}  // namespace
 
 bool FrameMotion::atRest() const
 {
@@ -155,10 +153,10 @@ FrameForces frameForces(const FrameMotion& motion, int dimension, const Eigen::V
 {
   const Eigen::Matrix3d& rt = motion.rotation.transpose();
   const Eigen::Vector3d w = rt * motion.angular_velocity;
-  const Eigen::Matrix3d spin = cross(w);
+  const Eigen::Matrix3d spin = crossMatrix(w);
   const Eigen::Vector3d uniform = rt * gravity - gravity - rt * (motion.acceleration + alpha * motion.velocity);
-  const Eigen::Matrix3d position = cross(rt * motion.angular_acceleration) + spin * spin + alpha * spin;
-  const std::vector<int> rows = dimension == 3 ? std::vector<int>{0, 1, 2} : std::vector<int>{0, 2};
+  const Eigen::Matrix3d position = crossMatrix(rt * motion.angular_acceleration) + spin * spin + alpha * spin;
+  const std::vector<int> rows = gridAxes(dimension);
   FrameForces f;
   f.rotation = motion.rotation(rows, rows);
   f.uniform = uniform(rows);

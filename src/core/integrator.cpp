@@ -89,10 +89,7 @@ bool ExplicitNewmark::step(ForceModel& model, const State& s, State& next)
     {
       gyroscopic_force_.noalias() = *gyroscopic_ * next.v;
       gyroscopic_force_ = rhs_ - (0.5 * dt_) * gyroscopic_force_;
-      if (diagonal_)
-        velocity_ = inverse_diagonal_.cwiseProduct(gyroscopic_force_);
-      else
-        velocity_ = ldlt_.solve(gyroscopic_force_);
+      velocity_ = solve(gyroscopic_force_);
       const double change = (velocity_ - next.v).norm();
       converged = change <= 1e-14 * velocity_.norm() || change == 0.0;
       next.v.swap(velocity_);
@@ -161,23 +158,19 @@ bool ImplicitNewmark::advance(ForceModel& model, const State& s, State& next, do
   return advance(model, s, middle, 0.5 * h, depth + 1) && advance(model, middle, next, 0.5 * h, depth + 1);
 }
 
-void ImplicitNewmark::analyzeIfNewPattern(const SparseMatrix& jacobian)
+bool SparsityPattern::changedTo(const SparseMatrix& m)
 {
-  // The symbolic analysis (fill-reducing ordering) is the costly part for the full model, whose
-  // pattern never changes; a reduced tangent can gain or lose exact zeros from step to step.
-  const int* outer = jacobian.outerIndexPtr();
-  const int* inner = jacobian.innerIndexPtr();
-  const size_t num_outer = jacobian.outerSize() + 1;
-  const size_t num_inner = jacobian.nonZeros();
-  const bool same = pattern_outer_.size() == num_outer && pattern_inner_.size() == num_inner &&
-                    std::equal(outer, outer + num_outer, pattern_outer_.begin()) &&
-                    std::equal(inner, inner + num_inner, pattern_inner_.begin());
-  if (!same)
-  {
-    ldlt_.analyzePattern(jacobian);
-    pattern_outer_.assign(outer, outer + num_outer);
-    pattern_inner_.assign(inner, inner + num_inner);
-  }
+  const int* outer_index = m.outerIndexPtr();
+  const int* inner_index = m.innerIndexPtr();
+  const size_t num_outer = m.outerSize() + 1;
+  const size_t num_inner = m.nonZeros();
+  if (outer.size() == num_outer && inner.size() == num_inner &&
+      std::equal(outer_index, outer_index + num_outer, outer.begin()) &&
+      std::equal(inner_index, inner_index + num_inner, inner.begin()))
+    return false;
+  outer.assign(outer_index, outer_index + num_outer);
+  inner.assign(inner_index, inner_index + num_inner);
+  return true;
 }
 
 void ImplicitNewmark::kinematics(const State& s, State& next) const
@@ -272,16 +265,8 @@ Eigen::VectorXd ImplicitNewmark::direction(ForceModel& model, const State& next,
   {
     SparseMatrix jacobian = inertia_ + (1.0 + alpha_) * tangent_;
     jacobian.makeCompressed();
-    const int* outer = jacobian.outerIndexPtr();
-    const int* inner = jacobian.innerIndexPtr();
-    const size_t num_outer = jacobian.outerSize() + 1, num_inner = jacobian.nonZeros();
-    if (lu_outer_.size() != num_outer || lu_inner_.size() != num_inner ||
-        !std::equal(outer, outer + num_outer, lu_outer_.begin()) || !std::equal(inner, inner + num_inner, lu_inner_.begin()))
-    {
+    if (lu_pattern_.changedTo(jacobian))
       lu_.analyzePattern(jacobian);
-      lu_outer_.assign(outer, outer + num_outer);
-      lu_inner_.assign(inner, inner + num_inner);
-    }
     lu_.factorize(jacobian);
     if (lu_.info() == Eigen::Success)
       delta = -lu_.solve(residual_);
@@ -295,7 +280,10 @@ Eigen::VectorXd ImplicitNewmark::direction(ForceModel& model, const State& next,
   {
     SparseMatrix jacobian = (1.0 + extra) * inertia_ + (1.0 + alpha_) * tangent_;
     jacobian.makeCompressed();
-    analyzeIfNewPattern(jacobian);
+    // The symbolic analysis (fill-reducing ordering) is the costly part for the full model, whose
+    // pattern never changes; a reduced tangent can gain or lose exact zeros from step to step.
+    if (ldlt_pattern_.changedTo(jacobian))
+      ldlt_.analyzePattern(jacobian);
     ldlt_.factorize(jacobian);
     if (ldlt_.info() == Eigen::Success && ldlt_.vectorD().minCoeff() > 0.0)
     {

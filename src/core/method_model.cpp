@@ -394,6 +394,20 @@ Eigen::VectorXd ModalMethod::velocity(const State& s) const
   return lin_.basis.phi * s.v;
 }
 
+// Row k of Psi dx_b and Psi v_b from Psi's row: O(handle dofs), where psiDx() and psiV() redo the whole
+// product after every handle motion.
+double ModalMethod::displacementAt(const State& s, int k) const
+{
+  const double handles = lin_.constraint_modes ? lin_.constraint_modes->row(k).dot(handle_motion_.displacement) : 0.0;
+  return offset_[k] + handles + lin_.basis.phi.row(k).dot(s.q);
+}
+
+double ModalMethod::velocityAt(const State& s, int k) const
+{
+  const double handles = lin_.constraint_modes ? lin_.constraint_modes->row(k).dot(handle_motion_.velocity) : 0.0;
+  return handles + lin_.basis.phi.row(k).dot(s.v);
+}
+
 const Eigen::VectorXd& ModalMethod::psiDx() const
 {
   if (psi_dx_stale_ || psi_dx_.size() == 0)

@@ -549,7 +549,7 @@ void Simulation::setHandleFrameMotion(const FrameMotion& m)
   }
   // Constraint modes: the handle particles' rigid motion.
   const int dim = grid_.dimension();
-  const std::vector<int> rows = dim == 3 ? std::vector<int>{0, 1, 2} : std::vector<int>{0, 2};
+  const std::vector<int> rows = gridAxes(dim);
   const std::vector<int>& dofs = grid_.handleDofs();
   const Eigen::Index n = static_cast<Eigen::Index>(dofs.size()) / dim;
   const Eigen::Matrix3Xd all = grid_.toPoints(x_ref_);
@@ -721,14 +721,20 @@ struct PlanarFrame
 {
   Eigen::MatrixXd rotation, spin;
   Eigen::VectorXd translation, velocity;
+
+  // Where a point at y in B, moving at y' there, is in the world and how fast it goes:
+  // x = p + R y, x' = p' + omega x R y + R y'.
+  Eigen::VectorXd worldPosition(const Eigen::VectorXd& y) const { return translation + rotation * y; }
+  Eigen::VectorXd worldVelocity(const Eigen::VectorXd& y, const Eigen::VectorXd& y_dot) const
+  {
+    return velocity + spin * (rotation * y) + rotation * y_dot;
+  }
 };
 
 PlanarFrame restrict(const FrameMotion& m, int dim)
 {
-  const std::vector<int> rows = dim == 3 ? std::vector<int>{0, 1, 2} : std::vector<int>{0, 2};
-  Eigen::Matrix3d spin;
-  const Eigen::Vector3d& w = m.angular_velocity;
-  spin << 0.0, -w.z(), w.y(), w.z(), 0.0, -w.x(), -w.y(), w.x(), 0.0;
+  const std::vector<int> rows = gridAxes(dim);
+  const Eigen::Matrix3d spin = crossMatrix(m.angular_velocity);
   return PlanarFrame{m.rotation(rows, rows), spin(rows, rows), m.translation(rows), m.velocity(rows)};
 }
 
@@ -736,7 +742,7 @@ PlanarFrame restrict(const FrameMotion& m, int dim)
 
 void Simulation::toBody(Eigen::VectorXd& u, Eigen::VectorXd& v) const
 {
-  if (formulation_ != HandleFormulation::MovingFrame || frame_current_.atRest())
+  if (!frameMoved())
     return;
   // y = R^T (x - p), y' = R^T (x' - p' - omega x (x - p)).
   const int dim = grid_.dimension();
@@ -752,14 +758,14 @@ void Simulation::toBody(Eigen::VectorXd& u, Eigen::VectorXd& v) const
 
 Eigen::VectorXd Simulation::displacement() const
 {
-  if (formulation_ != HandleFormulation::MovingFrame || frame_current_.atRest())
+  if (!frameMoved())
     return bodyDisplacement();
   return grid_.gatherFree(positions() - x_ref_);
 }
 
 Eigen::VectorXd Simulation::velocity() const
 {
-  if (formulation_ != HandleFormulation::MovingFrame || frame_current_.atRest())
+  if (!frameMoved())
     return bodyVelocity();
   // x' = p' + omega x R y + R y'.
   const int dim = grid_.dimension();
@@ -767,7 +773,7 @@ Eigen::VectorXd Simulation::velocity() const
   const Eigen::VectorXd y = grid_.gatherFree(x_ref_) + bodyDisplacement();
   Eigen::VectorXd v = bodyVelocity();
   for (Eigen::Index p = 0; p + dim <= v.size(); p += dim)
-    v.segment(p, dim) = f.velocity + f.spin * (f.rotation * y.segment(p, dim)) + f.rotation * v.segment(p, dim);
+    v.segment(p, dim) = f.worldVelocity(y.segment(p, dim), v.segment(p, dim));
   return v;
 }
 
@@ -778,20 +784,45 @@ Eigen::VectorXd Simulation::positions() const
     for (int k = 0; k < grid_.numHandleDofs(); ++k)
       x[grid_.handleDofs()[k]] += handle_current_.displacement[k];
   grid_.addFree(bodyDisplacement(), x);
-  if (formulation_ == HandleFormulation::MovingFrame && !frame_current_.atRest())
+  if (frameMoved())
   {
     // x = p + R y, every particle (the handles' with them).
     const int dim = grid_.dimension();
     const PlanarFrame f = restrict(frame_current_, dim);
     for (Eigen::Index p = 0; p + dim <= x.size(); p += dim)
-      x.segment(p, dim) = f.translation + f.rotation * x.segment(p, dim);
+      x.segment(p, dim) = f.worldPosition(x.segment(p, dim));
   }
   return x;
 }
 
+void Simulation::particleState(int particle, Eigen::VectorXd& position, Eigen::VectorXd& velocity) const
+{
+  const int dim = grid_.dimension();
+  if (particle < 0 || particle >= grid_.numParticles() || grid_.isFixed(particle) || grid_.isHandle(particle))
+    rejectParameter("particle", std::to_string(particle),
+                    "must be a free particle (neither fixed nor held by a handle) in [0, " +
+                        std::to_string(grid_.numParticles()) + ")");
+  position.resize(dim);
+  velocity.resize(dim);
+  for (int c = 0; c < dim; ++c)
+  {
+    const int k = grid_.freeIndex(particle * dim + c);
+    position[c] = x_ref_[particle * dim + c] + model_->displacementAt(model_->state(), k);
+    velocity[c] = model_->velocityAt(model_->state(), k);
+  }
+  if (frameMoved())
+  {
+    // As positions() and velocity(): x = p + R y, x' = p' + omega x R y + R y'.
+    const PlanarFrame f = restrict(frame_current_, dim);
+    const Eigen::VectorXd y = position;
+    position = f.worldPosition(y);
+    velocity = f.worldVelocity(y, velocity);
+  }
+}
+
 double Simulation::kineticEnergy() const
 {
-  if (formulation_ != HandleFormulation::MovingFrame || frame_current_.atRest())
+  if (!frameMoved())
     return model_->kineticEnergy(model_->state());
   return 0.5 * velocity().cwiseAbs2().dot(mass_);
 }

@@ -2,11 +2,24 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <sstream>
 
 namespace modal_mass_spring
 {
+
+std::string vectorText(const Eigen::Vector3d& v)
+{
+  std::string text = "(";
+  for (int k = 0; k < 3; ++k)
+  {
+    char number[32];
+    std::snprintf(number, sizeof number, "%g", v[k]);
+    text += (k > 0 ? ", " : "") + std::string(std::isnan(v[k]) ? "nan" : number);
+  }
+  return text + ")";
+}
 
 std::string AppliedForces::add(const std::vector<uint32_t>& particles, const std::vector<Eigen::Vector3d>& forces,
                                double duration, double now)
@@ -16,8 +29,8 @@ std::string AppliedForces::add(const std::vector<uint32_t>& particles, const std
     return "no particles: 'particles' must list at least one index";
   if (forces.size() != particles.size() && forces.size() != 1)
   {
-    why << particles.size() << " particles but " << forces.size()
-        << " forces: give one force per particle, or one for all of them";
+    why << particles.size() << (particles.size() == 1 ? " particle but " : " particles but ") << forces.size()
+        << (forces.size() == 1 ? " force" : " forces") << ": give one force per particle, or one for all of them";
     return why.str();
   }
   if (!std::isfinite(duration) || duration < 0.0)
@@ -52,7 +65,7 @@ std::string AppliedForces::add(const std::vector<uint32_t>& particles, const std
     const Eigen::Vector3d& f = forces.size() == 1 ? forces[0] : forces[k];
     if (!f.allFinite())
     {
-      why << "the force on particle " << p << " is not finite (" << f.transpose() << " N)";
+      why << "the force on particle " << p << " is not finite: " << vectorText(f) << " N";
       return why.str();
     }
     // A 2D grid lies in the x-z plane: a force across it cannot act.

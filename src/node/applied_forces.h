@@ -14,6 +14,9 @@
 namespace modal_mass_spring
 {
 
+// "(x, y, z)" for a message about a vector, with NaN as "nan" whatever its sign bit (printf gives "-nan").
+std::string vectorText(const Eigen::Vector3d& v);
+
 class AppliedForces
 {
 public:

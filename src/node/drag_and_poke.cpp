@@ -99,11 +99,16 @@ Eigen::Vector3d pokeDirection(const Grid& grid, const Eigen::Matrix3Xd& points, 
   return direction.normalized();
 }
 
-Eigen::Vector3d particleVector(const Grid& grid, const Eigen::VectorXd& all, int particle)
+Eigen::Vector3d gridPoint(const Grid& grid, const Eigen::VectorXd& value)
 {
   if (grid.dimension() == 2)
-    return Eigen::Vector3d(all[2 * particle], 0.0, all[2 * particle + 1]);
-  return all.segment<3>(3 * particle);
+    return Eigen::Vector3d(value[0], 0.0, value[1]);
+  return value.head<3>();
+}
+
+Eigen::Vector3d particleVector(const Grid& grid, const Eigen::VectorXd& all, int particle)
+{
+  return gridPoint(grid, all.segment(grid.dimension() * particle, grid.dimension()));
 }
 
 void addParticleVector(const Grid& grid, int particle, const Eigen::Vector3d& value, Eigen::VectorXd& all)
@@ -115,19 +120,6 @@ void addParticleVector(const Grid& grid, int particle, const Eigen::Vector3d& va
   }
   else
     all.segment<3>(3 * particle) += value;
-}
-
-Eigen::Vector3d particleVelocity(const Grid& grid, const Eigen::VectorXd& free_velocity, int particle)
-{
-  const int dim = grid.dimension();
-  Eigen::Vector3d v = Eigen::Vector3d::Zero();
-  for (int d = 0; d < dim; ++d)
-  {
-    const int k = grid.freeIndex(dim * particle + d);
-    const double value = k >= 0 ? free_velocity[k] : 0.0;
-    v[dim == 2 ? 2 * d : d] = value;  // 2D: x, z
-  }
-  return v;
 }
 
 HandForces::HandForces(const Grid& grid, size_t tracks)
@@ -165,16 +157,14 @@ bool HandForces::active(size_t track) const
 }
 
 std::optional<Eigen::VectorXd> HandForces::nextForce(size_t track, const Eigen::VectorXd& applied,
-                                                     const Eigen::VectorXd& positions, const Eigen::VectorXd& velocity)
+                                                     const Eigen::Vector3d& position, const Eigen::Vector3d& velocity)
 {
   if (!active(track))
     return std::nullopt;
   Eigen::VectorXd force = applied;
   if (drag_)
   {
-    const Eigen::Vector3d f =
-        dragForce(stiffness_, dragDamping(stiffness_, mass_), drag_->target, particleVector(grid_, positions, drag_->particle),
-                  particleVelocity(grid_, velocity, drag_->particle));
+    const Eigen::Vector3d f = dragForce(stiffness_, dragDamping(stiffness_, mass_), drag_->target, position, velocity);
     addParticleVector(grid_, drag_->particle, f, force);
   }
   const bool poked = poke_pending_[track];

@@ -46,12 +46,12 @@ double maxPokeImpulse(const GridParams& grid);
 // A degenerate neighbourhood (all neighbours at one point) gives the unturned grid's direction.
 Eigen::Vector3d pokeDirection(const Grid& grid, const Eigen::Matrix3Xd& points, int particle);
 
-// A particle's 3-vector from a flat all-dof vector (positions(): x, z in 2D), and one added into it
-// (in 2D the y component is dropped: the grid cannot move across its plane).
+// A 3-vector from one particle's `dimension` values (x, z in 2D), a particle's from a flat all-dof
+// vector (positions()), and one added into it (in 2D the y component is dropped: the grid cannot move
+// across its plane).
+Eigen::Vector3d gridPoint(const Grid& grid, const Eigen::VectorXd& value);
 Eigen::Vector3d particleVector(const Grid& grid, const Eigen::VectorXd& all, int particle);
 void addParticleVector(const Grid& grid, int particle, const Eigen::Vector3d& value, Eigen::VectorXd& all);
-// A particle's velocity from a free-dof velocity (Simulation::velocity()); zero on a dof not free.
-Eigen::Vector3d particleVelocity(const Grid& grid, const Eigen::VectorXd& free_velocity, int particle);
 
 // What the hand does to the tracks of a node: one drag (a particle pulled toward a target in grid
 // coordinates, the same on every track) and the pokes not yet stepped. Each track's external force
@@ -77,14 +77,15 @@ public:
   // impulse / time_step over that step.
   void poke(int particle, const Eigen::Vector3d& impulse);
 
-  // The external force of `track` for its next step, from `applied` (the ~apply_force total) and its
-  // state (flat positions, free-dof velocity), or nothing when the track's force is already right
-  // (no hand force now, none at its last step). Takes the track's pending poke.
+  // The external force of `track` for its next step, from `applied` (the ~apply_force total) and the
+  // track's position and velocity of the dragged particle (grid coordinates; read only while a drag
+  // is on), or nothing when the track's force is already right (no hand force now, none at its last
+  // step). Takes the track's pending poke.
   std::optional<Eigen::VectorXd> nextForce(size_t track, const Eigen::VectorXd& applied,
-                                           const Eigen::VectorXd& positions, const Eigen::VectorXd& velocity);
+                                           const Eigen::Vector3d& position, const Eigen::Vector3d& velocity);
   // A track that does not step (diverged) lets its pending poke go.
   void skip(size_t track);
-  // True when nextForce needs the track's state: a drag is on.
+  // True when nextForce needs the dragged particle's state: a drag is on.
   bool needsState() const { return drag_.has_value(); }
   // True when the track's next step has a hand force, or its last one had (nextForce will answer).
   bool active(size_t track) const;

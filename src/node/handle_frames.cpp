@@ -51,8 +51,7 @@ void HandleFrames::motion(double duration, double s, Eigen::VectorXd& x, Eigen::
   x.resize(dimension_ * count);
   v.setZero(dimension_ * count);
   a.setZero(dimension_ * count);
-  // 3D: x, y, z; 2D: x, z (the grid's plane).
-  const std::vector<int> rows = dimension_ == 3 ? std::vector<int>{0, 1, 2} : std::vector<int>{0, 2};
+  const std::vector<int> rows = gridAxes(dimension_);
   Eigen::Index dof = 0;
   for (const auto& handle : handles_)
   {

@@ -43,6 +43,9 @@ public:
   void reset();
   // Empty, or which frames are held because they could not be looked up.
   std::string status() const;
+  // Whether handle h follows its frame: it was looked up at the last tick.
+  bool following(size_t h) const { return handles_[h].found && !handles_[h].missing; }
+  size_t particles(size_t h) const { return static_cast<size_t>(handles_[h].start.cols()); }
 
 private:
   struct Handle

@@ -9,6 +9,7 @@
 
 #include <Eigen/Geometry>
 
+#include <cstdio>
 #include <limits>
 
 namespace modal_mass_spring
@@ -120,8 +121,7 @@ bool SimulationNode::toFixedFrame(const std::string& frame_id, const geometry_ms
   result = Eigen::Vector3d(point.x, point.y, point.z);
   if (!result.allFinite())
   {
-    why = "the point (" + std::to_string(point.x) + ", " + std::to_string(point.y) + ", " + std::to_string(point.z) +
-          ") is not finite";
+    why = "the point " + vectorText(result) + " is not finite";
     return false;
   }
   if (frame == fixed_frame)
@@ -182,8 +182,7 @@ void SimulationNode::onDragFeedback(const visualization_msgs::InteractiveMarkerF
     return;
   if (!known)
   {
-    ROS_WARN_THROTTLE(1.0, "drag: marker pose dropped: %s%s", why.c_str(),
-                      event == Feedback::MOUSE_UP ? "; the drag ends" : "");
+    warnDropped("drag: marker pose dropped: " + why + (event == Feedback::MOUSE_UP ? "; the drag ends" : ""));
     if (event == Feedback::MOUSE_UP)
     {
       hand_forces_->release();
@@ -225,7 +224,7 @@ void SimulationNode::onDragFeedback(const visualization_msgs::InteractiveMarkerF
     const int p = nearestOnTracks(point, track, distance);
     if (p < 0)
     {
-      ROS_WARN_THROTTLE(1.0, "drag: the grid has no free particle to grab");
+      warnDropped("drag: the grid has no free particle to grab");
       return;
     }
     selected_particle_ = p;
@@ -252,7 +251,7 @@ void SimulationNode::onClickedPoint(const geometry_msgs::PointStamped::ConstPtr&
   }
   if (!known)
   {
-    ROS_WARN_THROTTLE(1.0, "/clicked_point: point dropped: %s", why.c_str());
+    warnDropped("/clicked_point: point dropped: " + why);
     return;
   }
   size_t track = 0;
@@ -260,17 +259,17 @@ void SimulationNode::onClickedPoint(const geometry_msgs::PointStamped::ConstPtr&
   const int p = nearestOnTracks(point, track, distance);
   if (p < 0)
   {
-    ROS_WARN_THROTTLE(1.0, "/clicked_point: point dropped: the grid has no free particle to poke");
+    warnDropped("/clicked_point: point dropped: the grid has no free particle to poke");
     return;
   }
   const Grid& grid = tracks_[track].simulation->grid();
   const double reach = kPokeReach * grid.params().spacing;
   if (distance > reach)
   {
-    ROS_WARN_THROTTLE(1.0,
-                      "/clicked_point: point dropped: (%g, %g, %g) in '%s' is %.3g m from the nearest free particle, "
-                      "beyond the %.3g m (3 spacings) a poke reaches: click on the cloth",
-                      point.x(), point.y(), point.z(), config_.node.fixed_frame.c_str(), distance, reach);
+    char text[160];
+    std::snprintf(text, sizeof text, " in '%s' is %.3g m from the nearest free particle, beyond the %.3g m (3 spacings)",
+                  config_.node.fixed_frame.c_str(), distance, reach);
+    warnDropped("/clicked_point: point dropped: " + vectorText(point) + text + " a poke reaches: click on the cloth");
     return;
   }
   const Eigen::Vector3d direction = pokeDirection(grid, tracks_[track].last_points, p);
@@ -284,18 +283,25 @@ void SimulationNode::applyHandForce(size_t k)
   if (!hand_forces_->active(k))
     return;
   Simulation& simulation = *tracks_[k].simulation;
-  const bool state = hand_forces_->needsState();
-  const auto force = hand_forces_->nextForce(k, external_force_, state ? simulation.positions() : Eigen::VectorXd(),
-                                             state ? simulation.velocity() : Eigen::VectorXd());
-  if (!force)
-    return;
   try
   {
-    simulation.setExternalForce(*force);
+    // Only the dragged particle's state: reading the whole grid's every step would cost more than
+    // the step itself on a large grid.
+    Eigen::Vector3d position = Eigen::Vector3d::Zero(), velocity = Eigen::Vector3d::Zero();
+    if (hand_forces_->needsState())
+    {
+      Eigen::VectorXd x, v;
+      simulation.particleState(hand_forces_->draggedParticle(), x, v);
+      position = gridPoint(simulation.grid(), x);
+      velocity = gridPoint(simulation.grid(), v);
+    }
+    if (const auto force = hand_forces_->nextForce(k, external_force_, position, velocity))
+      simulation.setExternalForce(*force);
   }
   catch (const std::invalid_argument& error)
   {
-    // Only a state gone non-finite could do it; the core keeps the last good one.
+    // Only a state gone non-finite (or a particle no longer free) could do it; the core keeps the last
+    // good state.
     ROS_WARN_THROTTLE(1.0, "drag: the hand's force was refused (%s); the drag ends", error.what());
     hand_forces_->release();
   }

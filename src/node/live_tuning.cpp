@@ -151,7 +151,7 @@ void SimulationNode::rebuildLoop()
       {
         SimulationParams params = target.simulation;
         params.method = method;
-        built.push_back(buildSimulation(target.grid, params, false));
+        built.push_back(buildSimulation(target.grid, params, false, "rebuilding"));
       }
     }
     catch (const std::exception& error)

@@ -262,9 +262,9 @@ NodeConfiguration loadNodeConfiguration(const NodeParameterSource& source, const
   validateParameters(c.grid, c.simulation);
   c.node = loadNodeParams(recording, c.grid, c.simulation);
   c.node.handles = handles;
-  for (const auto& handle : handles)
-    if (handle.frame == c.node.fixed_frame || handle.frame == c.node.grid_frame)
-      rejectParameter("handles", "'" + handle.frame + "'",
+  for (size_t h = 0; h < handles.size(); ++h)
+    if (handles[h].frame == c.node.fixed_frame || handles[h].frame == c.node.grid_frame)
+      rejectParameter("handles[" + std::to_string(h) + "].frame", "'" + handles[h].frame + "'",
                       "a handle's frame must differ from fixed_frame and grid_frame (use `fixed` for particles "
                       "that never move)");
   for (const auto& key : present_keys)

@@ -225,11 +225,12 @@ SimulationNode::~SimulationNode()
 }
 
 std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& grid_params,
-                                                            const SimulationParams& sim_params, bool report) const
+                                                            const SimulationParams& sim_params, bool report,
+                                                            const std::string& activity) const
 {
   const auto start = Clock::now();
   StartupProgress progress([](const std::string& line) { ROS_INFO("%s", line.c_str()); },
-                           [start] { return secondsSince(start); });
+                           [start] { return secondsSince(start); }, 1.0, 10.0, activity);
   std::unique_ptr<Simulation> simulation;
   {
     ProgressWatcher watcher(progress);
@@ -360,6 +361,12 @@ void SimulationNode::updateHandleTargets()
   }
   if (!missing.empty())
     ROS_WARN_THROTTLE(5.0, "handle frame %s: its particles hold where they are", missing.c_str());
+  // A frame found (at last, or again) is said once, so that a run whose broadcaster starts after the
+  // node does not end its log on the warning.
+  for (size_t h = 0; h < poses.size(); ++h)
+    if (poses[h] && !handle_frames_->following(h))
+      ROS_INFO("handle frame '%s' found: its %zu %s it", handle_frames_->frame(h).c_str(),
+               handle_frames_->particles(h), handle_frames_->particles(h) == 1 ? "particle follows" : "particles follow");
   handle_frames_->setTargets(poses);
 }
 
@@ -409,7 +416,7 @@ bool SimulationNode::stepAll()
     track.tick_seconds += secondsSince(start);
     track.tick_steps += result.steps_taken;
     if (result.diverged)
-      track.divergence_message = result.message;
+      track.divergence_message = result.message + externalForcesNote(k);
     else
       any_running = true;
   }
@@ -650,6 +657,8 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     status.handles = handle_frames_->status();
     status.handle_formulation =
         handle_frames_->empty() ? "" : toString(simulation.handleFormulation());
+    status.applied_forces = static_cast<uint32_t>(applied_forces_->size());
+    status.dragged_particle = hand_forces_ ? hand_forces_->draggedParticle() : -1;
     status.reference = measured ? "full" : "";
     status.rms_distance = track.rms_distance;
     status.max_distance = track.max_distance;
@@ -751,6 +760,9 @@ void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& statu
                     1e3 * mean_cost, 1e3 * period, diag_late_ticks_, diag_ticks_);
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, paused_ ? "paused" : "stepping");
+  if (!handle_frames_->status().empty())  // whatever else is said
+    status.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
+                        "handles " + handle_frames_->status() + " (their particles hold where they are)");
   status.add("state", stateName(first));
   status.add("method", lockstep() ? "lockstep" : toString(simulation.method()));
   status.add("step count", steps(first));
@@ -827,6 +839,13 @@ bool SimulationNode::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Respo
   response.message = "reset to the initial state at rest (method " +
                      (lockstep() ? std::string("s in lockstep") : toString(primary().simulation->method())) +
                      (paused_ ? ", still paused)" : ")");
+  // Forces from ~apply_force act on across a reset (as a wrench applied in Gazebo does); a reset after
+  // a divergence they caused would diverge again, so the reply says they are there.
+  const size_t forces = applied_forces_->size();
+  if (forces > 0)
+    response.message += "; " + std::to_string(forces) +
+                        (forces == 1 ? " force from ~apply_force acts" : " forces from ~apply_force act") +
+                        " on (~clear_forces ends them)";
   ROS_INFO("%s", response.message.c_str());
   return true;
 }
@@ -916,8 +935,8 @@ void SimulationNode::applyForce(const ApplyForce::ConstPtr& message)
     }
     catch (const tf2::TransformException& e)
     {
-      ROS_WARN_THROTTLE(1.0, "~apply_force: message dropped: frame '%s' cannot be turned into '%s': %s", frame.c_str(),
-                        fixed_frame.c_str(), e.what());
+      warnDropped("~apply_force: message dropped: frame '" + frame + "' cannot be turned into '" + fixed_frame +
+                  "': " + e.what());
       return;
     }
   }
@@ -925,14 +944,31 @@ void SimulationNode::applyForce(const ApplyForce::ConstPtr& message)
   for (const geometry_msgs::Vector3& f : message->forces)
     forces.push_back(frame == fixed_frame ? Eigen::Vector3d(f.x, f.y, f.z) : rotation * Eigen::Vector3d(f.x, f.y, f.z));
   std::string why;
+  size_t acting = 0;
   {
     ServiceLock lock(*this);
-    why = applied_forces_->add(message->particles, forces, message->duration, simTime(primary()));
+    why = applied_forces_->add(message->particles, forces, message->duration, clock_seconds_);
     if (why.empty())
       updateExternalForces();
+    acting = applied_forces_->size();
   }
   if (!why.empty())
-    ROS_WARN_THROTTLE(1.0, "~apply_force: message dropped: %s", why.c_str());
+    warnDropped("~apply_force: message dropped: " + why);
+  else if (message->duration > 0.0)
+    ROS_INFO_THROTTLE(1.0, "~apply_force: taken: %zu %s for %g s; %zu %s", message->particles.size(),
+                      message->particles.size() == 1 ? "particle" : "particles", message->duration, acting,
+                      acting == 1 ? "force acts" : "forces act");
+  else
+    ROS_INFO_THROTTLE(1.0, "~apply_force: taken: %zu %s until ~clear_forces; %zu %s", message->particles.size(),
+                      message->particles.size() == 1 ? "particle" : "particles", acting,
+                      acting == 1 ? "force acts" : "forces act");
+}
+
+void SimulationNode::warnDropped(const std::string& text)
+{
+  std::lock_guard<std::mutex> lock(warnings_mutex_);
+  if (dropped_warnings_.allow(text, ros::SteadyTime::now().toSec()))
+    ROS_WARN("%s", text.c_str());
 }
 
 bool SimulationNode::clearForces(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response)
@@ -946,9 +982,24 @@ bool SimulationNode::clearForces(std_srvs::Trigger::Request&, std_srvs::Trigger:
   return true;
 }
 
+std::string SimulationNode::externalForcesNote(size_t track) const
+{
+  const size_t applied = applied_forces_->size();
+  const bool hand = hand_forces_ && hand_forces_->active(track);
+  if (applied == 0 && !hand)
+    return "";
+  std::string acting = applied > 0 ? std::to_string(applied) + " from ~apply_force" : "";
+  if (hand)
+    acting += std::string(applied > 0 ? " and " : "") + (hand_forces_->dragging() ? "a drag" : "a poke");
+  return "; forces from outside were acting (" + acting +
+         "): too large a force diverges too; ~clear_forces ends them, then ~reset starts again";
+}
+
 void SimulationNode::updateExternalForces()
 {
-  applied_forces_->update(simTime(primary()), external_force_);
+  // On /clock's seconds, which a reset does not take back: a force lasts its duration of simulated
+  // time across resets too.
+  applied_forces_->update(clock_seconds_, external_force_);
   // A rebuilt simulation starts without them: every track is brought to the current total.
   // A track under the hand's force gets the total before its next step (applyHandForce).
   for (size_t k = 0; k < tracks_.size(); ++k)

@@ -5,6 +5,7 @@
 #include "applied_forces.h"
 #include "drag_and_poke.h"
 #include "handle_frames.h"
+#include "warning_throttle.h"
 #include "modal_mass_spring/ApplyForce.h"
 #include "modal_mass_spring/SetMethod.h"
 #include "modal_mass_spring/SimulationConfig.h"
@@ -74,8 +75,10 @@ private:
   // What one tick publishes, built under the lock and sent after it.
   struct Output;
 
-  std::unique_ptr<Simulation> buildSimulation(const GridParams& grid, const SimulationParams& params,
-                                              bool report) const;
+  // Builds a simulation, logging its stages when slow ("<activity> for N s: ...") and, with `report`,
+  // the start-up line.
+  std::unique_ptr<Simulation> buildSimulation(const GridParams& grid, const SimulationParams& params, bool report,
+                                              const std::string& activity = "starting up") const;
   void buildTracks();
   // Puts every full track at the state of the first reduced one (the same state, the same time), so
   // that the distances measure the methods, not their start.
@@ -118,6 +121,12 @@ private:
   void applyForce(const ApplyForce::ConstPtr& message);
   bool clearForces(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   void updateExternalForces();  // with mutex_ held: drops the forces whose time is up, sets the rest
+  // What a divergence message of `track` adds when forces from outside acted on it (they may be why).
+  std::string externalForcesNote(size_t track) const;
+  // A warning about a dropped message (~apply_force, /clicked_point, a drag pose), throttled per text.
+  void warnDropped(const std::string& text);
+  std::mutex warnings_mutex_;
+  WarningThrottle dropped_warnings_;
   // Handles: looks every handle frame up (the latest pose in tf_buffer_), warns for the missing ones.
   void updateHandleTargets();   // with mutex_ held
   // Prescribes the handles' motion at the fraction s of a tick of `duration` s on every track.

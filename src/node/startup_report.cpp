@@ -130,8 +130,12 @@ std::string describeStage(const std::string& stage)
 }
 
 StartupProgress::StartupProgress(std::function<void(const std::string&)> log, std::function<double()> now,
-                                 double quiet_seconds, double repeat_seconds)
-  : log_(std::move(log)), now_(std::move(now)), quiet_seconds_(quiet_seconds), repeat_seconds_(repeat_seconds)
+                                 double quiet_seconds, double repeat_seconds, std::string activity)
+  : log_(std::move(log)),
+    now_(std::move(now)),
+    quiet_seconds_(quiet_seconds),
+    repeat_seconds_(repeat_seconds),
+    activity_(std::move(activity))
 {
   start_ = stage_start_ = now_();
 }
@@ -156,8 +160,8 @@ void StartupProgress::poll()
       return;
     std::ostringstream out;
     char text[128];
-    std::snprintf(text, sizeof text, "starting up for %.1f s: ", t - start_);
-    out << text << describeStage(stage_);
+    std::snprintf(text, sizeof text, " for %.1f s: ", t - start_);
+    out << activity_ << text << describeStage(stage_);
     if (!new_stage || t - stage_start_ >= quiet_seconds_)
     {
       std::snprintf(text, sizeof text, ", for %.1f s so far", t - stage_start_);

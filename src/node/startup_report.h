@@ -47,8 +47,9 @@ std::string describeStage(const std::string& stage);
 class StartupProgress
 {
 public:
+  // `activity` begins each line: "starting up", or "rebuilding" for a live rebuild.
   StartupProgress(std::function<void(const std::string&)> log, std::function<double()> now,
-                  double quiet_seconds = 1.0, double repeat_seconds = 10.0);
+                  double quiet_seconds = 1.0, double repeat_seconds = 10.0, std::string activity = "starting up");
 
   void onStage(const std::string& stage);
   void poll();
@@ -57,6 +58,7 @@ private:
   std::function<void(const std::string&)> log_;
   std::function<double()> now_;
   double quiet_seconds_, repeat_seconds_;
+  std::string activity_;
   std::mutex mutex_;
   double start_ = 0.0, stage_start_ = 0.0, last_report_ = 0.0;
   std::string stage_ = "building the grid", reported_stage_;

@@ -268,8 +268,7 @@ RigidFrameMotion HandleDriver::frame(int h, double t) const
 void HandleDriver::particleMotion(double t, Eigen::VectorXd& positions, Eigen::VectorXd& velocities,
                                   Eigen::VectorXd& accelerations) const
 {
-  // Grid coordinates: (x, y, z) in 3D, (x, z) in 2D.
-  const std::vector<int> rows = dimension_ == 3 ? std::vector<int>{0, 1, 2} : std::vector<int>{0, 2};
+  const std::vector<int> rows = gridAxes(dimension_);
   Eigen::Index size = 0;
   for (const Eigen::Matrix3Xd& o : offsets_)
     size += dimension_ * o.cols();

@@ -19,6 +19,7 @@ import unittest
 import numpy as np
 import rospy
 import rostest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from dynamic_reconfigure.client import Client
 from modal_mass_spring.msg import Status
 from rosgraph_msgs.msg import Log
@@ -52,9 +53,11 @@ class Recorder:
         self.ticks = {m: [] for m in METHODS}  # each tick: {particle: position}
         self.warnings = []
         self.logs = []
+        self.diagnostics = []
         self.status = {}
         self.subs = [rospy.Subscriber("/tf", TFMessage, self.on_tf, queue_size=1000),
-                     rospy.Subscriber("/rosout", Log, self.on_log, queue_size=1000)]
+                     rospy.Subscriber("/rosout", Log, self.on_log, queue_size=1000),
+                     rospy.Subscriber("/diagnostics", DiagnosticArray, self.on_diagnostics, queue_size=100)]
         for m in METHODS:
             self.subs.append(rospy.Subscriber(NODE + "/" + m + "/status", Status,
                                               lambda msg, m=m: self.on_status(m, msg), queue_size=10))
@@ -81,6 +84,10 @@ class Recorder:
             self.logs.append(msg.msg)
             if msg.level >= Log.WARN:
                 self.warnings.append(msg.msg)
+
+    def on_diagnostics(self, msg):
+        with self.lock:
+            self.diagnostics.extend(msg.status)
 
     def on_status(self, method, msg):
         self.status[method] = msg
@@ -140,11 +147,21 @@ class Follow(unittest.TestCase):
             self.assertGreater(free_motion, 1e-3, "%s: a free particle responds" % method)
         self.assertIn("physical", rec.status)
         self.assertEqual(rec.status["physical"].handle_formulation, FORMULATION)
+        with rec.lock:
+            held_reports = [d for d in rec.diagnostics if "not available" in d.message]
+            self.assertGreater(len(rec.diagnostics), 0)
         if MISSING:
             self.assertTrue(any("handle frame 'absent' not available" in w for w in warnings), warnings[:5])
             self.assertEqual(rec.status["physical"].handles, "held: frame 'absent' not available")
+            # /diagnostics says it too, as a warning, for a user watching a robot monitor.
+            self.assertTrue(any(d.level == DiagnosticStatus.WARN and "frame 'absent' not available" in d.message
+                                for d in held_reports), [d.message for d in held_reports[:3]])
         else:
             self.assertEqual(rec.status["physical"].handles, "")
+            # The frame may not have reached the node at its first reports; by now it has.
+            with rec.lock:
+                last = rec.diagnostics[-1]
+            self.assertNotIn("not available", last.message)
 
 
 class Rebuild(unittest.TestCase):

@@ -1,5 +1,6 @@
 // The forces of ~apply_force, without a master: what is refused and why, the sum, the expiry.
 #include "applied_forces.h"
+#include "warning_throttle.h"
 
 #include <gtest/gtest.h>
 
@@ -64,8 +65,10 @@ TEST(AppliedForces, BadRequestsAreRefusedByNameAndAddNothing)
   EXPECT_TRUE(contains(forces.add({2}, {f}, 0, 0), "particle 2 is fixed"));
   EXPECT_TRUE(contains(forces.add({9, 9}, {f}, 0, 0), "particle 9 is listed twice"));
   EXPECT_TRUE(contains(forces.add({9, 10, 11}, {f, f}, 0, 0), "3 particles but 2 forces"));
+  EXPECT_TRUE(contains(forces.add({9}, {}, 0, 0), "1 particle but 0 forces"));
   EXPECT_TRUE(contains(forces.add({}, {f}, 0, 0), "no particles"));
   EXPECT_TRUE(contains(forces.add({9}, {Eigen::Vector3d(nan, 0, 0)}, 0, 0), "the force on particle 9 is not finite"));
+  EXPECT_TRUE(contains(forces.add({9}, {Eigen::Vector3d(-nan, 1.5, 0)}, 0, 0), "not finite: (nan, 1.5, 0) N"));
   EXPECT_TRUE(contains(forces.add({9}, {f}, -1.0, 0), "duration -1"));
   EXPECT_TRUE(contains(forces.add({9}, {f}, std::numeric_limits<double>::infinity(), 0), "duration inf"));
   EXPECT_EQ(forces.size(), 0u);
@@ -77,4 +80,16 @@ TEST(AppliedForces, BadRequestsAreRefusedByNameAndAddNothing)
   const Grid with_handle(held);
   AppliedForces on_handle(with_handle);
   EXPECT_TRUE(contains(on_handle.add({22}, {f}, 0, 0), "particle 22 is held by a handle"));
+}
+
+TEST(WarningThrottle, EachDistinctWarningOncePerPeriodAndABurstAtMost)
+{
+  WarningThrottle throttle(1.0, 3);
+  EXPECT_TRUE(throttle.allow("particle 25 is out of range", 0.0));
+  EXPECT_FALSE(throttle.allow("particle 25 is out of range", 0.5)) << "the same mistake again: throttled";
+  EXPECT_TRUE(throttle.allow("the force on particle 9 is not finite", 0.6)) << "a different one is told";
+  EXPECT_TRUE(throttle.allow("duration -1", 0.7));
+  EXPECT_FALSE(throttle.allow("particle 2 is fixed", 0.8)) << "a flood is cut at the burst";
+  EXPECT_TRUE(throttle.allow("particle 25 is out of range", 1.2)) << "its period is over";
+  EXPECT_TRUE(throttle.allow("particle 2 is fixed", 1.3));
 }

@@ -157,17 +157,11 @@ TEST(DragAndPoke, ParticleVectorsInTwoAndThreeDimensions)
   addParticleVector(net, 7, Eigen::Vector3d(1.0, 5.0, -2.0), all);
   EXPECT_EQ(particleVector(net, all, 7), Eigen::Vector3d(1.0, 0.0, -2.0)) << "y dropped in 2D";
   EXPECT_DOUBLE_EQ(all.cwiseAbs().sum(), 3.0);
-  // Velocities come over the free dofs; a fixed particle has none.
-  Eigen::VectorXd free_velocity = Eigen::VectorXd::LinSpaced(net.numFreeDofs(), 1.0, net.numFreeDofs());
-  Eigen::VectorXd full = Eigen::VectorXd::Zero(net.numDofs());
-  net.addFree(free_velocity, full);
-  EXPECT_EQ(particleVelocity(net, free_velocity, 7), particleVector(net, full, 7));
-  EXPECT_TRUE(particleVelocity(net, free_velocity, 2).isZero(0.0));
+  EXPECT_EQ(gridPoint(net, Eigen::Vector2d(3.0, -4.0)), Eigen::Vector3d(3.0, 0.0, -4.0)) << "x, z in 2D";
   const Grid sheet(sheet3D());
-  free_velocity = Eigen::VectorXd::LinSpaced(sheet.numFreeDofs(), 1.0, sheet.numFreeDofs());
-  full = Eigen::VectorXd::Zero(sheet.numDofs());
-  sheet.addFree(free_velocity, full);
-  EXPECT_EQ(particleVelocity(sheet, free_velocity, 21), full.segment<3>(63));
+  EXPECT_EQ(gridPoint(sheet, Eigen::Vector3d(3.0, 5.0, -4.0)), Eigen::Vector3d(3.0, 5.0, -4.0));
+  all = Eigen::VectorXd::LinSpaced(sheet.numDofs(), 1.0, sheet.numDofs());
+  EXPECT_EQ(particleVector(sheet, all, 21), all.segment<3>(63));
 }
 
 TEST(DragAndPoke, EachTrackIsPulledFromItsOwnStateAndPokedOnce)
@@ -178,18 +172,15 @@ TEST(DragAndPoke, EachTrackIsPulledFromItsOwnStateAndPokedOnce)
   hand.configure(k, grid.particleMass(), dt);
   const Eigen::VectorXd applied = Eigen::VectorXd::Constant(grid.numDofs(), 0.25);
   const Eigen::VectorXd x0 = grid.initialPositions();
-  const Eigen::VectorXd v0 = Eigen::VectorXd::Zero(grid.numFreeDofs());
-  EXPECT_FALSE(hand.nextForce(0, applied, x0, v0)) << "nothing by hand: the applied force stands";
+  const Eigen::Vector3d at_rest = Eigen::Vector3d::Zero();
+  EXPECT_FALSE(hand.nextForce(0, applied, at_rest, at_rest)) << "nothing by hand: the applied force stands";
 
   const int p = 22;
-  const Eigen::Vector3d target = particleVector(grid, x0, p) + Eigen::Vector3d(0.0, 0.1, 0.0);
-  hand.grab(p, target);
-  Eigen::VectorXd x1 = x0;
-  x1.segment<3>(3 * p) += Eigen::Vector3d(0.0, 0.04, 0.0);  // track 1's particle is further along
-  Eigen::VectorXd v1 = v0;
-  v1.segment<3>(grid.freeIndex(3 * p)) = Eigen::Vector3d(0.0, 0.5, 0.0);
-  const auto f0 = hand.nextForce(0, applied, x0, v0);
-  const auto f1 = hand.nextForce(1, applied, x1, v1);
+  const Eigen::Vector3d x0p = particleVector(grid, x0, p);
+  hand.grab(p, x0p + Eigen::Vector3d(0.0, 0.1, 0.0));
+  const Eigen::Vector3d x1p = x0p + Eigen::Vector3d(0.0, 0.04, 0.0);  // track 1's particle is further along
+  const auto f0 = hand.nextForce(0, applied, x0p, at_rest);
+  const auto f1 = hand.nextForce(1, applied, x1p, Eigen::Vector3d(0.0, 0.5, 0.0));
   ASSERT_TRUE(f0 && f1);
   const double c = dragDamping(k, grid.particleMass());
   EXPECT_TRUE((*f0 - applied).segment<3>(3 * p).isApprox(Eigen::Vector3d(0.0, k * 0.1, 0.0)));
@@ -201,22 +192,22 @@ TEST(DragAndPoke, EachTrackIsPulledFromItsOwnStateAndPokedOnce)
   hand.poke(12, Eigen::Vector3d(0.0, 0.02, 0.0));
   for (size_t track : {0, 1})
   {
-    const auto poked = hand.nextForce(track, applied, x0, v0);
+    const auto poked = hand.nextForce(track, applied, at_rest, at_rest);
     ASSERT_TRUE(poked);
     EXPECT_NEAR(((*poked - applied) * dt).segment<3>(3 * 12).y(), 0.02, 1e-15);
     EXPECT_DOUBLE_EQ((*poked - applied).cwiseAbs().sum() * dt, 0.02);
     // The step after: the applied force alone, once, then nothing more to set.
-    const auto after = hand.nextForce(track, applied, x0, v0);
+    const auto after = hand.nextForce(track, applied, at_rest, at_rest);
     ASSERT_TRUE(after);
     EXPECT_EQ(*after, applied);
-    EXPECT_FALSE(hand.nextForce(track, applied, x0, v0));
+    EXPECT_FALSE(hand.nextForce(track, applied, at_rest, at_rest));
   }
   // A track that cannot step lets its poke go; the other still gets it.
   hand.poke(12, Eigen::Vector3d(0.0, 0.02, 0.0));
   hand.skip(1);
   EXPECT_TRUE(hand.active(0));
   EXPECT_FALSE(hand.active(1));
-  EXPECT_NE(*hand.nextForce(0, applied, x0, v0), applied);
+  EXPECT_NE(*hand.nextForce(0, applied, at_rest, at_rest), applied);
 }
 
 TEST(DragAndPoke, ParametersAreCheckedByName)

@@ -935,6 +935,19 @@ modal_mass_spring::ApplyForce force(const std::string& frame, std::vector<uint32
   return message;
 }
 
+// Whether `text` was logged at `level`, waiting up to 3 s for /rosout to bring it.
+bool loggedWithin(const Recorder<rosgraph_msgs::Log>& log, uint8_t level, const std::string& text)
+{
+  for (const ros::WallTime end = ros::WallTime::now() + ros::WallDuration(3.0); ros::WallTime::now() < end;)
+  {
+    for (const auto& entry : log.messages())
+      if (entry->level == level && entry->msg.find(text) != std::string::npos)
+        return true;
+    ros::WallDuration(0.05).sleep();
+  }
+  return false;
+}
+
 class ExternalForces : public ::testing::Test
 {
 protected:
@@ -1025,17 +1038,55 @@ TEST_F(ExternalForces, BadMessagesAreDroppedWithAWarningNamingTheProblem)
   };
   for (const auto& [message, expected] : cases)
   {
-    apply(message);
-    ros::WallDuration(1.1).sleep();  // the warning is throttled to one a second
-    bool warned = false;
-    for (const auto& entry : log.messages())
-      warned |= entry->level == rosgraph_msgs::Log::WARN && entry->msg.find(expected) != std::string::npos;
-    EXPECT_TRUE(warned) << "no warning naming: " << expected;
+    apply(message);  // each different warning is told at once (throttled per text)
+    EXPECT_TRUE(loggedWithin(log, rosgraph_msgs::Log::WARN, expected)) << "no warning naming: " << expected;
   }
   // Nothing of them was taken, and the node runs on.
   EXPECT_LT(maxDistance(afterSteps(node, 100), free), 1e-12);
   ASSERT_TRUE(node.pause(false));
   EXPECT_TRUE(node.status([](const Status& s) { return s.state == Status::RUNNING && s.tick_steps > 0; }));
+}
+
+TEST_F(ExternalForces, ADivergenceUnderAForceNamesItAndAResetSaysItActsOn)
+{
+  ASSERT_TRUE(node.setMethod("physical").success);
+  ASSERT_TRUE(node.pause(true));
+  ASSERT_TRUE(node.reset().success);
+  apply(force("", {corner}, {{1e12, 0.0, 0.0}}));  // finite, and far more than any step holds
+  EXPECT_TRUE(node.status([](const Status& s) { return s.applied_forces == 1; }));
+  stepBy(node, 100);
+  const auto diverged = node.status([](const Status& s) { return s.state == Status::DIVERGED; });
+  ASSERT_TRUE(diverged);
+  EXPECT_NE(diverged->message.find("forces from outside were acting (1 from ~apply_force)"), std::string::npos)
+      << diverged->message;
+  EXPECT_NE(diverged->message.find("~clear_forces"), std::string::npos) << diverged->message;
+  // The force acts on across a reset, and the reply says so; cleared, the run is an ordinary one.
+  const auto reset = node.reset();
+  EXPECT_TRUE(reset.success);
+  EXPECT_NE(reset.message.find("1 force from ~apply_force acts on (~clear_forces ends them)"), std::string::npos)
+      << reset.message;
+  clear();
+  EXPECT_TRUE(node.status([](const Status& s) { return s.applied_forces == 0; }));
+  EXPECT_EQ(node.reset().message.find("~apply_force"), std::string::npos);
+  ASSERT_TRUE(stepBy(node, 100).success);
+  EXPECT_TRUE(node.status([](const Status& s) { return s.state == Status::PAUSED && s.step_count == 100; }));
+}
+
+TEST_F(ExternalForces, AForceLastsItsDurationOfSimulatedTimeAcrossAReset)
+{
+  ASSERT_TRUE(node.setMethod("linear").success);
+  ASSERT_TRUE(node.pause(true));
+  ASSERT_TRUE(node.reset().success);
+  ASSERT_TRUE(stepBy(node, 300).success);
+  modal_mass_spring::ApplyForce message = force("", {corner}, {{0.01, 0.0, 0.0}});
+  message.duration = 0.1;
+  apply(message);
+  EXPECT_TRUE(node.status([](const Status& s) { return s.applied_forces == 1; }));
+  // After a reset at 0.3 s and 0.2 s more of steps the force's 0.1 s are over, though the run's own
+  // time (0.2 s) has not reached where it was applied.
+  ASSERT_TRUE(node.reset().success);
+  ASSERT_TRUE(stepBy(node, 200).success);
+  EXPECT_TRUE(node.status([](const Status& s) { return s.applied_forces == 0; }));
 }
 
 // ---------------------------------------------------------------- by hand: the drag marker and pokes (drag_and_poke.test)
@@ -1131,10 +1182,7 @@ protected:
   }
   bool logged(const Recorder<rosgraph_msgs::Log>& log, uint8_t level, const std::string& text) const
   {
-    for (const auto& entry : log.messages())
-      if (entry->level == level && entry->msg.find(text) != std::string::npos)
-        return true;
-    return false;
+    return loggedWithin(log, level, text);
   }
 
   NodeUnderTest node{"/modal_mass_spring"};
@@ -1181,7 +1229,9 @@ TEST_F(ByHand, DragGrabsOnlyFreeParticlesAndItsArrowsDoNotPull)
   Recorder<rosgraph_msgs::Log> log("/rosout");
   ros::WallDuration(0.3).sleep();
   run(node, 1, [&] { drag(feedback_pub, Feedback::MOUSE_DOWN, vec(free[2]) + Eigen::Vector3d(0.0, 0.0, 0.01)); });
+  EXPECT_TRUE(node.status([](const Status& s) { return s.dragged_particle == 7; }));
   drag(feedback_pub, Feedback::MOUSE_UP, vec(free[2]));
+  EXPECT_TRUE(node.status([](const Status& s) { return s.dragged_particle == -1; }));
   EXPECT_TRUE(logged(log, rosgraph_msgs::Log::INFO, "particle 7 grabbed"));
   // Moved by an arrow, the marker pulls nothing.
   const auto placed = run(node, 50, [&] {
@@ -1259,12 +1309,10 @@ TEST_F(ByHand, BadClicksAndDragsAreDroppedWithAWarningNamingTheProblem)
   ros::WallDuration(0.3).sleep();
   const double nan = std::numeric_limits<double>::quiet_NaN();
   const auto hit = run(node, 50, [&] {
+    // One after another: warnings are throttled per text, so each different one is told at once.
     click(Eigen::Vector3d(nan, 0.0, 0.0));
-    ros::WallDuration(1.1).sleep();  // each warning is throttled to one a second
     click(vec(free[corner]), "no_such_frame");
-    ros::WallDuration(1.1).sleep();
     click(vec(free[corner]) + Eigen::Vector3d(0.0, 1.0, 0.0));
-    ros::WallDuration(1.1).sleep();
     drag(feedback_pub, Feedback::MOUSE_DOWN, vec(free[corner]), "no_such_frame");
     drag(feedback_pub, Feedback::POSE_UPDATE, Eigen::Vector3d(nan, 0.0, 0.0));
   });
@@ -1272,7 +1320,7 @@ TEST_F(ByHand, BadClicksAndDragsAreDroppedWithAWarningNamingTheProblem)
   for (const std::string expected :
        {"/clicked_point: point dropped: the point (nan", "/clicked_point: point dropped: frame 'no_such_frame'",
         "from the nearest free particle, beyond the 0.3 m (3 spacings) a poke reaches",
-        "drag: marker pose dropped: frame 'no_such_frame'"})
+        "drag: marker pose dropped: frame 'no_such_frame'", "drag: marker pose dropped: the point (nan, 0, 0)"})
     EXPECT_TRUE(logged(log, rosgraph_msgs::Log::WARN, expected)) << "no warning naming: " << expected;
   // None of them did anything, and the node runs on.
   EXPECT_LT(maxDistance(hit, free), 1e-12);

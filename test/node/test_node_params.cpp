@@ -449,7 +449,7 @@ TEST(NodeParams, HandlesAreCheckedAndReachTheGrid)
             "invalid parameter 'handles[0].frame' = '/gripper': must be a non-empty frame id without a leading '/' or "
             "spaces");
   EXPECT_EQ(refusal(handles({{"gripper", {}}})), "invalid parameter 'handles[0]' = []: a handle must hold at least one particle");
-  EXPECT_NE(refusal(handles({{"world", {0}}})).find("invalid parameter 'handles' = 'world': a handle's frame must differ"),
+  EXPECT_NE(refusal(handles({{"world", {0}}})).find("invalid parameter 'handles[0].frame' = 'world': a handle's frame must differ"),
             std::string::npos);
 }
 

@@ -172,3 +172,16 @@ TEST(StartupReport, HandleFormulationAndWhy)
             "on 1 frame (5 fixed particles cannot move with the frame; the moving frame needs none fixed; large turns "
             "distort the constraint modes)");
 }
+
+TEST(StartupProgress, ALiveRebuildSaysSo)
+{
+  std::vector<std::string> lines;
+  double now = 0.0;
+  StartupProgress progress([&](const std::string& line) { lines.push_back(line); }, [&] { return now; }, 1.0, 10.0,
+                           "rebuilding");
+  progress.onStage("eigensolver");
+  now = 1.5;
+  progress.poll();
+  ASSERT_EQ(lines.size(), 1u);
+  EXPECT_EQ(lines[0].rfind("rebuilding for 1.5 s: ", 0), 0u) << lines[0];
+}
