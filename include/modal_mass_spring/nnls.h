@@ -36,8 +36,10 @@ private:
   auto gram() const { return gram_.topLeftCorner(size(), size()); }
   // Appends variable j to the factor; false when its column depends on the passive ones.
   bool appendToFactor(Eigen::Index j);
-  // Refactors the passive set after variables left it.
-  void rebuildFactor();
+  // Removes the variable at `position` of the factor's order (a Cholesky downdate).
+  void removeFromFactor(Eigen::Index position);
+  // Removes from the factor the variables that left the passive set.
+  void dropLeftVariables();
   // The least-squares weights of the passive variables (zero elsewhere).
   Eigen::VectorXd passiveSolution() const;
 
