@@ -8,6 +8,7 @@
 
 #include <Eigen/Core>
 
+#include <random>
 #include <string>
 #include <vector>
 
@@ -31,6 +32,8 @@ constexpr int kDefaultPoseGrowth = 8;
 // A training pose shortens no spring below this fraction of its length at the reference (the paper
 // setups' simulations reach 0.74 in 2D and 0.62 in 3D): beyond, the grid has folded.
 constexpr double kShortestTrainingSpring = 0.5;
+// Draws of a training pose before one that folds no spring is shrunk instead.
+constexpr int kPoseAttempts = 100;
 // Springs tried in each greedy selection (all when fewer remain).
 constexpr int kCubatureCandidates = 256;
 
@@ -57,6 +60,13 @@ std::string describeCubature(const Cubature& cubature, int num_springs);
 int effectiveMaxSprings(const CubatureParams& params, int num_springs);
 // The most training poses after growth.
 Eigen::Index effectiveMaxTrainingPoses(const CubatureParams& params);
+
+// `count` poses (columns) of the training's law: N(0, 1) amplitudes times omega_1 / omega_i (An et
+// al.: low modes move most), scaled so that the largest particle displacement is uniform in
+// (0, size], drawn again while x_ref + Phi X shortens a spring below kShortestTrainingSpring of its
+// length at x_ref (after kPoseAttempts draws, the last is halved until it does not).
+Eigen::MatrixXd trainingPoses(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref, int count,
+                              double size, std::mt19937_64& rng);
 
 // Greedy selection with NNLS refits on random poses X around x_ref (each mode's amplitude scaled by
 // omega_1 / omega_i, the largest particle displacement uniform in (0, pose_size], no spring shorter

@@ -17,9 +17,6 @@ namespace modal_mass_spring
 namespace
 {
 
-// Draws of a training pose before one that folds no spring is shrunk instead.
-constexpr int kPoseAttempts = 100;
-
 // Up to 3 entries, never on the heap: per-spring vectors of the training.
 using SmallVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, 3, 1>;
 
@@ -78,12 +75,13 @@ bool folds(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_r
   return false;
 }
 
-// `count` poses (columns): N(0, 1) amplitudes times omega_1 / omega_i (An et al.: low modes move
-// most), scaled so that the largest particle displacement is uniform in (0, size]. A pose that folds
-// a spring is drawn again: modes extrapolated that far are no deformation the grid takes, and such
-// poses, whose force nearly cancels, made a single one dominate the relative error of a whole set.
-Eigen::MatrixXd randomPoses(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref, int count,
-                            double size, std::mt19937_64& rng)
+}  // namespace
+
+// A pose that folds a spring is drawn again: modes extrapolated that far are no deformation the grid
+// takes, and such poses, whose force nearly cancels, made a single one dominate the relative error
+// of a whole set.
+Eigen::MatrixXd trainingPoses(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref, int count,
+                              double size, std::mt19937_64& rng)
 {
   const Eigen::Index r = basis.phi.cols();
   const int dim = grid.dimension();
@@ -120,6 +118,9 @@ Eigen::MatrixXd randomPoses(const Grid& grid, const ModalBasis& basis, const Eig
   }
   return poses;
 }
+
+namespace
+{
 
 // The training problem: targets b and, for any spring, its column of the (never stored) matrix A.
 // Both are stacked pose by pose (r entries each) and every pose is scaled by 1 / |its target|, so
@@ -238,7 +239,7 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
   const auto start = std::chrono::steady_clock::now();
   std::mt19937_64 rng(static_cast<std::uint64_t>(params.seed));
   std::mt19937_64 validation_rng = poseStream(params.seed, 1), heldout_rng = poseStream(params.seed, 2);
-  TrainingSet training(grid, basis, x_ref, randomPoses(grid, basis, x_ref, params.training_poses, params.pose_size, rng));
+  TrainingSet training(grid, basis, x_ref, trainingPoses(grid, basis, x_ref, params.training_poses, params.pose_size, rng));
   const int max_springs = effectiveMaxSprings(params, static_cast<int>(grid.springs().size()));
   const Eigen::Index max_poses = effectiveMaxTrainingPoses(params);
 
@@ -293,7 +294,7 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
     // Otherwise those poses join the training set (twice as many poses, the same springs refitted) and
     // the selection goes on, as long as the training set may grow.
     TrainingSet validation(grid, basis, x_ref,
-                           randomPoses(grid, basis, x_ref, static_cast<int>(training.size()), params.pose_size, validation_rng));
+                           trainingPoses(grid, basis, x_ref, static_cast<int>(training.size()), params.pose_size, validation_rng));
     Eigen::MatrixXd validation_columns;
     validation_error = relativeError(validation, selected, weights_fit.weights(), &validation_columns);
     if (validation_error <= params.tolerance || error > params.tolerance || 2 * training.size() > max_poses)
@@ -328,7 +329,7 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
 
   // Held-out poses, as many as the training's, that neither the selection nor the stop saw.
   const TrainingSet heldout(grid, basis, x_ref,
-                            randomPoses(grid, basis, x_ref, cubature.training_poses, params.pose_size, heldout_rng));
+                            trainingPoses(grid, basis, x_ref, cubature.training_poses, params.pose_size, heldout_rng));
   cubature.heldout_error = relativeError(heldout, cubature.springs, cubature.weights);
   cubature.training_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return cubature;
