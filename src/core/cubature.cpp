@@ -64,14 +64,27 @@ Eigen::VectorXd reducedSpringForce(const Grid& grid, const Eigen::MatrixXd& phi,
   return phi.transpose() * grid.gatherFree(f);
 }
 
-// Whether x_ref + Phi X shortens a spring below kShortestTrainingSpring of its length at x_ref.
-bool folds(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref, const Eigen::VectorXd& modal)
+// Whether x_ref + u (u on the free dofs) shortens a spring below kShortestTrainingSpring of its
+// length at x_ref (`reference`, per spring); x is scratch.
+bool folds(const Grid& grid, const Eigen::VectorXd& x_ref, const Eigen::VectorXd& reference, const Eigen::VectorXd& u,
+           Eigen::VectorXd& x)
 {
-  Eigen::VectorXd x = x_ref;
-  grid.addFree(basis.phi * modal, x);
-  for (const Spring& s : grid.springs())
-    if (restDiff(grid, x, s).norm() < kShortestTrainingSpring * restDiff(grid, x_ref, s).norm())
+  x = x_ref;
+  grid.addFree(u, x);
+  const int dim = grid.dimension();
+  const std::vector<Spring>& springs = grid.springs();
+  for (size_t k = 0; k < springs.size(); ++k)
+  {
+    double squared = 0.0;
+    for (int a = 0; a < dim; ++a)
+    {
+      const double d = x[dim * springs[k].j + a] - x[dim * springs[k].i + a];
+      squared += d * d;
+    }
+    const double shortest = kShortestTrainingSpring * reference[static_cast<Eigen::Index>(k)];
+    if (squared < shortest * shortest)
       return true;
+  }
   return false;
 }
 
@@ -88,9 +101,13 @@ Eigen::MatrixXd trainingPoses(const Grid& grid, const ModalBasis& basis, const E
   double omega_1 = 0.0;
   for (Eigen::Index i = 0; i < r && omega_1 == 0.0; ++i)
     omega_1 = basis.frequencies[i];
+  Eigen::VectorXd reference(static_cast<Eigen::Index>(grid.springs().size()));
+  for (size_t k = 0; k < grid.springs().size(); ++k)
+    reference[static_cast<Eigen::Index>(k)] = restDiff(grid, x_ref, grid.springs()[k]).norm();
   std::normal_distribution<double> normal;
   std::uniform_real_distribution<double> uniform;
   Eigen::MatrixXd poses(r, count);
+  Eigen::VectorXd u, x;
   for (int p = 0; p < count; ++p)
   {
     bool folded = true;
@@ -101,19 +118,22 @@ Eigen::MatrixXd trainingPoses(const Grid& grid, const ModalBasis& basis, const E
         const double omega = basis.frequencies[i];
         poses(i, p) = normal(rng) * (omega > 0.0 && omega_1 > 0.0 ? omega_1 / omega : 1.0);
       }
-      const Eigen::VectorXd u = basis.phi * poses.col(p);
+      u.noalias() = basis.phi * poses.col(p);
       double largest = 0.0;
       for (Eigen::Index k = 0; k + dim <= u.size(); k += dim)
         largest = std::max(largest, u.segment(k, dim).norm());
       const double magnitude = size * (1.0 - uniform(rng));  // (0, size]
-      poses.col(p) *= largest > 0.0 ? magnitude / largest : 0.0;
-      folded = folds(grid, basis, x_ref, poses.col(p));
+      const double scale = largest > 0.0 ? magnitude / largest : 0.0;
+      poses.col(p) *= scale;
+      u *= scale;
+      folded = folds(grid, x_ref, reference, u, x);
     }
     // Where nearly every direction folds (a pose size far beyond the grid), the last one is shrunk.
     for (int halving = 0; halving < 60 && folded; ++halving)
     {
       poses.col(p) *= 0.5;
-      folded = folds(grid, basis, x_ref, poses.col(p));
+      u *= 0.5;
+      folded = folds(grid, x_ref, reference, u, x);
     }
   }
   return poses;
