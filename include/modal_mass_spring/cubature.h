@@ -17,12 +17,12 @@ namespace modal_mass_spring
 
 struct CubatureParams
 {
-  double tolerance = 0.02;  // relative RMS force error over the training poses to reach, in (0, 1)
-  int max_springs = 0;      // the most springs T may hold; 0: min(number of springs, kDefaultMaxSprings)
-  int training_poses = 100;
-  int max_training_poses = 0;  // the training set may double up to this; 0: kDefaultPoseGrowth training_poses
-  double pose_size = 0.4;   // m: the largest particle displacement of the largest training pose
-  int seed = 1;             // of the poses and the candidate sets: training is reproducible
+  double tolerance = 0.02;      // relative RMS force error to reach on the training and validation poses, in (0, 1)
+  int max_springs = 0;          // the most springs T may hold; 0: min(number of springs, kDefaultMaxSprings)
+  int training_poses = 100;     // to start from
+  int max_training_poses = 0;   // the training set may double up to this; 0: kDefaultPoseGrowth training_poses
+  double pose_size = 0.4;       // m: the largest particle displacement of the largest training pose
+  int seed = 1;                 // of the poses and the candidate sets: training is reproducible
 };
 
 // The cap of max_springs = 0: keeps the training's dense Gram matrix and the step's cost bounded.

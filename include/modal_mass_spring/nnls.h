@@ -17,7 +17,7 @@ struct NnlsResult
 // Lawson and Hanson's active-set method on the normal equations (A^T A and A^T b), for a problem
 // that grows a variable (a column of A) at a time, as the cubature's greedy selection does: the
 // weights and the Cholesky factor of the passive variables' Gram matrix are kept between solves, so
-// a variable entering costs O(k^2), not a new factorisation. Eigen 3.4 has no NNLS solver (its
+// a variable entering or leaving costs O(k^2), not a new factorisation. Eigen 3.4 has no NNLS solver (its
 // NNLS module is unsupported and unreleased), hence this small one.
 class NnlsNormal
 {

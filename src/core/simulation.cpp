@@ -120,7 +120,7 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
     rejectParameter("hht_alpha", p.hht_alpha, "must be in [-1/3, 0] (0: Newmark average acceleration)");
   if (!std::isfinite(p.cubature_tolerance) || p.cubature_tolerance <= 0.0 || p.cubature_tolerance >= 1.0)
     rejectParameter("cubature_tolerance", p.cubature_tolerance,
-                    "must be in (0, 1) (the relative force error over the training poses)");
+                    "must be in (0, 1) (the relative force error on the training and validation poses)");
   const long long springs = countSprings(grid);
   if (p.cubature_max_springs < 0 || p.cubature_max_springs > springs)
     rejectParameter("cubature_max_springs", p.cubature_max_springs,
