@@ -17,7 +17,7 @@ namespace modal_mass_spring
 
 struct CubatureParams
 {
-  double tolerance = 0.02;      // relative RMS force error to reach on the training and validation poses, in (0, 1)
+  double tolerance = 0.01;      // relative RMS force error to reach on the training and validation poses, in (0, 1)
   int max_springs = 0;          // the most springs T may hold; 0: min(number of springs, kDefaultMaxSprings)
   int training_poses = 100;     // to start from
   int max_training_poses = 0;   // the training set may double up to this; 0: kDefaultPoseGrowth training_poses

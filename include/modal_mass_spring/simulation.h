@@ -49,7 +49,7 @@ struct SimulationParams
   // most springs (0: min(number of springs, 1000)); the random poses, and the most they may grow to
   // (0: 8 times as many); the largest particle displacement of a pose (m); the seed of the poses and
   // candidate sets.
-  double cubature_tolerance = 0.02;
+  double cubature_tolerance = 0.01;
   int cubature_max_springs = 0;
   int cubature_training_poses = 100;
   int cubature_max_training_poses = 0;

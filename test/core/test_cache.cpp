@@ -224,7 +224,7 @@ TEST_F(CacheTest, AChangedParameterMissesTheOldEntryAndAFileOfOtherParametersIsR
 
   // A cubature parameter changes the cubature's entry, not the basis'.
   SimulationParams tighter = sheetParams();
-  tighter.cubature_tolerance = 0.01;
+  tighter.cubature_tolerance = 0.5 * tighter.cubature_tolerance;
   const auto retrained = build(sheet(), tighter, options());
   EXPECT_TRUE(retrained->cacheReport().basis_loaded);
   EXPECT_FALSE(retrained->cacheReport().cubature_loaded);

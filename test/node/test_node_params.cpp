@@ -292,7 +292,7 @@ TEST(NodeParams, UnknownKeysAreReportedAndKnownOnesAreNot)
                            {"integrator", std::string("explicit")}, {"initial_state", std::string("initial")},
                            {"newton_max_iterations", 50}, {"memory_limit_gb", 12.0},
                            {"basis", std::string("linear_modes")}, {"num_derivative_modes", 0},
-                           {"cubature_tolerance", 0.02}, {"cubature_max_springs", 0}, {"cubature_training_poses", 100},
+                           {"cubature_tolerance", 0.01}, {"cubature_max_springs", 0}, {"cubature_training_poses", 100},
                            {"cubature_max_training_poses", 0}, {"cubature_pose_size", 0.4}, {"cubature_seed", 1}, {"real_time_factor", 1.0},
                            {"publish_rate", 30.0}, {"fixed_frame", std::string("world")},
                            {"grid_frame", std::string("grid")}, {"tf_particles", std::vector<int>{20, 24}},
