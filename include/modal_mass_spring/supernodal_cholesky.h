@@ -12,14 +12,14 @@ namespace modal_mass_spring
 // Sparse Cholesky factorisation P (A - sigma I) P^T = L L^T of a symmetric positive definite A - sigma I
 // (P an AMD ordering), by supernodes: runs of columns of L with the same rows below them, each kept
 // as one dense block, factorised and updated with dense matrix products. Written here because Eigen's
-// sparse Cholesky is simplicial (one column at a time: 2-3x slower on a 100 x 100 grid) and
+// sparse Cholesky is simplicial (one column at a time: 1.8x slower on a 100 x 100 grid) and
 // SuiteSparse's supernodal CHOLMOD needs an optimised BLAS to gain, which Debian does not install by
 // default. The solves, memory-bound, read each supernode's row list once and its entries in order.
 class SupernodalCholesky
 {
 public:
-  // a: both triangles stored. Check info(): Eigen::NumericalIssue when A - sigma I is not positive
-  // definite.
+  // a: symmetric; its lower triangle is read. Check info(): Eigen::NumericalIssue when A - sigma I is
+  // not positive definite (or not finite).
   explicit SupernodalCholesky(const Eigen::SparseMatrix<double>& a, double sigma = 0.0);
 
   Eigen::ComputationInfo info() const { return info_; }
@@ -58,8 +58,8 @@ private:
 };
 
 // Asks the kernel to back [data, data + bytes) with 2 MB pages where it can: a large buffer written
-// once (the factor, the Lanczos vectors) otherwise takes a page fault every 4 kB, about a tenth of
-// the modal basis's time on a 100 x 100 grid. A hint only; nothing changes where it is refused.
+// once (the factor, the Lanczos vectors) otherwise takes a page fault every 4 kB (3-4% of a fresh
+// process's modal basis on a 100 x 100 grid). A hint only; nothing changes where it is refused.
 void adviseHugePages(void* data, std::size_t bytes);
 
 }  // namespace modal_mass_spring

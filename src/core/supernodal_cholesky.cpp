@@ -8,6 +8,7 @@
 #include <sys/mman.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 
 namespace modal_mass_spring
@@ -24,8 +25,10 @@ SupernodalCholesky::SupernodalCholesky(const Eigen::SparseMatrix<double>& a, dou
 {
   Eigen::AMDOrdering<int>()(a, p_inverse_);
   p_ = p_inverse_.inverse();
+  // Both triangles from the lower one: the analysis reads the entries above the diagonal, the
+  // factorisation those below, and they must agree.
   Eigen::SparseMatrix<double> twisted;
-  twisted = a.twistedBy(p_);
+  twisted = a.selfadjointView<Eigen::Lower>().twistedBy(p_);
   const Eigen::SparseMatrix<double> ap = twisted.transpose();  // a transpose sorts each column's rows
   analyse(ap);
   factorise(ap, sigma);
@@ -123,10 +126,13 @@ void SupernodalCholesky::factorise(const Eigen::SparseMatrix<double>& ap, double
   // where in its row list that supernode's rows start.
   std::vector<int> head(count, -1), next(count, -1), next_row(count, 0);
   std::vector<int> local(n_, 0);  // a row's position in the supernode being factorised
-  int tallest = 0;
+  int tallest = 0, widest = 0;
   for (const Supernode& s : supernodes_)
+  {
     tallest = std::max(tallest, s.height);
-  RowMajorMatrix update(tallest, tallest);
+    widest = std::max(widest, s.width);
+  }
+  RowMajorMatrix update(tallest, widest);  // an update's columns are some of one supernode's
   tallest_ = tallest;
   inverse_diagonal_.resize(n_);
   auto wait = [&](int k, int position) {
@@ -185,7 +191,14 @@ void SupernodalCholesky::factorise(const Eigen::SparseMatrix<double>& ap, double
       return;
     }
     for (int c = 0; c < s.width; ++c)
+    {
+      if (!std::isfinite(diagonal(c, c)))  // Eigen's LLT refuses non-positive pivots, not NaN ones
+      {
+        info_ = Eigen::NumericalIssue;
+        return;
+      }
       inverse_diagonal_[s.first + c] = 1.0 / diagonal(c, c);
+    }
     if (s.height > s.width)
     {
       diagonal.triangularView<Eigen::Lower>().adjoint().solveInPlace<Eigen::OnTheRight>(

@@ -5,6 +5,8 @@
 #include <Eigen/Eigenvalues>
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -146,8 +148,45 @@ TEST(SupernodalCholesky, HandlesDenseRowsDiagonalAndTinyMatrices)
   EXPECT_EQ(SupernodalCholesky(full).supernodes(), 1);
 }
 
-TEST(SupernodalCholesky, RefusesAnIndefiniteMatrix)
+TEST(SupernodalCholesky, SolvesWideSupernodesWithRowsBelowThem)
+{
+  // A chain of dense 10 x 10 blocks, each coupled densely to the next: supernodes ten and more
+  // columns wide with rows below them (the Eigen products of the solves and of the updates).
+  const int blocks = 6, size = 10, n = blocks * size;
+  std::vector<Eigen::Triplet<double>> lower;
+  for (int b = 0; b < blocks; ++b)
+    for (int i = 0; i < size; ++i)
+    {
+      const int row = b * size + i;
+      for (int j = 0; j < i; ++j)
+        lower.emplace_back(row, b * size + j, 0.3 / (1.0 + i + j));
+      if (b > 0)
+        for (int j = 0; j < size; ++j)
+          lower.emplace_back(row, (b - 1) * size + j, 0.2 / (2.0 + i + j));
+      lower.emplace_back(row, row, 4.0 + 0.1 * i);
+    }
+  const SparseMatrix a = symmetric(n, lower);
+  EXPECT_LT(solveError(a), 1e-13);
+  EXPECT_LE(SupernodalCholesky(a).supernodes(), 2 * blocks);  // wide, not column by column
+}
+
+TEST(SupernodalCholesky, ReadsTheLowerTriangle)
+{
+  // The same matrix given by its lower triangle alone solves the same.
+  const SparseMatrix a = gridMatrix(7, 6, 2, 5);
+  const SparseMatrix lower = a.triangularView<Eigen::Lower>();
+  Eigen::VectorXd x = Eigen::VectorXd::LinSpaced(a.rows(), -1.0, 2.0), y = x;
+  SupernodalCholesky(a).solveInPlace(x);
+  SupernodalCholesky(lower).solveInPlace(y);
+  EXPECT_LT((x - y).norm(), 1e-14 * x.norm());
+}
+
+TEST(SupernodalCholesky, RefusesAnIndefiniteOrNonFiniteMatrix)
 {
   std::vector<Eigen::Triplet<double>> lower = {{0, 0, 1.0}, {1, 0, 2.0}, {1, 1, 1.0}, {2, 2, 3.0}};
   EXPECT_EQ(SupernodalCholesky(symmetric(3, lower)).info(), Eigen::NumericalIssue);
+  lower = {{0, 0, 1.0}, {1, 0, 0.5}, {1, 1, std::nan("")}, {2, 2, 3.0}};
+  EXPECT_EQ(SupernodalCholesky(symmetric(3, lower)).info(), Eigen::NumericalIssue);
+  lower = {{0, 0, 1.0}, {1, 1, std::numeric_limits<double>::infinity()}};
+  EXPECT_EQ(SupernodalCholesky(symmetric(2, lower)).info(), Eigen::NumericalIssue);
 }
