@@ -5,6 +5,7 @@
 
 #include <Eigen/Core>
 
+#include <algorithm>
 #include <functional>
 #include <string>
 
@@ -31,6 +32,10 @@ struct ModalBasis
 // Told the name of each stage of a long computation as it starts ("factorisation", "eigensolver"),
 // so a caller can say what a slow start-up is doing.
 using StageFn = std::function<void(const std::string& stage)>;
+
+// The most Lanczos vectors (of the free dofs' length) computeModalBasis holds for r modes; for memory
+// estimates.
+inline int maxLanczosVectors(int r) { return std::max(4 * r, r + 80) + 1; }
 
 // K: free-dof stiffness (symmetric, positive semi-definite); mass: the diagonal of M over the same
 // dofs. Throws std::invalid_argument for r outside [1, size] and std::runtime_error when the

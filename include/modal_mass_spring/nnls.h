@@ -17,7 +17,7 @@ struct NnlsResult
 // Lawson and Hanson's active-set method on the normal equations (A^T A and A^T b), for a problem
 // that grows a variable (a column of A) at a time, as the cubature's greedy selection does: the
 // weights and the Cholesky factor of the passive variables' Gram matrix are kept between solves, so
-// a variable entering costs O(k^2), not a new factorisation. Eigen 3.4 has no NNLS solver (its
+// a variable entering or leaving costs O(k^2), not a new factorisation. Eigen 3.4 has no NNLS solver (its
 // NNLS module is unsupported and unreleased), hence this small one.
 class NnlsNormal
 {
@@ -36,8 +36,10 @@ private:
   auto gram() const { return gram_.topLeftCorner(size(), size()); }
   // Appends variable j to the factor; false when its column depends on the passive ones.
   bool appendToFactor(Eigen::Index j);
-  // Refactors the passive set after variables left it.
-  void rebuildFactor();
+  // Removes the variable at `position` of the factor's order (a Cholesky downdate).
+  void removeFromFactor(Eigen::Index position);
+  // Removes from the factor the variables that left the passive set.
+  void dropLeftVariables();
   // The least-squares weights of the passive variables (zero elsewhere).
   Eigen::VectorXd passiveSolution() const;
 

@@ -46,11 +46,13 @@ struct SimulationParams
   BasisKind basis = BasisKind::LinearModes;
   int num_derivative_modes = 0;
   // `cubature`'s training (see CubatureParams): the relative force error to reach, in (0, 1); the
-  // most springs (0: min(number of springs, 1000)); the random poses; the largest particle
-  // displacement of a pose (m); the seed of the poses and candidate sets.
-  double cubature_tolerance = 0.02;
+  // most springs (0: min(number of springs, 1000)); the random poses, and the most they may grow to
+  // (0: 8 times as many); the largest particle displacement of a pose (m); the seed of the poses and
+  // candidate sets.
+  double cubature_tolerance = 0.01;
   int cubature_max_springs = 0;
   int cubature_training_poses = 100;
+  int cubature_max_training_poses = 0;
   double cubature_pose_size = 0.4;
   int cubature_seed = 1;
   // How the modal methods follow moving handles. constraint_modes: Craig-Bampton (see

@@ -332,7 +332,7 @@ std::string cubatureKey(const GridParams& g, const SimulationParams& p)
   key << basisKey(g, p);
   keyLine(key, "cubature_tolerance", p.cubature_tolerance);
   key << "cubature_max_springs=" << p.cubature_max_springs << "\ncubature_training_poses=" << p.cubature_training_poses
-      << '\n';
+      << "\ncubature_max_training_poses=" << p.cubature_max_training_poses << '\n';
   keyLine(key, "cubature_pose_size", p.cubature_pose_size);
   key << "cubature_seed=" << p.cubature_seed << '\n';
   return key.str();
@@ -438,6 +438,7 @@ std::optional<Cubature> loadCubature(const std::string& file, const std::string&
   const Eigen::VectorXd springs = r.vector();
   c.weights = r.vector();
   c.training_error = r.get<double>();
+  c.validation_error = r.get<double>();
   c.heldout_error = r.get<double>();
   c.training_seconds = r.get<double>();
   c.training_poses = r.get<std::int32_t>();
@@ -470,6 +471,7 @@ bool storeCubature(const std::string& file, const std::string& key, const Cubatu
   w.put(springs);
   w.put(c.weights);
   w.put(c.training_error);
+  w.put(c.validation_error);
   w.put(c.heldout_error);
   w.put(c.training_seconds);
   w.put<std::int32_t>(c.training_poses);

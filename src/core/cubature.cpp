@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdint>
 #include <cstdio>
 #include <cmath>
 #include <random>
@@ -63,34 +64,83 @@ Eigen::VectorXd reducedSpringForce(const Grid& grid, const Eigen::MatrixXd& phi,
   return phi.transpose() * grid.gatherFree(f);
 }
 
-// `count` poses (columns): N(0, 1) amplitudes times omega_1 / omega_i (An et al.: low modes move
-// most), scaled so that the largest particle displacement is uniform in (0, size].
-Eigen::MatrixXd randomPoses(const Grid& grid, const ModalBasis& basis, int count, double size, std::mt19937_64& rng)
+// Whether x_ref + u (u on the free dofs) shortens a spring below kShortestTrainingSpring of its
+// length at x_ref (`reference`, per spring); x is scratch.
+bool folds(const Grid& grid, const Eigen::VectorXd& x_ref, const Eigen::VectorXd& reference, const Eigen::VectorXd& u,
+           Eigen::VectorXd& x)
+{
+  x = x_ref;
+  grid.addFree(u, x);
+  const int dim = grid.dimension();
+  const std::vector<Spring>& springs = grid.springs();
+  for (size_t k = 0; k < springs.size(); ++k)
+  {
+    double squared = 0.0;
+    for (int a = 0; a < dim; ++a)
+    {
+      const double d = x[dim * springs[k].j + a] - x[dim * springs[k].i + a];
+      squared += d * d;
+    }
+    const double shortest = kShortestTrainingSpring * reference[static_cast<Eigen::Index>(k)];
+    if (squared < shortest * shortest)
+      return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+// A pose that folds a spring is drawn again: modes extrapolated that far are no deformation the grid
+// takes, and such poses, whose force nearly cancels, made a single one dominate the relative error
+// of a whole set.
+Eigen::MatrixXd trainingPoses(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref, int count,
+                              double size, std::mt19937_64& rng)
 {
   const Eigen::Index r = basis.phi.cols();
   const int dim = grid.dimension();
   double omega_1 = 0.0;
   for (Eigen::Index i = 0; i < r && omega_1 == 0.0; ++i)
     omega_1 = basis.frequencies[i];
+  Eigen::VectorXd reference(static_cast<Eigen::Index>(grid.springs().size()));
+  for (size_t k = 0; k < grid.springs().size(); ++k)
+    reference[static_cast<Eigen::Index>(k)] = restDiff(grid, x_ref, grid.springs()[k]).norm();
   std::normal_distribution<double> normal;
   std::uniform_real_distribution<double> uniform;
   Eigen::MatrixXd poses(r, count);
+  Eigen::VectorXd u, x;
   for (int p = 0; p < count; ++p)
   {
-    for (Eigen::Index i = 0; i < r; ++i)
+    bool folded = true;
+    for (int attempt = 0; attempt < kPoseAttempts && folded; ++attempt)
     {
-      const double omega = basis.frequencies[i];
-      poses(i, p) = normal(rng) * (omega > 0.0 && omega_1 > 0.0 ? omega_1 / omega : 1.0);
+      for (Eigen::Index i = 0; i < r; ++i)
+      {
+        const double omega = basis.frequencies[i];
+        poses(i, p) = normal(rng) * (omega > 0.0 && omega_1 > 0.0 ? omega_1 / omega : 1.0);
+      }
+      u.noalias() = basis.phi * poses.col(p);
+      double largest = 0.0;
+      for (Eigen::Index k = 0; k + dim <= u.size(); k += dim)
+        largest = std::max(largest, u.segment(k, dim).norm());
+      const double magnitude = size * (1.0 - uniform(rng));  // (0, size]
+      const double scale = largest > 0.0 ? magnitude / largest : 0.0;
+      poses.col(p) *= scale;
+      u *= scale;
+      folded = folds(grid, x_ref, reference, u, x);
     }
-    const Eigen::VectorXd u = basis.phi * poses.col(p);
-    double largest = 0.0;
-    for (Eigen::Index k = 0; k + dim <= u.size(); k += dim)
-      largest = std::max(largest, u.segment(k, dim).norm());
-    const double magnitude = size * (1.0 - uniform(rng));  // (0, size]
-    poses.col(p) *= largest > 0.0 ? magnitude / largest : 0.0;
+    // Where nearly every direction folds (a pose size far beyond the grid), the last one is shrunk.
+    for (int halving = 0; halving < 60 && folded; ++halving)
+    {
+      poses.col(p) *= 0.5;
+      u *= 0.5;
+      folded = folds(grid, x_ref, reference, u, x);
+    }
   }
   return poses;
 }
+
+namespace
+{
 
 // The training problem: targets b and, for any spring, its column of the (never stored) matrix A.
 // Both are stacked pose by pose (r entries each) and every pose is scaled by 1 / |its target|, so
@@ -98,35 +148,45 @@ Eigen::MatrixXd randomPoses(const Grid& grid, const ModalBasis& basis, int count
 class TrainingSet
 {
 public:
-  TrainingSet(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref, Eigen::MatrixXd poses)
-    : grid_(grid), phi_(basis.phi), phi_t_(basis.phi.transpose()), x_ref_(x_ref), poses_(std::move(poses))
+  TrainingSet(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref, const Eigen::MatrixXd& poses)
+    : grid_(grid), phi_(basis.phi), phi_t_(basis.phi.transpose()), x_ref_(x_ref),
+      base_(reducedSpringForce(grid, phi_, x_ref, Eigen::VectorXd::Zero(phi_.cols())))
   {
-    const Eigen::Index r = phi_.cols(), count = poses_.cols();
-    const Eigen::VectorXd base = reducedSpringForce(grid, phi_, x_ref, Eigen::VectorXd::Zero(r));
-    scale_.resize(count);
-    b_.resize(r * count);
-    for (Eigen::Index p = 0; p < count; ++p)
+    append(poses);
+  }
+
+  // Adds poses after the current ones (their rows follow the current rows of b and of every column).
+  void append(const Eigen::MatrixXd& poses)
+  {
+    const Eigen::Index r = phi_.cols(), first = size(), count = poses.cols();
+    poses_.conservativeResize(r, first + count);
+    poses_.rightCols(count) = poses;
+    scale_.conservativeResize(first + count);
+    b_.conservativeResize(r * (first + count));
+    for (Eigen::Index p = first; p < first + count; ++p)
     {
-      const Eigen::VectorXd target = reducedSpringForce(grid, phi_, x_ref, poses_.col(p)) - base;
+      const Eigen::VectorXd target = reducedSpringForce(grid_, phi_, x_ref_, poses_.col(p)) - base_;
       const double norm = target.norm();
       scale_[p] = norm > 0.0 ? 1.0 / norm : 0.0;  // a pose that moves no spring carries no information
       b_.segment(p * r, r) = scale_[p] * target;
     }
   }
 
+  Eigen::Index size() const { return poses_.cols(); }
+  const Eigen::MatrixXd& poses() const { return poses_; }
   const Eigen::VectorXd& target() const { return b_; }
 
-  // (g_s(X_p) - g_s(0)) scaled, for every pose p.
-  Eigen::VectorXd column(int spring) const
+  // (g_s(X_p) - g_s(0)) scaled, for every pose p from `first` on.
+  Eigen::VectorXd column(int spring, Eigen::Index first = 0) const
   {
     const Spring& s = grid_.springs()[spring];
     const Eigen::MatrixXd rows = springRows(grid_, phi_t_, s);
     const SmallVector d0 = restDiff(grid_, x_ref_, s);
     const SmallVector f0 = springForce(s, d0);
-    const Eigen::MatrixXd d = (rows * poses_).colwise() + Eigen::VectorXd(d0);
+    const Eigen::MatrixXd d = (rows * poses_.rightCols(size() - first)).colwise() + Eigen::VectorXd(d0);
     Eigen::MatrixXd f(d.rows(), d.cols());
     for (Eigen::Index p = 0; p < d.cols(); ++p)
-      f.col(p) = scale_[p] * (springForce(s, d.col(p)) - f0);
+      f.col(p) = scale_[first + p] * (springForce(s, d.col(p)) - f0);
     Eigen::MatrixXd g = -rows.transpose() * f;  // r x poses
     return Eigen::Map<const Eigen::VectorXd>(g.data(), g.size());
   }
@@ -136,9 +196,37 @@ private:
   const Eigen::MatrixXd& phi_;
   const Eigen::MatrixXd phi_t_;
   const Eigen::VectorXd& x_ref_;
+  const Eigen::VectorXd base_;
   Eigen::MatrixXd poses_;
   Eigen::VectorXd scale_, b_;
 };
+
+// Each purpose draws from its own stream of the seed: growing the training set never changes the
+// held-out poses.
+std::mt19937_64 poseStream(int seed, int purpose)
+{
+  std::seed_seq sequence{static_cast<std::uint32_t>(seed), static_cast<std::uint32_t>(purpose)};
+  return std::mt19937_64(sequence);
+}
+
+// The relative error of weights w on springs' columns of `set` (its rows from pose `first` on).
+double relativeError(const TrainingSet& set, const std::vector<int>& springs, const Eigen::VectorXd& w,
+                     Eigen::MatrixXd* columns = nullptr)
+{
+  const Eigen::VectorXd& b = set.target();
+  Eigen::VectorXd fit = Eigen::VectorXd::Zero(b.size());
+  if (columns)
+    columns->resize(b.size(), static_cast<Eigen::Index>(springs.size()));
+  for (size_t k = 0; k < springs.size(); ++k)
+  {
+    const Eigen::VectorXd column = set.column(springs[k]);
+    fit += w[static_cast<Eigen::Index>(k)] * column;
+    if (columns)
+      columns->col(static_cast<Eigen::Index>(k)) = column;
+  }
+  const double norm = b.norm();
+  return norm > 0.0 ? (fit - b).norm() / norm : 0.0;
+}
 
 }  // namespace
 
@@ -146,10 +234,17 @@ std::string describeCubature(const Cubature& c, int num_springs)
 {
   char text[256];
   std::snprintf(text, sizeof text,
-                "cubature: %zu of %d springs, training error %.3g%% on %d poses, held-out %.3g%%, trained in %.3g s",
-                c.springs.size(), num_springs, 100.0 * c.training_error, c.training_poses, 100.0 * c.heldout_error,
-                c.training_seconds);
+                "cubature: %zu of %d springs, training error %.3g%% on %d poses, validation %.3g%%, held-out %.3g%%, "
+                "trained in %.3g s",
+                c.springs.size(), num_springs, 100.0 * c.training_error, c.training_poses, 100.0 * c.validation_error,
+                100.0 * c.heldout_error, c.training_seconds);
   return text;
+}
+
+Eigen::Index effectiveMaxTrainingPoses(const CubatureParams& params)
+{
+  return params.max_training_poses > 0 ? params.max_training_poses
+                                       : static_cast<Eigen::Index>(kDefaultPoseGrowth) * params.training_poses;
 }
 
 int effectiveMaxSprings(const CubatureParams& params, int num_springs)
@@ -163,60 +258,85 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
 {
   const auto start = std::chrono::steady_clock::now();
   std::mt19937_64 rng(static_cast<std::uint64_t>(params.seed));
-  Eigen::MatrixXd training_poses = randomPoses(grid, basis, params.training_poses, params.pose_size, rng);
-  Eigen::MatrixXd heldout_poses = randomPoses(grid, basis, params.training_poses, params.pose_size, rng);
-  const TrainingSet training(grid, basis, x_ref, std::move(training_poses));
-  const Eigen::VectorXd& b = training.target();
-  const double b_norm = b.norm();
+  std::mt19937_64 validation_rng = poseStream(params.seed, 1), heldout_rng = poseStream(params.seed, 2);
+  TrainingSet training(grid, basis, x_ref, trainingPoses(grid, basis, x_ref, params.training_poses, params.pose_size, rng));
   const int max_springs = effectiveMaxSprings(params, static_cast<int>(grid.springs().size()));
+  const Eigen::Index max_poses = effectiveMaxTrainingPoses(params);
 
   std::vector<int> pool(grid.springs().size()), selected;
   for (size_t k = 0; k < pool.size(); ++k)
     pool[k] = static_cast<int>(k);
-  Eigen::MatrixXd a(b.size(), std::min(max_springs, 64));  // the selected springs' columns
+  Eigen::MatrixXd a(training.target().size(), std::min(max_springs, 64));  // the selected springs' columns
   NnlsNormal weights_fit;
-  Eigen::VectorXd residual = b;
-  double error = b_norm > 0.0 ? 1.0 : 0.0;
-  while (error > params.tolerance && static_cast<int>(selected.size()) < max_springs && !pool.empty())
+  Eigen::VectorXd residual = training.target();
+  double error = training.target().norm() > 0.0 ? 1.0 : 0.0, validation_error = 0.0;
+  while (true)
   {
-    // The candidate, among a random subset, whose column points most along the residual. (Adding
-    // batches of the best candidates per refit was tried: it needed far more springs for the same error.)
-    const size_t candidates = std::min<size_t>(kCubatureCandidates, pool.size());
-    size_t best = candidates;
-    double best_score = 0.0;
-    Eigen::VectorXd best_column;
-    for (size_t c = 0; c < candidates; ++c)
+    const Eigen::VectorXd& b = training.target();
+    const double b_norm = b.norm();
+    while (error > params.tolerance && static_cast<int>(selected.size()) < max_springs && !pool.empty())
     {
-      std::swap(pool[c], pool[c + std::uniform_int_distribution<size_t>(0, pool.size() - 1 - c)(rng)]);
-      Eigen::VectorXd column = training.column(pool[c]);
-      const double norm = column.norm();
-      const double score = norm > 0.0 ? column.dot(residual) / norm : 0.0;
-      if (score > best_score)
+      // The candidate, among a random subset, whose column points most along the residual. (Adding
+      // batches of the best candidates per refit was tried: it needed far more springs for the same error.)
+      const size_t candidates = std::min<size_t>(kCubatureCandidates, pool.size());
+      size_t best = candidates;
+      double best_score = 0.0;
+      Eigen::VectorXd best_column;
+      for (size_t c = 0; c < candidates; ++c)
       {
-        best = c;
-        best_score = score;
-        best_column = std::move(column);
+        std::swap(pool[c], pool[c + std::uniform_int_distribution<size_t>(0, pool.size() - 1 - c)(rng)]);
+        Eigen::VectorXd column = training.column(pool[c]);
+        const double norm = column.norm();
+        const double score = norm > 0.0 ? column.dot(residual) / norm : 0.0;
+        if (score > best_score)
+        {
+          best = c;
+          best_score = score;
+          best_column = std::move(column);
+        }
       }
+      if (best == candidates)
+        break;  // no spring reduces the residual
+      const Eigen::Index k = static_cast<Eigen::Index>(selected.size());
+      selected.push_back(pool[best]);
+      pool[best] = pool.back();
+      pool.pop_back();
+      if (k >= a.cols())
+        a.conservativeResize(Eigen::NoChange, std::min<Eigen::Index>(2 * a.cols(), max_springs));
+      a.col(k) = best_column;
+      // The refit: the new column's Gram entries, then NNLS from the previous weights.
+      weights_fit.addVariable(a.leftCols(k + 1).transpose() * best_column, best_column.dot(b));
+      weights_fit.solve();
+      residual = b - a.leftCols(k + 1) * weights_fit.weights();
+      error = residual.norm() / b_norm;
     }
-    if (best == candidates)
-      break;  // no spring reduces the residual
-    const Eigen::Index k = static_cast<Eigen::Index>(selected.size());
-    selected.push_back(pool[best]);
-    pool[best] = pool.back();
-    pool.pop_back();
-    if (k >= a.cols())
-      a.conservativeResize(Eigen::NoChange, std::min<Eigen::Index>(2 * a.cols(), max_springs));
-    a.col(k) = best_column;
-    // The refit: the new column's Gram entries, then NNLS from the previous weights.
-    weights_fit.addVariable(a.leftCols(k + 1).transpose() * best_column, best_column.dot(b));
+    // The fit is judged on fresh poses of the same law: below the tolerance there too, it generalises.
+    // Otherwise those poses join the training set (twice as many poses, the same springs refitted) and
+    // the selection goes on, as long as the training set may grow.
+    TrainingSet validation(grid, basis, x_ref,
+                           trainingPoses(grid, basis, x_ref, static_cast<int>(training.size()), params.pose_size, validation_rng));
+    Eigen::MatrixXd validation_columns;
+    validation_error = relativeError(validation, selected, weights_fit.weights(), &validation_columns);
+    if (validation_error <= params.tolerance || error > params.tolerance || 2 * training.size() > max_poses)
+      break;
+    const Eigen::Index k = static_cast<Eigen::Index>(selected.size()), rows = a.rows();
+    training.append(validation.poses());
+    a.conservativeResize(training.target().size(), Eigen::NoChange);
+    a.bottomLeftCorner(a.rows() - rows, k) = validation_columns;
+    const Eigen::MatrixXd gram = a.leftCols(k).transpose() * a.leftCols(k);
+    const Eigen::VectorXd atb = a.leftCols(k).transpose() * training.target();
+    weights_fit = NnlsNormal();
+    for (Eigen::Index j = 0; j < k; ++j)
+      weights_fit.addVariable(gram.col(j).head(j + 1), atb[j]);
     weights_fit.solve();
-    residual = b - a.leftCols(k + 1) * weights_fit.weights();
-    error = residual.norm() / b_norm;
+    residual = training.target() - a.leftCols(k) * weights_fit.weights();
+    error = residual.norm() / training.target().norm();
   }
 
   Cubature cubature;
-  cubature.training_poses = params.training_poses;
+  cubature.training_poses = static_cast<int>(training.size());
   cubature.training_error = error;
+  cubature.validation_error = validation_error;
   std::vector<double> weights;
   const Eigen::VectorXd& w = weights_fit.weights();
   for (size_t k = 0; k < selected.size(); ++k)
@@ -227,12 +347,10 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
     }
   cubature.weights = Eigen::Map<const Eigen::VectorXd>(weights.data(), static_cast<Eigen::Index>(weights.size()));
 
-  const TrainingSet heldout(grid, basis, x_ref, std::move(heldout_poses));
-  Eigen::VectorXd fit = Eigen::VectorXd::Zero(heldout.target().size());
-  for (size_t k = 0; k < cubature.springs.size(); ++k)
-    fit += cubature.weights[static_cast<Eigen::Index>(k)] * heldout.column(cubature.springs[k]);
-  const double heldout_norm = heldout.target().norm();
-  cubature.heldout_error = heldout_norm > 0.0 ? (fit - heldout.target()).norm() / heldout_norm : 0.0;
+  // Held-out poses, as many as the training's, that neither the selection nor the stop saw.
+  const TrainingSet heldout(grid, basis, x_ref,
+                            trainingPoses(grid, basis, x_ref, cubature.training_poses, params.pose_size, heldout_rng));
+  cubature.heldout_error = relativeError(heldout, cubature.springs, cubature.weights);
   cubature.training_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return cubature;
 }

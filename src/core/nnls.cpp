@@ -54,16 +54,33 @@ bool NnlsNormal::appendToFactor(Eigen::Index j)
   return true;
 }
 
-void NnlsNormal::rebuildFactor()
+void NnlsNormal::removeFromFactor(Eigen::Index position)
 {
-  std::vector<Eigen::Index> previous;
-  previous.swap(order_);
-  for (Eigen::Index j : previous)
-    if (passive_[j] && !appendToFactor(j))
+  const Eigen::Index k = static_cast<Eigen::Index>(order_.size());
+  // Without its row, L L^T is the Gram matrix of the others, but rows position..k-2 then hold one
+  // entry right of the diagonal: Givens rotations of neighbouring columns (orthogonal, so L L^T is
+  // unchanged) move it back onto the diagonal, O((k - position)^2) against O(k^3) for a refactor.
+  for (Eigen::Index row = position; row + 1 < k; ++row)
+    factor_.row(row).head(k) = factor_.row(row + 1).head(k);
+  for (Eigen::Index m = position; m + 1 < k; ++m)
+  {
+    const double a = factor_(m, m), b = factor_(m, m + 1);  // b is the removed row's successor's diagonal, > 0
+    const double r = std::hypot(a, b), c = a / r, s = b / r;
+    for (Eigen::Index row = m; row + 1 < k; ++row)
     {
-      passive_[j] = false;
-      w_[j] = 0.0;
+      const double x = factor_(row, m), y = factor_(row, m + 1);
+      factor_(row, m) = c * x + s * y;
+      factor_(row, m + 1) = c * y - s * x;
     }
+  }
+  order_.erase(order_.begin() + position);
+}
+
+void NnlsNormal::dropLeftVariables()
+{
+  for (Eigen::Index position = static_cast<Eigen::Index>(order_.size()) - 1; position >= 0; --position)
+    if (!passive_[order_[position]])
+      removeFromFactor(position);
 }
 
 Eigen::VectorXd NnlsNormal::passiveSolution() const
@@ -139,7 +156,7 @@ NnlsResult NnlsNormal::solve(double tolerance, int max_iterations)
           passive_[k] = false;
           w_[k] = 0.0;
         }
-      rebuildFactor();
+      dropLeftVariables();
     }
     // A variable whose gradient is positive but whose least-squares weight is not (round-off in a
     // nearly dependent column) would enter and leave forever: skip it until another one enters.

@@ -61,6 +61,7 @@ SimulationParams loadSimulationParams(const ParameterSource& s)
   p.cubature_tolerance = s.getDouble("cubature_tolerance").value_or(p.cubature_tolerance);
   p.cubature_max_springs = s.getInt("cubature_max_springs").value_or(p.cubature_max_springs);
   p.cubature_training_poses = s.getInt("cubature_training_poses").value_or(p.cubature_training_poses);
+  p.cubature_max_training_poses = s.getInt("cubature_max_training_poses").value_or(p.cubature_max_training_poses);
   p.cubature_pose_size = s.getDouble("cubature_pose_size").value_or(p.cubature_pose_size);
   p.cubature_seed = s.getInt("cubature_seed").value_or(p.cubature_seed);
   if (const auto name = s.getString("handle_formulation"))

@@ -120,7 +120,7 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
     rejectParameter("hht_alpha", p.hht_alpha, "must be in [-1/3, 0] (0: Newmark average acceleration)");
   if (!std::isfinite(p.cubature_tolerance) || p.cubature_tolerance <= 0.0 || p.cubature_tolerance >= 1.0)
     rejectParameter("cubature_tolerance", p.cubature_tolerance,
-                    "must be in (0, 1) (the relative force error over the training poses)");
+                    "must be in (0, 1) (the relative force error on the training and validation poses)");
   const long long springs = countSprings(grid);
   if (p.cubature_max_springs < 0 || p.cubature_max_springs > springs)
     rejectParameter("cubature_max_springs", p.cubature_max_springs,
@@ -128,6 +128,11 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
                         ")) or in [1, " + std::to_string(springs) + "], the number of springs");
   if (p.cubature_training_poses < 1)
     rejectParameter("cubature_training_poses", p.cubature_training_poses, "must be an integer >= 1");
+  if (p.cubature_max_training_poses != 0 && p.cubature_max_training_poses < p.cubature_training_poses)
+    rejectParameter("cubature_max_training_poses", p.cubature_max_training_poses,
+                    "must be 0 (up to " + std::to_string(kDefaultPoseGrowth) +
+                        " times cubature_training_poses) or an integer >= cubature_training_poses (" +
+                        std::to_string(p.cubature_training_poses) + ")");
   if (!std::isfinite(p.cubature_pose_size) || p.cubature_pose_size <= 0.0)
     rejectParameter("cubature_pose_size", p.cubature_pose_size,
                     "must be a finite number of metres > 0 (the largest particle displacement of a training pose)");
@@ -191,7 +196,7 @@ double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
   bytes += 12.0 * fill * n * std::log2(std::max(n, 2.0));
   // The basis: Phi, the physical model's Phi^T and (K Phi)^T, the Lanczos vectors and the Ritz
   // vectors of deflated passes; a dense eigensolver when r is close to n.
-  bytes += 8.0 * n * (3.0 * r + std::max(2.0 * r + 1.0, r + 20.0) + 2.0 * r);
+  bytes += 8.0 * n * (3.0 * r + std::min(n, static_cast<double>(maxLanczosVectors(p.num_modes))) + 2.0 * r);
   // The physical basis (a copy, or the modes and their derivative directions, three times for the
   // force model), and while it is built the derivatives of every pair with their right-hand sides.
   const double d = p.basis == BasisKind::ModalDerivatives ? p.num_derivative_modes : 0.0;
@@ -205,10 +210,12 @@ double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
   }
   if (r + 1.0 >= n)
     bytes += 3.0 * 8.0 * n * n;
-  // The cubature training: the selected springs' columns (with a copy while they grow), their Gram
-  // matrix and the held-out columns.
+  // The cubature training, with its training set grown to the most: the selected springs' columns
+  // (with a copy while they grow) and those on the last validation set, their Gram matrix and the
+  // NNLS factor.
   const double max_springs = effectiveMaxSprings(cubatureParams(p), static_cast<int>(std::min<long long>(countSprings(g), 1 << 30)));
-  bytes += 8.0 * (3.0 * p.cubature_training_poses * r * max_springs + max_springs * max_springs);
+  const double max_poses = static_cast<double>(effectiveMaxTrainingPoses(cubatureParams(p)));
+  bytes += 8.0 * (3.0 * max_poses * r * max_springs + 4.0 * max_springs * max_springs);
   // The constraint modes Psi (interior dofs x handle dofs), Phi^T M Psi, and a right-hand side.
   long long handle_particles = 0;
   for (const std::vector<int>& handle : g.handles)
@@ -225,6 +232,7 @@ CubatureParams cubatureParams(const SimulationParams& p)
   c.tolerance = p.cubature_tolerance;
   c.max_springs = p.cubature_max_springs;
   c.training_poses = p.cubature_training_poses;
+  c.max_training_poses = p.cubature_max_training_poses;
   c.pose_size = p.cubature_pose_size;
   c.seed = p.cubature_seed;
   return c;

@@ -180,6 +180,8 @@ def cases(configs):
         setting("cubature_max_springs", "100000"),
         setting("cubature_training_poses", "0"),
         setting("cubature_training_poses", "-10"),
+        setting("cubature_max_training_poses", "50"),
+        setting("cubature_max_training_poses", "1.5"),
         setting("cubature_pose_size", "-0.1"),
         setting("cubature_pose_size", ".nan"),
         setting("cubature_seed", "-1"),

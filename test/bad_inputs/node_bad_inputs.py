@@ -75,6 +75,8 @@ CASES = [
     ({"cubature_max_springs": 100000}, [], ["cubature_max_springs"]),
     ({"cubature_training_poses": 0}, [], ["cubature_training_poses"]),
     ({"cubature_training_poses": -10}, [], ["cubature_training_poses"]),
+    ({"cubature_max_training_poses": 50}, [], ["cubature_max_training_poses"]),
+    ({"cubature_max_training_poses": -1}, [], ["cubature_max_training_poses"]),
     ({"cubature_pose_size": -0.1}, [], ["cubature_pose_size"]),
     ({"cubature_pose_size": 0.0}, [], ["cubature_pose_size"]),
     ({"cubature_seed": -1}, [], ["cubature_seed"]),

@@ -224,7 +224,7 @@ TEST_F(CacheTest, AChangedParameterMissesTheOldEntryAndAFileOfOtherParametersIsR
 
   // A cubature parameter changes the cubature's entry, not the basis'.
   SimulationParams tighter = sheetParams();
-  tighter.cubature_tolerance = 0.01;
+  tighter.cubature_tolerance = 0.5 * tighter.cubature_tolerance;
   const auto retrained = build(sheet(), tighter, options());
   EXPECT_TRUE(retrained->cacheReport().basis_loaded);
   EXPECT_FALSE(retrained->cacheReport().cubature_loaded);
@@ -315,4 +315,18 @@ TEST(CacheKey, EveryParameterOfThePrecomputationChangesTheKey)
   s2.cubature_seed = 7;
   EXPECT_EQ(basisKey(g, s2), key);
   EXPECT_NE(cubatureKey(g, s2), cubatureKey(g, s));
+  // Every training parameter changes the cubature's key.
+  const std::vector<std::pair<std::string, std::function<void(SimulationParams&)>>> training = {
+      {"cubature_tolerance", [](SimulationParams& p) { p.cubature_tolerance = 0.05; }},
+      {"cubature_max_springs", [](SimulationParams& p) { p.cubature_max_springs = 10; }},
+      {"cubature_training_poses", [](SimulationParams& p) { p.cubature_training_poses = 50; }},
+      {"cubature_max_training_poses", [](SimulationParams& p) { p.cubature_max_training_poses = 100; }},
+      {"cubature_pose_size", [](SimulationParams& p) { p.cubature_pose_size = 0.2; }},
+      {"cubature_seed", [](SimulationParams& p) { p.cubature_seed = 2; }}};
+  for (const auto& [name, change] : training)
+  {
+    SimulationParams s3 = s;
+    change(s3);
+    EXPECT_NE(cubatureKey(g, s3), cubatureKey(g, s)) << name;
+  }
 }

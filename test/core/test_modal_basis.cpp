@@ -58,6 +58,13 @@ void expectDenseAgreement(const SparseMatrix& k, const Eigen::VectorXd& mass, in
   }
   const Eigen::MatrixXd gram = basis.phi.transpose() * mass.asDiagonal() * basis.phi;
   EXPECT_LT((gram - Eigen::MatrixXd::Identity(r, r)).cwiseAbs().maxCoeff(), 1e-10);
+  // The sign convention: each mode's largest entry is positive.
+  for (int j = 0; j < r; ++j)
+  {
+    Eigen::Index largest = 0;
+    basis.phi.col(j).cwiseAbs().maxCoeff(&largest);
+    EXPECT_GT(basis.phi(largest, j), 0.0) << "mode " << j;
+  }
 }
 
 }  // namespace

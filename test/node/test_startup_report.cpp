@@ -49,13 +49,14 @@ TEST(StartupReport, EveryStageHasItsTime)
   Cubature cubature;
   cubature.springs = {0, 3, 7};
   cubature.training_error = 0.0195;
+  cubature.validation_error = 0.0207;
   cubature.heldout_error = 0.031;
   cubature.training_seconds = 1.25;
   cubature.training_poses = 100;
   EXPECT_EQ(describeStartupTimes(lin, basis, 1.3, {}, &cubature),
             "start-up 1.3 s: stiffness 2.1 ms, factorisation 4.9 ms, eigensolver 28.9 ms, cubature 1.25 s");
   EXPECT_EQ(describeCubature(cubature, 72),
-            "cubature: 3 of 72 springs, training error 1.95% on 100 poses, held-out 3.1%, trained in 1.25 s");
+            "cubature: 3 of 72 springs, training error 1.95% on 100 poses, validation 2.07%, held-out 3.1%, trained in 1.25 s");
   EXPECT_EQ(describeStage("cubature"), "training the cubature's springs and weights (cubature)");
 }
 
