@@ -86,6 +86,8 @@ void validateParameters(const GridParams& grid, const SimulationParams& params);
 // vectors and the force models' copies, and the per-dof vectors. An estimate, within a factor of
 // about 1.5 of what was measured.
 double estimateMemoryBytes(const GridParams& grid, const SimulationParams& params);
+// The part of it the cubature training takes, with its training set grown to the most.
+double cubatureTrainingBytes(const GridParams& grid, const SimulationParams& params);
 
 // What building the linearization point found.
 struct LinearizationInfo

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cmath>
 #include <random>
+#include <stdexcept>
 #include <utility>
 
 namespace modal_mass_spring
@@ -269,6 +270,9 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
   Eigen::MatrixXd a(training.target().size(), std::min(max_springs, 64));  // the selected springs' columns
   NnlsNormal weights_fit;
   Eigen::VectorXd residual = training.target();
+  if (!training.target().allFinite())
+    throw std::runtime_error("cubature: the training poses' forces are not finite (cubature_pose_size " +
+                             std::to_string(params.pose_size) + " m too large for this grid?)");
   double error = training.target().norm() > 0.0 ? 1.0 : 0.0, validation_error = 0.0;
   while (true)
   {

@@ -158,6 +158,20 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
   if (!std::isfinite(p.memory_limit_gb) || p.memory_limit_gb <= 0.0)
     rejectParameter("memory_limit_gb", p.memory_limit_gb, "must be a finite number of GB > 0");
   const double needed_gb = estimateMemoryBytes(grid, p) / 1e9;
+  const double training_gb = cubatureTrainingBytes(grid, p) / 1e9;
+  if (needed_gb > p.memory_limit_gb && training_gb > 0.5 * needed_gb)
+  {
+    std::ostringstream value;
+    value << p.cubature_training_poses << " training poses, up to " << effectiveMaxTrainingPoses(cubatureParams(p))
+          << " grown, num_modes = " << p.num_modes;
+    std::ostringstream allowed;
+    allowed.precision(3);
+    allowed << "the cubature's training would need about " << training_gb << " GB of the " << needed_gb
+            << " GB estimated, above memory_limit_gb = " << p.memory_limit_gb
+            << " GB; use fewer cubature_training_poses or a smaller cubature_max_training_poses or cubature_max_springs, "
+               "or raise memory_limit_gb if the machine has the memory";
+    rejectParameter("cubature_training_poses, cubature_max_training_poses", value.str(), allowed.str());
+  }
   if (needed_gb > p.memory_limit_gb)
   {
     std::ostringstream value;
@@ -177,6 +191,15 @@ HandleFormulation resolveHandleFormulation(const GridParams& grid, const Simulat
                ? HandleFormulation::MovingFrame
                : HandleFormulation::ConstraintModes;
   return params.handle_formulation;
+}
+
+// The selected springs' columns (with a copy while they grow) and those on the last validation set,
+// their Gram matrix and the NNLS factor. Counted whatever the method: ~set_method may train it later.
+double cubatureTrainingBytes(const GridParams& g, const SimulationParams& p)
+{
+  const double max_springs = effectiveMaxSprings(cubatureParams(p), static_cast<int>(std::min<long long>(countSprings(g), 1 << 30)));
+  const double max_poses = static_cast<double>(effectiveMaxTrainingPoses(cubatureParams(p)));
+  return 8.0 * (3.0 * max_poses * p.num_modes * max_springs + 4.0 * max_springs * max_springs);
 }
 
 double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
@@ -210,12 +233,7 @@ double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
   }
   if (r + 1.0 >= n)
     bytes += 3.0 * 8.0 * n * n;
-  // The cubature training, with its training set grown to the most: the selected springs' columns
-  // (with a copy while they grow) and those on the last validation set, their Gram matrix and the
-  // NNLS factor.
-  const double max_springs = effectiveMaxSprings(cubatureParams(p), static_cast<int>(std::min<long long>(countSprings(g), 1 << 30)));
-  const double max_poses = static_cast<double>(effectiveMaxTrainingPoses(cubatureParams(p)));
-  bytes += 8.0 * (3.0 * max_poses * r * max_springs + 4.0 * max_springs * max_springs);
+  bytes += cubatureTrainingBytes(g, p);
   // The constraint modes Psi (interior dofs x handle dofs), Phi^T M Psi, and a right-hand side.
   long long handle_particles = 0;
   for (const std::vector<int>& handle : g.handles)

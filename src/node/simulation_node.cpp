@@ -16,6 +16,7 @@
 #include <cmath>
 #include <cstdio>
 #include <condition_variable>
+#include <stdexcept>
 #include <thread>
 
 namespace modal_mass_spring
@@ -808,7 +809,17 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   const std::string previous = toString(simulation.method());
   const bool was_diverged = simulation.diverged();
   const bool trains = method == Method::Cubature && !simulation.cubature();
-  simulation.setMethod(method);
+  try
+  {
+    simulation.setMethod(method);  // trains before it replaces anything: a failure keeps the run
+  }
+  catch (const std::exception& error)
+  {
+    response.success = false;
+    response.message = "cannot switch to " + request.method + ": " + error.what() + "; still running '" + previous + "'";
+    ROS_ERROR("%s", response.message.c_str());
+    return true;
+  }
   if (trains)
     ROS_INFO("%s", describeCubature(*simulation.cubature(), static_cast<int>(simulation.grid().springs().size())).c_str());
   primary().name = toString(method);

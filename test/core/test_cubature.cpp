@@ -390,6 +390,29 @@ TEST(Cubature, TrainingPosesFoldNoSpringAndStayWithinThePoseSize)
   }
 }
 
+TEST(Cubature, PosesWhoseForcesOverflowAreRefusedNotTrainedToZeroError)
+{
+  // 1e200 m poses: every spring force overflows. The training says so instead of reporting a
+  // cubature of no springs at 0% error, and a method switch to it keeps the run.
+  SimulationParams s = paperParams(Method::Physical, 4);
+  s.cubature_pose_size = 1e200;
+  Simulation sim(paper2D(), s);
+  sim.step(10);
+  const Eigen::VectorXd before = sim.positions();
+  try
+  {
+    sim.setMethod(Method::Cubature);
+    ADD_FAILURE() << "trained on overflowing poses";
+  }
+  catch (const std::runtime_error& error)
+  {
+    EXPECT_TRUE(contains(error.what(), "cubature_pose_size")) << error.what();
+  }
+  EXPECT_EQ(sim.method(), Method::Physical);
+  EXPECT_EQ(sim.positions(), before);
+  EXPECT_FALSE(sim.step().diverged);
+}
+
 TEST(Cubature, TrainingIsReproducibleAndStopsAtMaxSprings)
 {
   SimulationParams s = paperParams(Method::Cubature, 30);
@@ -510,6 +533,10 @@ TEST(Cubature, BadParametersAreNamed)
   EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.cubature_pose_size = -0.1; }), "'cubature_pose_size' = -0.1"));
   EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.cubature_pose_size = INFINITY; }), "'cubature_pose_size'"));
   EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.cubature_seed = -1; }), "'cubature_seed' = -1"));
+  // Training poses that would not fit in memory name the training, not the grid.
+  const std::string poses = refused([](SimulationParams& s) { s.cubature_training_poses = 3000000; });
+  EXPECT_TRUE(contains(poses, "'cubature_training_poses, cubature_max_training_poses' = 3000000 training poses")) << poses;
+  EXPECT_TRUE(contains(poses, "use fewer cubature_training_poses")) << poses;
   EXPECT_EQ(refused([](SimulationParams&) {}), "");
   EXPECT_EQ(parseMethod("cubature"), Method::Cubature);
   EXPECT_EQ(countSprings(g), static_cast<long long>(Grid(g).springs().size()));
