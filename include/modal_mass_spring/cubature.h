@@ -53,8 +53,9 @@ struct Cubature
 };
 
 // "cubature: 174 of 342 springs, training error 1.97% on 400 poses, validation 2.1%, held-out 2.3%,
-// trained in 0.29 s"
-std::string describeCubature(const Cubature& cubature, int num_springs);
+// trained in 0.29 s", and with a tolerance, whether the fit missed it ("; above cubature_tolerance 2%
+// on fresh poses: ...").
+std::string describeCubature(const Cubature& cubature, int num_springs, double tolerance = 0.0);
 
 // The max_springs that applies on a grid with `num_springs` springs.
 int effectiveMaxSprings(const CubatureParams& params, int num_springs);

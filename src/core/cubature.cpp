@@ -231,14 +231,20 @@ double relativeError(const TrainingSet& set, const std::vector<int>& springs, co
 
 }  // namespace
 
-std::string describeCubature(const Cubature& c, int num_springs)
+std::string describeCubature(const Cubature& c, int num_springs, double tolerance)
 {
-  char text[256];
-  std::snprintf(text, sizeof text,
-                "cubature: %zu of %d springs, training error %.3g%% on %d poses, validation %.3g%%, held-out %.3g%%, "
-                "trained in %.3g s",
-                c.springs.size(), num_springs, 100.0 * c.training_error, c.training_poses, 100.0 * c.validation_error,
-                100.0 * c.heldout_error, c.training_seconds);
+  char text[512];
+  int length = std::snprintf(text, sizeof text,
+                             "cubature: %zu of %d springs, training error %.3g%% on %d poses, validation %.3g%%, "
+                             "held-out %.3g%%, trained in %.3g s",
+                             c.springs.size(), num_springs, 100.0 * c.training_error, c.training_poses,
+                             100.0 * c.validation_error, 100.0 * c.heldout_error, c.training_seconds);
+  // The training stops at its caps too; say so rather than let the figures pass for the tolerance.
+  if (tolerance > 0.0 && std::max(c.training_error, c.validation_error) > tolerance && length > 0)
+    std::snprintf(text + length, sizeof text - static_cast<std::size_t>(length),
+                  "; above cubature_tolerance %.3g%%: the training stopped at its caps (cubature_max_springs, "
+                  "cubature_max_training_poses) or found no spring that helps",
+                  100.0 * tolerance);
   return text;
 }
 

@@ -268,7 +268,7 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
   ROS_INFO("%s", describeBasis(sim_params, simulation->derivativeInfo(), simulation->physicalBasis()).c_str());
   ROS_INFO("%s", describeCache(simulation->cacheReport()).c_str());
   if (const Cubature* cubature = simulation->cubature())
-    ROS_INFO("%s", describeCubature(*cubature, static_cast<int>(grid.springs().size())).c_str());
+    ROS_INFO("%s", describeCubature(*cubature, static_cast<int>(grid.springs().size()), sim_params.cubature_tolerance).c_str());
   return simulation;
 }
 
@@ -821,7 +821,9 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
     return true;
   }
   if (trains)
-    ROS_INFO("%s", describeCubature(*simulation.cubature(), static_cast<int>(simulation.grid().springs().size())).c_str());
+    ROS_INFO("%s", describeCubature(*simulation.cubature(), static_cast<int>(simulation.grid().springs().size()),
+                                    simulation.params().cubature_tolerance)
+                       .c_str());
   primary().name = toString(method);
   primary().divergence_message.clear();
   synchronise();  // the shadow full starts again from the state carried over
