@@ -67,6 +67,7 @@ def main():
                        check=True, capture_output=True)
         k = scipy.io.mmread(os.path.join(folder, "K.mtx")).tocsc()
         m = scipy.sparse.diags(np.ravel(scipy.io.mmread(os.path.join(folder, "M.mtx")))).tocsc()
+        print("ours: %s (built %s)" % (args.binary, time.strftime("%Y-%m-%d %H:%M", time.localtime(os.path.getmtime(args.binary)))))
         print("%dD grid %d x %d: %d free dofs, r = %d, tol = %g, %d runs each, alternating"
               % (args.dimension, args.size, args.size, k.shape[0], args.modes, TOLERANCE, args.runs))
         times = {"ours": [], "eigsh": []}
