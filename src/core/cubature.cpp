@@ -267,6 +267,9 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
   std::mt19937_64 rng(static_cast<std::uint64_t>(params.seed));
   std::mt19937_64 validation_rng = poseStream(params.seed, 1), heldout_rng = poseStream(params.seed, 2);
   TrainingSet training(grid, basis, x_ref, trainingPoses(grid, basis, x_ref, params.training_poses, params.pose_size, rng));
+  if (!training.target().allFinite())
+    throw std::runtime_error("cubature: the training poses' forces are not finite (cubature_pose_size " +
+                             std::to_string(params.pose_size) + " m too large for this grid?)");
   const int max_springs = effectiveMaxSprings(params, static_cast<int>(grid.springs().size()));
   const Eigen::Index max_poses = effectiveMaxTrainingPoses(params);
 
@@ -276,9 +279,6 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
   Eigen::MatrixXd a(training.target().size(), std::min(max_springs, 64));  // the selected springs' columns
   NnlsNormal weights_fit;
   Eigen::VectorXd residual = training.target();
-  if (!training.target().allFinite())
-    throw std::runtime_error("cubature: the training poses' forces are not finite (cubature_pose_size " +
-                             std::to_string(params.pose_size) + " m too large for this grid?)");
   double error = training.target().norm() > 0.0 ? 1.0 : 0.0, validation_error = 0.0;
   while (true)
   {

@@ -158,29 +158,31 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
   if (!std::isfinite(p.memory_limit_gb) || p.memory_limit_gb <= 0.0)
     rejectParameter("memory_limit_gb", p.memory_limit_gb, "must be a finite number of GB > 0");
   const double needed_gb = estimateMemoryBytes(grid, p) / 1e9;
-  const double training_gb = cubatureTrainingBytes(grid, p) / 1e9;
-  if (needed_gb > p.memory_limit_gb && training_gb > 0.5 * needed_gb)
-  {
-    std::ostringstream value;
-    value << p.cubature_training_poses << " training poses, up to " << effectiveMaxTrainingPoses(cubatureParams(p))
-          << " grown, num_modes = " << p.num_modes;
-    std::ostringstream allowed;
-    allowed.precision(3);
-    allowed << "the cubature's training would need about " << training_gb << " GB of the " << needed_gb
-            << " GB estimated, above memory_limit_gb = " << p.memory_limit_gb
-            << " GB; use fewer cubature_training_poses or a smaller cubature_max_training_poses or cubature_max_springs, "
-               "or raise memory_limit_gb if the machine has the memory";
-    rejectParameter("cubature_training_poses, cubature_max_training_poses", value.str(), allowed.str());
-  }
   if (needed_gb > p.memory_limit_gb)
   {
+    // Blame what takes most of it: the cubature's training poses, or the grid and its modes.
+    const double training_gb = cubatureTrainingBytes(grid, p) / 1e9;
+    const bool training = training_gb > 0.5 * needed_gb;
     std::ostringstream value;
-    value << grid.rows << " x " << grid.cols << " grid (" << grid.dimension << "D), num_modes = " << p.num_modes;
     std::ostringstream allowed;
     allowed.precision(3);
-    allowed << "needs about " << needed_gb << " GB, above memory_limit_gb = " << p.memory_limit_gb
-            << " GB; use a smaller grid or fewer modes, or raise memory_limit_gb if the machine has the memory";
-    rejectParameter("rows, cols, num_modes", value.str(), allowed.str());
+    if (training)
+    {
+      value << p.cubature_training_poses << " training poses, up to " << effectiveMaxTrainingPoses(cubatureParams(p))
+            << " grown, num_modes = " << p.num_modes;
+      allowed << "the cubature's training would need about " << training_gb << " GB of the " << needed_gb << " GB estimated, ";
+    }
+    else
+    {
+      value << grid.rows << " x " << grid.cols << " grid (" << grid.dimension << "D), num_modes = " << p.num_modes;
+      allowed << "needs about " << needed_gb << " GB, ";
+    }
+    allowed << "above memory_limit_gb = " << p.memory_limit_gb << " GB; "
+            << (training ? "use fewer cubature_training_poses or a smaller cubature_max_training_poses or cubature_max_springs"
+                         : "use a smaller grid or fewer modes")
+            << ", or raise memory_limit_gb if the machine has the memory";
+    rejectParameter(training ? "cubature_training_poses, cubature_max_training_poses" : "rows, cols, num_modes",
+                    value.str(), allowed.str());
   }
 }
 
