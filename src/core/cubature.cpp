@@ -268,8 +268,14 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
   std::mt19937_64 validation_rng = poseStream(params.seed, 1), heldout_rng = poseStream(params.seed, 2);
   TrainingSet training(grid, basis, x_ref, trainingPoses(grid, basis, x_ref, params.training_poses, params.pose_size, rng));
   if (!training.target().allFinite())
-    throw std::runtime_error("cubature: the training poses' forces are not finite (cubature_pose_size " +
-                             std::to_string(params.pose_size) + " m too large for this grid?)");
+  {
+    char text[160];
+    std::snprintf(text, sizeof text,
+                  "the cubature's training poses give forces that are not finite (cubature_pose_size = %g m: too "
+                  "large for this grid?)",
+                  params.pose_size);
+    throw std::runtime_error(text);
+  }
   const int max_springs = effectiveMaxSprings(params, static_cast<int>(grid.springs().size()));
   const Eigen::Index max_poses = effectiveMaxTrainingPoses(params);
 
