@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Measures what dragging costs a running node (not a test: a number for the README). Resets the node,
+"""Measures what dragging costs a running node (not a test: a number for docs/benchmarks.md). Resets the node,
 reads ~status for S seconds with nothing by hand, then resets it again, grabs the free particle under the drag marker's start
 (the particle nearest the middle of the bottom row) by sending its feedback as rviz does, pulls it
 `pull` m along +y for S seconds, lets go, and prints the median step cost and stepping per tick of

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Measures how long a service call to a running node takes (not a test: a number for the README and
+"""Measures how long a service call to a running node takes (not a test: a number for docs/benchmarks.md and
 reviews). Calls ~pause with data=false (changes nothing on a running node) N times at random moments
 and prints the median, 99th percentile and largest round trip.
 Usage: measure_service_latency.py [node name, default /modal_mass_spring] [calls, default 200]"""
