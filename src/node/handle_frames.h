@@ -45,6 +45,8 @@ public:
   std::string status() const;
   // Whether handle h follows its frame: it was looked up at the last tick.
   bool following(size_t h) const { return handles_[h].found && !handles_[h].missing; }
+  // Whether handle h's frame was ever looked up.
+  bool everFound(size_t h) const { return handles_[h].found; }
   size_t particles(size_t h) const { return static_cast<size_t>(handles_[h].start.cols()); }
 
 private:

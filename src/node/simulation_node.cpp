@@ -63,6 +63,13 @@ private:
 // The largest ~step request: more would hold the services for minutes on a large grid.
 constexpr uint32_t kMaxStepRequest = 10000;
 
+// How long a handle frame never seen is waited for before its warning: a broadcaster launched beside
+// the node needs a moment to come up.
+constexpr double kHandleFrameGraceSeconds = 5.0;
+
+// How often falling behind real time is logged: once a user knows, the diagnostics keep the count.
+constexpr double kBehindWarningPeriod = 10.0;
+
 std::string formatDistance(double metres)
 {
   char text[64];
@@ -341,8 +348,17 @@ void SimulationNode::updateHandleTargets()
 {
   std::vector<std::optional<FramePose>> poses(handle_frames_->size());
   std::string missing;  // every frame not available, so one throttled warning names them all
+  // A broadcaster started beside the node (a launch file's gripper) may come up after it: a frame
+  // never seen yet is waited for quietly at first, then warned about.
+  const ros::WallTime now = ros::WallTime::now();
+  if (handles_first_lookup_.isZero())
+    handles_first_lookup_ = now;
+  const bool waiting = (now - handles_first_lookup_).toSec() < kHandleFrameGraceSeconds;
   for (size_t h = 0; h < poses.size(); ++h)
   {
+    if (waiting && !handle_frames_->everFound(h) && !tf_buffer_.canTransform(config_.node.fixed_frame,
+                                                                               handle_frames_->frame(h), ros::Time(0)))
+      continue;
     const std::string& frame = handle_frames_->frame(h);
     try
     {
@@ -417,7 +433,11 @@ bool SimulationNode::stepAll()
     track.tick_seconds += secondsSince(start);
     track.tick_steps += result.steps_taken;
     if (result.diverged)
+    {
+      // Said where it happens, by a tick or by ~step: the step, the reason and the forces acting.
       track.divergence_message = result.message + externalForcesNote(k);
+      ROS_ERROR("%s%s", tracks_.size() > 1 ? (track.name + ": ").c_str() : "", track.divergence_message.c_str());
+    }
     else
       any_running = true;
   }
@@ -453,8 +473,8 @@ void SimulationNode::publishStaticFrames()
 void SimulationNode::onTick()
 {
   Output output;
-  std::vector<std::string> divergences;
   std::string status_line;
+  bool status_warns = false;
   double period = 0.0;
   std::optional<Eigen::Vector3d> drag_marker;
   {
@@ -524,8 +544,6 @@ void SimulationNode::onTick()
       tick_steps_ = std::max(tick_steps_, track.tick_steps);
       if (track.tick_steps > 0)
         track.step_seconds = track.tick_seconds / track.tick_steps;
-      if (!track.divergence_message.empty() && track.tick_steps > 0 && track.simulation->diverged())
-        divergences.push_back((tracks_.size() > 1 ? track.name + ": " : "") + track.divergence_message);
     }
     clock_seconds_ += tick_steps_ * dt;
     achieved_factor_ = tick_steps_ * dt / std::max(wall, 1e-9);
@@ -536,6 +554,7 @@ void SimulationNode::onTick()
     {
       last_status_log_ = ros::WallTime::now();
       const Track& first = primary();
+      status_warns = state(first) == Status::DIVERGED;
       char line[320];
       std::snprintf(line, sizeof line,
                     "%s: method %s, step %ld, simulated %.3f s, energy %.6g J, %.3f ms of stepping per tick%s",
@@ -546,9 +565,6 @@ void SimulationNode::onTick()
       status_line = line;
     }
   }
-  for (const auto& divergence : divergences)
-    ROS_ERROR("%s", divergence.c_str());
-
   send(output);
   if (drag_marker)
     placeDragMarker(*drag_marker);
@@ -560,7 +576,9 @@ void SimulationNode::onTick()
     ++diag_late_ticks_;
   diagnostics_->update();
 
-  if (!status_line.empty())
+  if (status_warns)
+    ROS_WARN("%s", status_line.c_str());
+  else if (!status_line.empty())
     ROS_INFO("%s", status_line.c_str());
 }
 
@@ -755,10 +773,25 @@ void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& statu
   if (simulation.diverged())
     status.summary(diagnostic_msgs::DiagnosticStatus::ERROR, "diverged: " + first.divergence_message);
   else if (diag_ticks_ > 0 && (mean_cost > period || 2 * diag_late_ticks_ > diag_ticks_))
-    status.summaryf(diagnostic_msgs::DiagnosticStatus::WARN,
-                    "falling behind real time: %.2f ms of stepping per %.2f ms tick, %d of %d ticks late "
-                    "(stepping longer than the period)",
-                    1e3 * mean_cost, 1e3 * period, diag_late_ticks_, diag_ticks_);
+  {
+    double step_seconds = 0.0;
+    for (const Track& track : tracks_)
+      step_seconds = std::max(step_seconds, track.step_seconds);
+    char behind[200];
+    std::snprintf(behind, sizeof behind,
+                  "falling behind real time: %.2f ms of stepping per %.2f ms tick, %d of %d ticks late "
+                  "(stepping longer than the period)",
+                  1e3 * mean_cost, 1e3 * period, diag_late_ticks_, diag_ticks_);
+    status.summary(diagnostic_msgs::DiagnosticStatus::WARN, behind);
+    // On the console too, with what costs: the steps a tick asks for and what one takes.
+    ROS_WARN_THROTTLE(kBehindWarningPeriod,
+                      "%s: %s takes %.3g ms a step and a tick asks for %.1f steps (real_time_factor / "
+                      "(publish_rate time_step)); a smaller real_time_factor, a larger time_step or a cheaper "
+                      "method keeps up",
+                      behind, lockstep() ? "the slowest method in lockstep" : ("method " + toString(simulation.method())).c_str(),
+                      1e3 * step_seconds,
+                      params.real_time_factor / (params.publish_rate * config_.simulation.time_step));
+  }
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, paused_ ? "paused" : "stepping");
   if (!handle_frames_->status().empty())  // whatever else is said
@@ -831,6 +864,8 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   response.success = true;
   response.message = "switched from " + previous + " to " + request.method + " at step " +
                      std::to_string(steps(primary())) + (was_diverged ? ", recovering from the divergence" : "");
+  if (was_diverged)  // forces that caused it act on, as after a reset
+    response.message += forcesActingNote();
   ROS_INFO("%s", response.message.c_str());
   return true;
 }
@@ -852,13 +887,7 @@ bool SimulationNode::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Respo
   response.message = "reset to the initial state at rest (method " +
                      (lockstep() ? std::string("s in lockstep") : toString(primary().simulation->method())) +
                      (paused_ ? ", still paused)" : ")");
-  // Forces from ~apply_force act on across a reset (as a wrench applied in Gazebo does); a reset after
-  // a divergence they caused would diverge again, so the reply says they are there.
-  const size_t forces = applied_forces_->size();
-  if (forces > 0)
-    response.message += "; " + std::to_string(forces) +
-                        (forces == 1 ? " force from ~apply_force acts" : " forces from ~apply_force act") +
-                        " on (~clear_forces ends them)";
+  response.message += forcesActingNote();
   ROS_INFO("%s", response.message.c_str());
   return true;
 }
@@ -993,6 +1022,17 @@ bool SimulationNode::clearForces(std_srvs::Trigger::Request&, std_srvs::Trigger:
   response.success = true;
   response.message = "cleared " + std::to_string(count) + (count == 1 ? " force" : " forces");
   return true;
+}
+
+std::string SimulationNode::forcesActingNote() const
+{
+  // Forces from ~apply_force act on across a reset and a method switch (as a wrench applied in Gazebo
+  // does); after a divergence they caused the run would diverge again, so the reply says they are there.
+  const size_t forces = applied_forces_->size();
+  if (forces == 0)
+    return "";
+  return "; " + std::to_string(forces) + (forces == 1 ? " force from ~apply_force acts" : " forces from ~apply_force act") +
+         " on (~clear_forces ends them)";
 }
 
 std::string SimulationNode::externalForcesNote(size_t track) const

@@ -121,6 +121,8 @@ private:
   void applyForce(const ApplyForce::ConstPtr& message);
   bool clearForces(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   void updateExternalForces();  // with mutex_ held: drops the forces whose time is up, sets the rest
+  // What a reply of ~reset or ~set_method adds while forces of ~apply_force act: empty, or how many.
+  std::string forcesActingNote() const;
   // What a divergence message of `track` adds when forces from outside acted on it (they may be why).
   std::string externalForcesNote(size_t track) const;
   // A warning about a dropped message (~apply_force, /clicked_point, a drag pose), throttled per text.
@@ -186,6 +188,7 @@ private:
   tf2_ros::Buffer tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   std::unique_ptr<HandleFrames> handle_frames_;     // with mutex_
+  ros::WallTime handles_first_lookup_;              // when the handle frames were first looked up
   std::unique_ptr<HandForces> hand_forces_;         // with mutex_
   std::unique_ptr<interactive_markers::InteractiveMarkerServer> drag_server_;
   ros::Subscriber clicked_point_sub_;

@@ -150,6 +150,10 @@ class Follow(unittest.TestCase):
         with rec.lock:
             held_reports = [d for d in rec.diagnostics if "not available" in d.message]
             self.assertGreater(len(rec.diagnostics), 0)
+        # The gripper's broadcaster comes up after the node (handles.test starts it 1 s late): the node
+        # waits for a frame it never saw quietly for a moment, and warns only about the one that stays away.
+        self.assertFalse(any("'gripper' not available" in w for w in warnings),
+                         [w for w in warnings if "gripper" in w][:3])
         if MISSING:
             self.assertTrue(any("handle frame 'absent' not available" in w for w in warnings), warnings[:5])
             self.assertEqual(rec.status["physical"].handles, "held: frame 'absent' not available")

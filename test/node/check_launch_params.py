@@ -3,12 +3,14 @@
 simulation.launch on the cloth config, stops it, runs it on the default config and checks that the
 node's parameters are exactly the default config's (before clear_params, the cloth's linearization,
 integrator, bending springs ... stayed and were used). Also: every node of every launch file clears
-its parameters."""
+its parameters; rviz is started only where it is installed and a display exists, and the default
+launch runs headless without an error, saying why rviz is left out."""
 import glob
 import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 import unittest
 import xml.etree.ElementTree as ElementTree
@@ -22,14 +24,14 @@ import yaml
 NODE = "/modal_mass_spring"
 
 
-def launch(*args):
-    return subprocess.Popen(["roslaunch", "modal_mass_spring", "simulation.launch", "rviz:=false"] + list(args),
+def launch(*args, env=None):
+    return subprocess.Popen(["roslaunch", "modal_mass_spring", "simulation.launch"] + list(args),
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, errors="replace",
-                            start_new_session=True)
+                            start_new_session=True, env=env)
 
 
-def wait_for_start_up(process, timeout=90.0):
-    """The node's output up to its linearization line (the second start-up line)."""
+def read_until(process, done, timeout=90.0):
+    """The output read until done(output so far) holds (None if it never does)."""
     lines = []
     end = time.time() + timeout
     while time.time() < end:
@@ -37,9 +39,26 @@ def wait_for_start_up(process, timeout=90.0):
         if not line:
             break
         lines.append(line)
-        if "linearization " in line and "integrator " in line:
+        if done("".join(lines)):
             return "".join(lines)
     return None
+
+
+def rviz_if_available(args, **env):
+    """Runs scripts/rviz_if_available.py with `env` over the environment (None: unset)."""
+    environ = dict(os.environ)
+    for name, value in env.items():
+        if value is None:
+            environ.pop(name, None)
+        else:
+            environ[name] = value
+    script = os.path.join(rospkg.RosPack().get_path("modal_mass_spring"), "scripts", "rviz_if_available.py")
+    return subprocess.run([script] + args, env=environ, capture_output=True, text=True, timeout=30)
+
+
+def wait_for_start_up(process, timeout=90.0):
+    """The node's output up to its linearization line (the second start-up line)."""
+    return read_until(process, lambda out: "linearization " in out and "integrator " in out, timeout)
 
 
 def stop(process):
@@ -63,13 +82,13 @@ class LaunchParameters(unittest.TestCase):
 
     def test_no_parameter_leaks_from_one_launch_into_the_next(self):
         package = rospkg.RosPack().get_path("modal_mass_spring")
-        cloth = launch("config:=" + os.path.join(package, "config", "cloth.yaml"))
+        cloth = launch("rviz:=false", "config:=" + os.path.join(package, "config", "cloth.yaml"))
         output = wait_for_start_up(cloth)
         stop(cloth)
         self.assertIsNotNone(output, "the cloth did not come up")
         self.assertIn("linearization equilibrium, integrator implicit", output)
 
-        default = launch()
+        default = launch("rviz:=false")
         output = wait_for_start_up(default)
         try:
             self.assertIsNotNone(output, "the default config did not come up")
@@ -85,6 +104,42 @@ class LaunchParameters(unittest.TestCase):
                        if name.startswith(NODE + "/")}
             self.assertEqual(present - expected, set(), "left over from the cloth launch")
             self.assertEqual(required - present, set())
+        finally:
+            stop(default)
+
+    def test_rviz_starts_only_where_it_is_installed_and_a_display_exists(self):
+        with tempfile.TemporaryDirectory() as empty:
+            headless = rviz_if_available(["-d", "x.rviz"], DISPLAY=None, WAYLAND_DISPLAY=None)
+            self.assertEqual(headless.returncode, 0, headless.stderr)
+            self.assertIn("rviz not started: no display", headless.stderr)
+            missing = rviz_if_available(["-d", "x.rviz"], DISPLAY=":99", ROS_PACKAGE_PATH=empty)
+            self.assertEqual(missing.returncode, 0, missing.stderr)
+            self.assertIn("rviz not started: rviz is not installed", missing.stderr)
+        # Installed (a package rviz on the path) and a display: rviz is run with every argument.
+        with tempfile.TemporaryDirectory() as root:
+            os.makedirs(os.path.join(root, "rviz"))
+            with open(os.path.join(root, "rviz", "package.xml"), "w") as manifest:
+                manifest.write("<package><name>rviz</name><version>0.0.0</version></package>")
+            os.makedirs(os.path.join(root, "bin"))
+            rosrun = os.path.join(root, "bin", "rosrun")
+            with open(rosrun, "w") as fake:
+                fake.write('#!/bin/sh\necho "rosrun $*"\n')
+            os.chmod(rosrun, 0o755)
+            started = rviz_if_available(["-d", "x.rviz", "__name:=rviz"], DISPLAY=":99", ROS_PACKAGE_PATH=root,
+                                        PATH=os.path.join(root, "bin") + os.pathsep + os.environ["PATH"])
+            self.assertEqual(started.returncode, 0, started.stderr)
+            self.assertEqual(started.stdout.strip(), "rosrun rviz rviz -d x.rviz __name:=rviz")
+
+    def test_the_default_launch_runs_headless_and_says_why_rviz_is_left_out(self):
+        environ = dict(os.environ)
+        environ.pop("DISPLAY", None)
+        environ.pop("WAYLAND_DISPLAY", None)
+        default = launch(env=environ)  # rviz:=true, the default
+        try:
+            output = read_until(default, lambda out: "rviz not started" in out and "linearization " in out)
+            self.assertIsNotNone(output, "no start-up line, or no word about rviz")
+            self.assertIn("rviz not started: no display", output)
+            self.assertNotIn("cannot launch node", output)
         finally:
             stop(default)
 

@@ -330,6 +330,17 @@ TEST(Timer, FallingBehindRealTimeWarnsInDiagnostics)
   ASSERT_TRUE(waitFor<diagnostic_msgs::DiagnosticArray>("/diagnostics", is_warn, 30.0));
   EXPECT_GT(ticks, 0);
   EXPECT_EQ(late, ticks) << "every tick's stepping takes longer than the period here";
+  // The console says it too, as a warning with what costs (the step and the steps a tick asks for);
+  // throttled to one every 10 s, so wait past that.
+  const auto warning = waitFor<rosgraph_msgs::Log>(
+      "/rosout",
+      [](const rosgraph_msgs::Log& log) {
+        return log.level == rosgraph_msgs::Log::WARN && log.msg.find("falling behind real time") != std::string::npos;
+      },
+      25.0);
+  ASSERT_TRUE(warning);
+  EXPECT_NE(warning->msg.find("method full takes"), std::string::npos) << warning->msg;
+  EXPECT_NE(warning->msg.find("ms a step and a tick asks for 10000.0 steps"), std::string::npos) << warning->msg;
 }
 
 // A service call is answered between two steps of a slow tick, not after the tick (behind.test: each
@@ -1054,12 +1065,23 @@ TEST_F(ExternalForces, ADivergenceUnderAForceNamesItAndAResetSaysItActsOn)
   ASSERT_TRUE(node.reset().success);
   apply(force("", {corner}, {{1e12, 0.0, 0.0}}));  // finite, and far more than any step holds
   EXPECT_TRUE(node.status([](const Status& s) { return s.applied_forces == 1; }));
+  Recorder<rosgraph_msgs::Log> log("/rosout");
+  ros::WallDuration(0.3).sleep();
   stepBy(node, 100);
   const auto diverged = node.status([](const Status& s) { return s.state == Status::DIVERGED; });
   ASSERT_TRUE(diverged);
   EXPECT_NE(diverged->message.find("forces from outside were acting (1 from ~apply_force)"), std::string::npos)
       << diverged->message;
   EXPECT_NE(diverged->message.find("~clear_forces"), std::string::npos) << diverged->message;
+  // The console has it as an error with the step and the force, also when ~step took it.
+  EXPECT_TRUE(loggedWithin(log, rosgraph_msgs::Log::ERROR, "diverged at step"));
+  EXPECT_TRUE(loggedWithin(log, rosgraph_msgs::Log::ERROR, "forces from outside were acting (1 from ~apply_force)"));
+  // A method switch recovers, and says that the force acts on, as a reset does.
+  const auto switched = node.setMethod("linear");
+  EXPECT_TRUE(switched.success) << switched.message;
+  EXPECT_NE(switched.message.find("recovering from the divergence; 1 force from ~apply_force acts on (~clear_forces ends them)"),
+            std::string::npos)
+      << switched.message;
   // The force acts on across a reset, and the reply says so; cleared, the run is an ordinary one.
   const auto reset = node.reset();
   EXPECT_TRUE(reset.success);
