@@ -181,8 +181,16 @@ std::optional<std::vector<char>> readPayload(const std::string& file, const std:
                                              const CacheOptions& options)
 {
   std::error_code error;
-  if (!std::filesystem::exists(file, error))
+  const auto status = std::filesystem::status(file, error);
+  if (!std::filesystem::exists(status))
     return std::nullopt;
+  // A directory reads as a huge size, a FIFO blocks its reader: neither is ever opened.
+  if (!std::filesystem::is_regular_file(status))
+  {
+    warn(options, "cache file '" + file + "' ignored and rebuilt: it is not a regular file (a directory, FIFO or "
+                  "device)");
+    return std::nullopt;
+  }
   std::ifstream in(file, std::ios::binary | std::ios::ate);
   std::vector<char> bytes(in ? static_cast<size_t>(std::max<std::streamoff>(0, in.tellg())) : 0);
   in.seekg(0);

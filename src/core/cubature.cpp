@@ -276,6 +276,17 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
                   params.pose_size);
     throw std::runtime_error(text);
   }
+  if (!(training.target().norm() > 0.0))
+  {
+    // Poses so small that every spring's force change underflows: nothing to fit, and a cubature of
+    // no springs would pass for exact.
+    char text[200];
+    std::snprintf(text, sizeof text,
+                  "the cubature's training poses give no force at all (cubature_pose_size = %g m: too small for "
+                  "this grid's springs to stretch); a cubature of no springs would model no force",
+                  params.pose_size);
+    throw std::runtime_error(text);
+  }
   const int max_springs = effectiveMaxSprings(params, static_cast<int>(grid.springs().size()));
   const Eigen::Index max_poses = effectiveMaxTrainingPoses(params);
 
@@ -362,6 +373,10 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
       weights.push_back(w[static_cast<Eigen::Index>(k)]);
     }
   cubature.weights = Eigen::Map<const Eigen::VectorXd>(weights.data(), static_cast<Eigen::Index>(weights.size()));
+  if (cubature.springs.empty())
+    throw std::runtime_error("the cubature's training selected no spring (cubature_pose_size = " +
+                             std::to_string(params.pose_size) + " m, cubature_seed = " + std::to_string(params.seed) +
+                             "): a cubature of no springs would model no force");
 
   // Held-out poses, as many as the training's, that neither the selection nor the stop saw.
   const TrainingSet heldout(grid, basis, x_ref,

@@ -417,7 +417,25 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
   const bool handles = grid_.numHandleDofs() > 0;
   const bool moving_frame = formulation_ == HandleFormulation::MovingFrame;
   if (handles && !moving_frame && method != Method::Full && constraint_modes_.size() == 0)
-    constraint_modes_ = modal_mass_spring::constraintModes(stiffness_, handle_coupling_);
+  {
+    try
+    {
+      constraint_modes_ = modal_mass_spring::constraintModes(stiffness_, handle_coupling_);
+    }
+    catch (const std::runtime_error& error)
+    {
+      if (params_.linearization != Linearization::Equilibrium)
+        throw;
+      // Already at the equilibrium: the advice to linearize there does not apply. What is left is
+      // cloth that hangs slack from these handles, with no stiffness across it.
+      throw std::runtime_error(
+          "handles: the stiffness of the interior dofs with the handles held is singular at the hanging equilibrium "
+          "(linearization: equilibrium), so the constraint modes Psi = -K_ii^-1 K_ib do not exist: cloth hanging "
+          "slack from these handles (small grips far apart) has no stiffness across it there; hold it by larger "
+          "grips (e.g. a whole row, or the top row's outer particles), fix some particles, or hold it by one "
+          "handle with handle_formulation: moving_frame");
+    }
+  }
   const LinearizedGrid linearized{grid_,
                                   basis,
                                   x_ref_,

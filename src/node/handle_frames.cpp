@@ -1,6 +1,9 @@
 // The frames' motion as the core's handle motion: rigid offsets, interpolated poses.
 #include "handle_frames.h"
 
+#include <cmath>
+#include <cstdio>
+
 namespace modal_mass_spring
 {
 
@@ -20,26 +23,109 @@ HandleFrames::HandleFrames(const std::vector<HandleParam>& handles, const Grid& 
   }
 }
 
-void HandleFrames::setTargets(const std::vector<std::optional<FramePose>>& poses)
+namespace
+{
+
+constexpr double kPi = 3.14159265358979323846;
+
+FramePose compose(const FramePose& a, const FramePose& b)
+{
+  FramePose c;
+  c.rotation = a.rotation * b.rotation;
+  c.translation = a.rotation * b.translation + a.translation;
+  return c;
+}
+
+FramePose inverse(const FramePose& a)
+{
+  FramePose i;
+  i.rotation = a.rotation.conjugate();
+  i.translation = -(i.rotation * a.translation);
+  return i;
+}
+
+bool samePose(const FramePose& a, const FramePose& b)
+{
+  return (a.translation - b.translation).norm() <= 1e-6 && a.rotation.angularDistance(b.rotation) <= 1e-6;
+}
+
+}  // namespace
+
+std::string HandleFrames::refusal(const Handle& handle, const FramePose& pose) const
+{
+  char text[200];
+  if (dimension_ == 2)
+  {
+    // The particles turn with the frame relative to its first pose: only a turn about y (the normal
+    // of the grid's x-z plane) keeps them in the plane; the rest would be projected onto it.
+    const Eigen::Matrix3d r = (pose.rotation * handle.start_pose.rotation.conjugate()).toRotationMatrix();
+    const double off_plane = std::abs(r(0, 1)) + std::abs(r(1, 0)) + std::abs(r(1, 2)) + std::abs(r(2, 1));
+    if (off_plane > 1e-6)
+      return "refused: it turns out of the 2D grid's x-z plane (a 2D grid's frame may only turn about y)";
+  }
+  const double turn = handle.current.rotation.angularDistance(pose.rotation);
+  if (turn > kMaxTurnPerTick)
+  {
+    std::snprintf(text, sizeof text,
+                  "refused: it turned %.0f degrees since the last tick, above %.0f (a flipping or glitching frame; "
+                  "kept at that pose for a tick, it is gripped anew)",
+                  turn * 180.0 / kPi, kMaxTurnPerTick * 180.0 / kPi);
+    return text;
+  }
+  return "";
+}
+
+void HandleFrames::regrip(Handle& handle, const FramePose& pose)
+{
+  // The particles where they are now, in the new pose; the motion relative to the start pose
+  // continues from where it is (start' = start current^-1 pose).
+  const Eigen::Matrix3Xd now = (handle.current.rotation.toRotationMatrix() * handle.offsets).colwise() +
+                               handle.current.translation;
+  handle.offsets = pose.rotation.conjugate().toRotationMatrix() * (now.colwise() - pose.translation);
+  handle.start_pose = compose(compose(handle.start_pose, inverse(handle.current)), pose);
+  handle.current = pose;
+}
+
+void HandleFrames::setTargets(const std::vector<std::optional<FramePose>>& poses, const std::vector<std::string>& problems)
 {
   for (size_t h = 0; h < handles_.size(); ++h)
   {
     Handle& handle = handles_[h];
     handle.missing = !poses[h];
+    handle.refused = false;
+    handle.problem = h < problems.size() && !problems[h].empty() ? problems[h] : "not available";
     if (!poses[h])
     {
       handle.target = handle.current;  // held
+      handle.refused_pose.reset();
       continue;
     }
+    const FramePose& pose = *poses[h];
     if (!handle.found)
     {
       // The particles' start positions in the frame's first pose.
-      const FramePose& pose = *poses[h];
       handle.offsets = pose.rotation.conjugate().toRotationMatrix() * (handle.start.colwise() - pose.translation);
       handle.start_pose = handle.current = pose;
       handle.found = true;
     }
-    handle.target = *poses[h];
+    std::string why = refusal(handle, pose);
+    const bool in_plane = why.empty() || why.find("x-z plane") == std::string::npos;
+    if (!why.empty() && in_plane && handle.refused_pose && samePose(*handle.refused_pose, pose))
+    {
+      regrip(handle, pose);  // not a flip: the frame stays at its new pose
+      why.clear();
+    }
+    handle.refused_pose.reset();
+    if (!why.empty())
+    {
+      if (in_plane)
+        handle.refused_pose = pose;
+      handle.missing = handle.refused = true;
+      handle.problem = why;
+      handle.target = handle.current;  // held
+      continue;
+    }
+    handle.target = pose;
   }
 }
 
@@ -109,8 +195,17 @@ std::string HandleFrames::status() const
   std::string held;
   for (const auto& handle : handles_)
     if (handle.missing)
-      held += (held.empty() ? "held: frame '" : ", frame '") + handle.frame + "'";
-  return held.empty() ? "" : held + " not available";
+      held += (held.empty() ? "held: frame '" : ", frame '") + handle.frame + "' " + handle.problem;
+  return held;
+}
+
+std::vector<std::string> HandleFrames::refusals() const
+{
+  std::vector<std::string> lines;
+  for (const auto& handle : handles_)
+    if (handle.refused)
+      lines.push_back("handle frame '" + handle.frame + "' " + handle.problem + "; its particles hold where they are");
+  return lines;
 }
 
 }  // namespace modal_mass_spring

@@ -15,6 +15,10 @@
 namespace modal_mass_spring
 {
 
+// A handle frame whose latest pose is older than this (s, ROS time) is stale: its broadcaster has
+// stopped, and its particles hold where they are until it comes back.
+constexpr double kStaleHandleFrameSeconds = 1.0;
+
 class HandleFrames
 {
 public:
@@ -27,9 +31,15 @@ public:
   const std::string& frame(size_t h) const { return handles_[h].frame; }
   size_t size() const { return handles_.size(); }
 
-  // This tick's target pose of each frame in the fixed frame; nothing: not available, held where it is.
-  // A frame's first pose fixes its particles' offsets (no motion on that tick).
-  void setTargets(const std::vector<std::optional<FramePose>>& poses);
+  // This tick's target pose of each frame in the fixed frame; nothing: not usable, held where it is,
+  // for the reason in `problems` (empty or "": "not available"). A frame's first pose fixes its
+  // particles' offsets (no motion on that tick). A pose the cloth cannot follow is refused and held:
+  // on a 2D grid one that turns the frame out of the x-z plane; on any grid one that turns it more
+  // than kMaxTurnPerTick since the last tick (a flipping or glitching frame). A refused large turn
+  // that stays (the same pose at the next tick) is a new grip: the particles keep where they are and
+  // follow the frame from there, as at a first lookup.
+  void setTargets(const std::vector<std::optional<FramePose>>& poses, const std::vector<std::string>& problems = {});
+  static constexpr double kMaxTurnPerTick = 1.5707963267948966;  // rad (90 degrees)
   // The handle dofs' positions (grid coordinates), velocities and accelerations at the fraction s of
   // a tick lasting `duration` seconds, in Grid::handleDofs() order.
   void motion(double duration, double s, Eigen::VectorXd& x, Eigen::VectorXd& v, Eigen::VectorXd& a) const;
@@ -41,8 +51,10 @@ public:
   void finishTick(double s);
   // Back to the start (Simulation::reset puts the handles at rest at x_ref); offsets are kept.
   void reset();
-  // Empty, or which frames are held because they could not be looked up.
+  // Empty, or which frames are held and why (not available, stale, refused).
   std::string status() const;
+  // The frames refused at the last tick (a turn out of the plane or too fast), one line each.
+  std::vector<std::string> refusals() const;
   // Whether handle h follows its frame: it was looked up at the last tick.
   bool following(size_t h) const { return handles_[h].found && !handles_[h].missing; }
   // Whether handle h's frame was ever looked up.
@@ -56,9 +68,17 @@ private:
     Eigen::Matrix3Xd start;    // the particles at x_ref, in the fixed frame
     Eigen::Matrix3Xd offsets;  // in the frame, from its first pose
     bool found = false;        // the frame was looked up at least once
-    bool missing = false;      // it could not be looked up this tick
+    bool missing = false;      // it could not be used this tick
+    std::string problem;       // why, when missing
+    bool refused = false;      // its pose this tick was refused (problem says why)
+    std::optional<FramePose> refused_pose;  // a large turn refused at the last tick
     FramePose start_pose, current, target;
   };
+  // Why the cloth cannot follow `pose` from the handle's current one, or empty.
+  std::string refusal(const Handle& handle, const FramePose& pose) const;
+  // Takes the particles' offsets anew at `pose`, where they are now (no jump).
+  static void regrip(Handle& handle, const FramePose& pose);
+
   int dimension_;
   Eigen::Vector3d grid_offset_;
   std::vector<Handle> handles_;

@@ -260,6 +260,18 @@ NodeConfiguration loadNodeConfiguration(const NodeParameterSource& source, const
   }
   // The node's own checks (tf_particles, steps per tick) rely on a valid grid and time step.
   validateParameters(c.grid, c.simulation);
+  // The explicit scheme's position update takes the damping force at the step's start: beyond
+  // alpha dt = 2 it overshoots, and the first push (a poke, a handle, the motion carried over by a live
+  // change) diverges. The core allows it (modal_compare's stability scan crosses it on purpose).
+  const double alpha_dt = c.simulation.alpha * c.simulation.time_step;
+  if (c.simulation.integrator == IntegratorKind::Explicit && alpha_dt > 2.0)
+  {
+    std::ostringstream allowed;
+    allowed << "with the explicit integrator alpha * time_step must be at most 2 (alpha <= " << 2.0 / c.simulation.time_step
+            << " 1/s at time_step = " << c.simulation.time_step
+            << " s): beyond it the damping overshoots and a moving cloth diverges; use integrator: implicit for heavier damping";
+    rejectParameter("alpha", c.simulation.alpha, allowed.str());
+  }
   c.node = loadNodeParams(recording, c.grid, c.simulation);
   c.node.handles = handles;
   for (size_t h = 0; h < handles.size(); ++h)

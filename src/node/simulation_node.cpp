@@ -347,13 +347,15 @@ const SimulationNode::Track* SimulationNode::reference() const
 void SimulationNode::updateHandleTargets()
 {
   std::vector<std::optional<FramePose>> poses(handle_frames_->size());
+  std::vector<std::string> problems(poses.size());
   std::string missing;  // every frame not available, so one throttled warning names them all
   // A broadcaster started beside the node (a launch file's gripper) may come up after it: a frame
   // never seen yet is waited for quietly at first, then warned about.
-  const ros::WallTime now = ros::WallTime::now();
+  const ros::WallTime wall_now = ros::WallTime::now();
   if (handles_first_lookup_.isZero())
-    handles_first_lookup_ = now;
-  const bool waiting = (now - handles_first_lookup_).toSec() < kHandleFrameGraceSeconds;
+    handles_first_lookup_ = wall_now;
+  const bool waiting = (wall_now - handles_first_lookup_).toSec() < kHandleFrameGraceSeconds;
+  const ros::Time now = ros::Time::now();  // the stamps' clock, for a frame's age
   for (size_t h = 0; h < poses.size(); ++h)
   {
     if (waiting && !handle_frames_->everFound(h) && !tf_buffer_.canTransform(config_.node.fixed_frame,
@@ -362,19 +364,32 @@ void SimulationNode::updateHandleTargets()
     const std::string& frame = handle_frames_->frame(h);
     try
     {
-      const auto t = tf_buffer_.lookupTransform(config_.node.fixed_frame, frame, ros::Time(0)).transform;
+      const auto stamped = tf_buffer_.lookupTransform(config_.node.fixed_frame, frame, ros::Time(0));
+      const auto& t = stamped.transform;
       FramePose pose;
       pose.translation = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);
       pose.rotation = Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z).normalized();
-      if (pose.translation.allFinite() && pose.rotation.coeffs().allFinite())
-        poses[h] = pose;
+      // tf2 keeps a frame's last pose after its broadcaster stops: an old one is not followed. A
+      // static frame's pose has no stamp.
+      const double age = stamped.header.stamp.isZero() ? 0.0 : (now - stamped.header.stamp).toSec();
+      if (!pose.translation.allFinite() || !pose.rotation.coeffs().allFinite())
+        problems[h] = "has a non-finite pose";
+      else if (age > kStaleHandleFrameSeconds)
+      {
+        char text[120];
+        std::snprintf(text, sizeof text, "stale (its last pose is %.1f s old, above %.1f s)", age,
+                      kStaleHandleFrameSeconds);
+        problems[h] = text;
+      }
       else
-        missing += (missing.empty() ? "" : "; ") + ("'" + frame + "' has a non-finite pose");
+        poses[h] = pose;
     }
     catch (const tf2::TransformException& error)
     {
-      missing += (missing.empty() ? "" : "; ") + ("'" + frame + "' not available (" + error.what() + ")");
+      problems[h] = std::string("not available (") + error.what() + ")";
     }
+    if (!poses[h])
+      missing += (missing.empty() ? "'" : "; '") + frame + "' " + problems[h];
   }
   if (!missing.empty())
     ROS_WARN_THROTTLE(5.0, "handle frame %s: its particles hold where they are", missing.c_str());
@@ -384,7 +399,12 @@ void SimulationNode::updateHandleTargets()
     if (poses[h] && !handle_frames_->following(h))
       ROS_INFO("handle frame '%s' found: its %zu %s it", handle_frames_->frame(h).c_str(),
                handle_frames_->particles(h), handle_frames_->particles(h) == 1 ? "particle follows" : "particles follow");
-  handle_frames_->setTargets(poses);
+  // Short reasons in the status ("not available", "stale"); the log line above has the details.
+  for (std::string& problem : problems)
+    problem = problem.substr(0, problem.find(" ("));
+  handle_frames_->setTargets(poses, problems);
+  for (const std::string& refusal : handle_frames_->refusals())
+    ROS_WARN_THROTTLE(5.0, "%s", refusal.c_str());
 }
 
 void SimulationNode::setHandleMotion(double duration, double s)

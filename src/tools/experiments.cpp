@@ -424,6 +424,11 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
       s.mean_rms /= counts[k];
       s.mean_max /= counts[k];
     }
+    else
+    {
+      // Not one sample after step 0 (diverged before the first): no error to report, never 0.
+      s.mean_rms = s.max_rms = s.mean_max = std::numeric_limits<double>::quiet_NaN();
+    }
     if (s.diverged)
       s.final_rms = std::numeric_limits<double>::quiet_NaN();
     s.step_seconds_median = median(times[k]);

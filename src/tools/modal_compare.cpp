@@ -5,6 +5,7 @@
 #include "modal_mass_spring/parameters.h"
 #include "modal_mass_spring/validation.h"
 
+#include <climits>
 #include <unistd.h>
 
 #include <algorithm>
@@ -75,7 +76,7 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
                 held_cloth.yaml): the grid's handles are the scenario's particle groups, each moved as a
                 rigid frame over move_time s along a smooth ramp, then held for hold_time s; every method
                 against the reference as in accuracy (--sample, --reference-time-step, --methods), each
-                scenario run for its move_time + hold_time; writes handles_<tag>_error.csv,
+                scenario run for its move_time (at least 10 time steps) + hold_time; writes handles_<tag>_error.csv,
                 handles_<tag>_summary.csv and (unless --no-snapshots) handles_<tag>_snapshots.csv,
                 every particle of every run where the move ends (of the first --vary combination)
   cost:       --sizes LIST (5,10,20,40; square grids)  --repeats R (7)  --min-repeat-seconds T (0.02)
@@ -494,11 +495,19 @@ std::vector<ExperimentSetup> handleSetups(const Options& o, const std::vector<Ex
   return out;
 }
 
+constexpr int kMinMoveSteps = 10;
+
 // Steps a handle scenario runs on a setup: its move and hold (or its move alone), rounded up to whole
 // samples.
 int handleSteps(const Options& o, const ExperimentSetup& setup, bool move_only = false)
 {
   const HandleScenario& scenario = *setup.handle_scenario;
+  // The ramp's velocity and acceleration exist only where steps resolve it: a shorter move is a jump.
+  if (scenario.move_time < kMinMoveSteps * setup.sim.time_step)
+    rejectParameter("handle_scenarios." + scenario.name + ".move_time", scenario.move_time,
+                    "must be at least " + std::to_string(kMinMoveSteps) + " time steps (" +
+                        fmt(kMinMoveSteps * setup.sim.time_step) + " s at time_step = " + fmt(setup.sim.time_step) +
+                        " s): a shorter move is a jump the smooth ramp cannot give");
   const double seconds = move_only ? scenario.move_time : scenario.duration();
   const double steps = std::ceil(seconds / setup.sim.time_step - 1e-9);
   const double samples = std::ceil(steps / o.accuracy.sample);
@@ -540,16 +549,86 @@ void validateStabilitySetups(const Options& o, const std::vector<ExperimentSetup
                     "needs an implicit setup and its explicit twin: --vary integrator=explicit,implicit");
 }
 
+// What the accuracy or handles experiment keeps of one setup until its files are written: an error
+// sample per run every `sample` steps, every particle of every run every `interval` steps.
+double resultBytes(const Options& o, const ExperimentSetup& setup, long steps, long interval)
+{
+  const double runs = o.methods.size() + 1.0 + (o.accuracy.reference_time_step > 0.0 ? 1.0 : 0.0);
+  const double samples = static_cast<double>(steps) / o.accuracy.sample + 1.0;
+  const double sample_bytes = sizeof(ErrorSample) + 2.0 * setup.variant.size() + 64.0;
+  double bytes = runs * samples * sample_bytes;
+  if (o.accuracy.snapshots)
+  {
+    const double particles = static_cast<double>(setup.grid.rows) * setup.grid.cols;
+    bytes += runs * (static_cast<double>(steps) / interval + 2.0) * (sizeof(Snapshot) + 24.0 * particles);
+  }
+  return bytes;
+}
+
+// Refuses results that would not fit in memory_limit_gb (with what one setup's simulations need).
+void checkResultMemory(const Options& o, const std::vector<ExperimentSetup>& setups, double result_bytes)
+{
+  for (const ExperimentSetup& setup : setups)
+  {
+    const double runs = o.methods.size() + 2.0;
+    const double needed_gb = (result_bytes + runs * estimateMemoryBytes(setup.grid, setup.sim)) / 1e9;
+    if (needed_gb > setup.sim.memory_limit_gb)
+    {
+      std::ostringstream allowed;
+      allowed.precision(3);
+      allowed << "the results kept in memory (an error sample per method every --sample steps, every particle "
+              << "every --interval steps) need about " << needed_gb << " GB, above memory_limit_gb = "
+              << setup.sim.memory_limit_gb << " GB (" << setup.variant
+              << "); use fewer --steps, a larger --sample or --interval, or --no-snapshots";
+      rejectParameter("--steps, --sample", std::to_string(o.accuracy.steps) + ", " + std::to_string(o.accuracy.sample),
+                      allowed.str());
+    }
+  }
+}
+
+// Builds what each setup's runs build (the equilibrium, both bases, the constraint modes of its
+// handles, the cubature's training) once, one setup at a time, before the first simulation steps:
+// a setup that cannot be built is refused in seconds, not after the setups before it ran. With the
+// cache on, the runs load them again.
+void buildEverySetup(const Options& o, const std::vector<ExperimentSetup>& setups)
+{
+  // The method that builds the most: the cubature is trained on the physical basis.
+  Method method = Method::Full;
+  for (Method m : {Method::Linear, Method::Physical, Method::Cubature})
+    if (std::find(o.methods.begin(), o.methods.end(), m) != o.methods.end())
+      method = m;
+  for (const ExperimentSetup& setup : setups)
+  {
+    SimulationParams params = setup.sim;
+    params.method = method;
+    try
+    {
+      Simulation built(setup.grid, params, StageFn{}, o.accuracy.cache);
+    }
+    catch (const std::bad_alloc&)
+    {
+      throw std::invalid_argument("config '" + o.config + "' (" + setup.variant + "): out of memory while building "
+                                  "it: lower memory_limit_gb to what is free, or use a smaller grid or fewer modes");
+    }
+    catch (const std::exception& e)
+    {
+      throw std::invalid_argument("config '" + o.config + "' (" + setup.variant + "): cannot be built (" +
+                                  toString(method) + "): " + e.what());
+    }
+  }
+}
+
 void validateHandleSetups(const Options& o, const std::vector<ExperimentSetup>& handle_setups)
 {
   if (handle_setups.empty())
     rejectParameter("handle_scenarios", "(absent)",
                     "the handles experiment needs a list of scenarios in the config '" + o.config +
                         "' (see config/compare/held_cloth.yaml)");
+  double result_bytes = 0.0;
   for (const ExperimentSetup& setup : handle_setups)
   {
     validateSetup(o, setup, setup.grid, "");
-    handleSteps(o, setup);
+    result_bytes += resultBytes(o, setup, handleSteps(o, setup), handleSteps(o, setup, true));
     if (o.accuracy.reference_time_step > 0.0)
     {
       const int substeps = referenceSubsteps(setup.sim.time_step, o.accuracy.reference_time_step);
@@ -558,11 +637,15 @@ void validateHandleSetups(const Options& o, const std::vector<ExperimentSetup>& 
                         "with --sample " + std::to_string(o.accuracy.sample) + " too many reference steps per sample");
     }
   }
+  checkResultMemory(o, handle_setups, result_bytes);
 }
 
-// Fails before any experiment runs.
+// Fails before any experiment runs. The setups as configured run in cost, accuracy and stability
+// only: the handles experiment runs them with its scenarios' handles (validateHandleSetups).
 void validate(const Options& o, const std::vector<ExperimentSetup>& setups)
 {
+  if (!o.runs("cost") && !o.runs("accuracy") && !o.runs("stability"))
+    return;
   for (const ExperimentSetup& setup : setups)
   {
     validateSetup(o, setup, setup.grid, "");
@@ -584,6 +667,39 @@ void validate(const Options& o, const std::vector<ExperimentSetup>& setups)
   }
   if (o.runs("stability"))
     validateStabilitySetups(o, setups);
+  if (o.runs("accuracy"))
+  {
+    double bytes = 0.0;
+    for (const ExperimentSetup& setup : setups)
+      bytes += resultBytes(o, setup, o.accuracy.steps, o.accuracy.interval);
+    checkResultMemory(o, setups, bytes);
+  }
+}
+
+// Every file the run writes, in the output folder.
+std::vector<std::string> outputNames(const Options& o)
+{
+  std::vector<std::string> names;
+  for (const std::string& experiment : o.experiments)
+  {
+    const std::string stem = experiment + "_" + o.tag;
+    if (experiment == "cost" || experiment == "stability")
+      names.push_back(stem + ".csv");
+    else
+      for (const char* part : {"_error", "_summary", "_cubature", "_snapshots"})
+        names.push_back(stem + part + ".csv");
+  }
+  return names;
+}
+
+// Refuses a --tag (or config file name) that makes a file name longer than file systems allow.
+void checkOutputNames(const Options& o)
+{
+  for (const std::string& name : outputNames(o))
+    if (name.size() > NAME_MAX)
+      rejectParameter("--tag", "'" + o.tag + "'",
+                      "makes the file name '" + name + "' " + std::to_string(name.size()) + " characters long, above " +
+                          std::to_string(NAME_MAX) + "; use a shorter --tag (default: the config file's stem)");
 }
 
 // Creates the output folder and makes sure a file can be written there, before any work.
@@ -627,14 +743,57 @@ private:
   std::chrono::steady_clock::time_point last_{};
 };
 
+// Said once per file, however often it is rewritten.
+std::set<std::string> announced;
+
 std::ofstream openCsv(const Options& o, const std::string& name)
 {
   const fs::path path = fs::path(o.output) / name;
   std::ofstream out(path);
   if (!out)
     throw std::runtime_error("cannot write '" + path.string() + "'");
-  std::cout << "wrote " << path.string() << "\n";
+  if (announced.insert(path.string()).second)
+    std::cout << "wrote " << path.string() << "\n";
   return out;
+}
+
+// Runs one experiment's setups in turn and writes its files after each, so that a failure (or a
+// kill) late in a run never loses what finished before; a failure is named by experiment and setup.
+void runEachSetup(const Options& o, const std::string& experiment, const std::vector<ExperimentSetup>& setups,
+                  const std::function<void(const ExperimentSetup&)>& run, const std::function<void()>& write)
+{
+  for (size_t k = 0; k < setups.size(); ++k)
+  {
+    std::string failure;
+    try
+    {
+      run(setups[k]);
+    }
+    catch (const std::bad_alloc&)
+    {
+      // The memory estimate (memory_limit_gb) passed, but the machine had less than that to give.
+      failure = "out of memory (std::bad_alloc): the machine could not provide what this setup needs; use a smaller "
+                "grid or fewer modes, or lower memory_limit_gb to what is free";
+    }
+    catch (const std::exception& e)
+    {
+      failure = e.what();
+    }
+    if (failure.empty())
+    {
+      write();
+      continue;
+    }
+    const std::string where = experiment == "handles" ? "scenario '" + setups[k].variant + "'"
+                                                      : "variant '" + setups[k].variant + "'";
+    if (k > 0)
+    {
+      write();
+      failure += "; the results of the " + std::to_string(k) + " " + experiment + " setup(s) finished before it are "
+                 "written to '" + o.output + "'";
+    }
+    throw std::runtime_error(experiment + " experiment, " + where + ": " + failure);
+  }
 }
 
 // Prints a table with columns padded to their widest cell.
@@ -667,13 +826,16 @@ void printTable(const std::string& title, const std::vector<std::vector<std::str
 void runCostExperiment(const Options& o, const std::vector<ExperimentSetup>& setups, Progress& progress)
 {
   std::vector<CostRow> rows;
-  for (const ExperimentSetup& setup : setups)
-  {
-    const auto part = runCost(setup, o.cost, std::ref(progress));
-    rows.insert(rows.end(), part.begin(), part.end());
-  }
-  std::ofstream out = openCsv(o, "cost_" + o.tag + ".csv");
-  writeCostCsv(out, rows);
+  runEachSetup(
+      o, "cost", setups,
+      [&](const ExperimentSetup& setup) {
+        const auto part = runCost(setup, o.cost, std::ref(progress));
+        rows.insert(rows.end(), part.begin(), part.end());
+      },
+      [&] {
+        std::ofstream out = openCsv(o, "cost_" + o.tag + ".csv");
+        writeCostCsv(out, rows);
+      });
   std::vector<std::vector<std::string>> table{
       {"variant", "grid", "dim", "free dofs", "modes", "basis build ms", "method", "step us (median)"}};
   for (const CostRow& r : rows)
@@ -730,8 +892,21 @@ void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>&
   std::vector<CubatureRow> cubatures;
   std::vector<std::vector<std::string>> table{
       {"variant", "method", "step", "time s", "max distance m", "RMS distance m", "max displacement m"}};
-  for (const ExperimentSetup& setup : setups)
-  {
+  auto write = [&] {
+    std::ofstream out = openCsv(o, "accuracy_" + o.tag + "_error.csv");
+    writeErrorCsv(out, errors);
+    if (!cubatures.empty())
+    {
+      std::ofstream cubature_out = openCsv(o, "accuracy_" + o.tag + "_cubature.csv");
+      writeCubatureCsv(cubature_out, cubatures);
+    }
+    if (o.accuracy.snapshots)
+    {
+      std::ofstream snap = openCsv(o, "accuracy_" + o.tag + "_snapshots.csv");
+      writeSnapshotCsv(snap, Grid(setups.front().grid), snapshots);
+    }
+  };
+  auto run = [&](const ExperimentSetup& setup) {
     const AccuracyResult result = runAccuracy(setup, o.accuracy, std::ref(progress));
     errors.insert(errors.end(), result.errors.begin(), result.errors.end());
     errors.insert(errors.end(), result.reference_check.begin(), result.reference_check.end());
@@ -758,19 +933,8 @@ void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>&
         table.push_back({e.variant, e.method, std::to_string(e.step), fmt(e.time), fmt(e.max_distance),
                          fmt(e.rms_distance), fmt(e.max_displacement)});
     }
-  }
-  std::ofstream out = openCsv(o, "accuracy_" + o.tag + "_error.csv");
-  writeErrorCsv(out, errors);
-  if (!cubatures.empty())
-  {
-    std::ofstream cubature_out = openCsv(o, "accuracy_" + o.tag + "_cubature.csv");
-    writeCubatureCsv(cubature_out, cubatures);
-  }
-  if (o.accuracy.snapshots)
-  {
-    std::ofstream snap = openCsv(o, "accuracy_" + o.tag + "_snapshots.csv");
-    writeSnapshotCsv(snap, Grid(setups.front().grid), snapshots);
-  }
+  };
+  runEachSetup(o, "accuracy", setups, run, write);
   printTable("accuracy (" + o.tag + "): distance to " + reference + " every " + std::to_string(o.accuracy.interval) +
                  " steps",
              table);
@@ -822,8 +986,18 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
   std::vector<ErrorSample> errors;
   std::vector<Snapshot> snapshots;
   std::vector<std::string> messages;
-  for (const ExperimentSetup& setup : setups)
-  {
+  auto write = [&] {
+    std::ofstream out = openCsv(o, "handles_" + o.tag + "_error.csv");
+    writeErrorCsv(out, errors);
+    std::ofstream summary_out = openCsv(o, "handles_" + o.tag + "_summary.csv");
+    writeAccuracySummaryCsv(summary_out, summarizeAccuracy(errors));
+    if (o.accuracy.snapshots)
+    {
+      std::ofstream snap = openCsv(o, "handles_" + o.tag + "_snapshots.csv");
+      writeSnapshotCsv(snap, Grid(setups.front().grid), snapshots);
+    }
+  };
+  auto run = [&](const ExperimentSetup& setup) {
     AccuracyOptions options = o.accuracy;
     options.steps = handleSteps(o, setup);
     options.interval = handleSteps(o, setup, true);
@@ -845,17 +1019,9 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
       std::cout << "; reference full, explicit, dt = " << fmt(o.accuracy.reference_time_step)
                 << " s, against dt / 2: largest RMS distance " << fmt(result.reference_check_max_rms) << " m";
     std::cout << "\n";
-  }
-  std::ofstream out = openCsv(o, "handles_" + o.tag + "_error.csv");
-  writeErrorCsv(out, errors);
+  };
+  runEachSetup(o, "handles", setups, run, write);
   const std::vector<AccuracySummary> summaries = summarizeAccuracy(errors);
-  std::ofstream summary_out = openCsv(o, "handles_" + o.tag + "_summary.csv");
-  writeAccuracySummaryCsv(summary_out, summaries);
-  if (o.accuracy.snapshots && !setups.empty())
-  {
-    std::ofstream snap = openCsv(o, "handles_" + o.tag + "_snapshots.csv");
-    writeSnapshotCsv(snap, Grid(setups.front().grid), snapshots);
-  }
   std::vector<std::vector<std::string>> table{
       {"scenario", "method", "mean RMS m", "largest RMS m", "RMS at the end m", "step us (median)"}};
   for (const AccuracySummary& s : summaries)
@@ -872,15 +1038,22 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
 void runStabilityExperiment(const Options& o, const std::vector<ExperimentSetup>& setups, Progress& progress)
 {
   std::vector<std::vector<StabilityRow>> per_setup;
-  for (const ExperimentSetup& setup : setups)
-    per_setup.push_back(runStability(setup, o.stability, std::ref(progress)));
+  std::vector<StabilityRow> rows;
+  auto write = [&] {
+    rows.clear();
+    for (const auto& part : per_setup)
+      rows.insert(rows.end(), part.begin(), part.end());
+    std::ofstream out = openCsv(o, "stability_" + o.tag + ".csv");
+    writeStabilityCsv(out, rows);
+  };
+  runEachSetup(
+      o, "stability", setups,
+      [&](const ExperimentSetup& setup) { per_setup.push_back(runStability(setup, o.stability, std::ref(progress))); },
+      write);
   const std::vector<std::string> checks =
       o.check_factor > 0.0 ? checkImplicitAtFactor(o, setups, per_setup) : std::vector<std::string>{};
-  std::vector<StabilityRow> rows;
-  for (const auto& part : per_setup)
-    rows.insert(rows.end(), part.begin(), part.end());
-  std::ofstream out = openCsv(o, "stability_" + o.tag + ".csv");
-  writeStabilityCsv(out, rows);
+  if (!checks.empty())
+    write();
   std::vector<std::vector<std::string>> table{{"variant", "method", "largest stable dt s", "diverges at s", "trials",
                                                "2/omega (highest mode)", "2/omega (K(x0), all dofs)",
                                                "stable windows above s"}};
@@ -920,6 +1093,10 @@ int main(int argc, char** argv)
       handle_setups = handleSetups(options, setups, scenarios);
       validateHandleSetups(options, handle_setups);
     }
+    checkOutputNames(options);
+    if (options.runs("accuracy") || options.runs("stability"))
+      buildEverySetup(options, setups);
+    buildEverySetup(options, handle_setups);
     prepareOutput(options);
   }
   catch (const std::bad_alloc&)

@@ -38,6 +38,9 @@ def cases(configs):
             "handle_scenarios:\n  - name: lift\n    handles:\n      - particles: [0, 1, 2, 3]\n"
             "        translation: [0, 0, 0.1]\n")
 
+    cloth = (pathlib.Path(configs) / "held_cloth.yaml").read_text()
+    cloth = cloth[:cloth.index("handle_scenarios:")]
+
     table = [
         # ------------------------------------------------ the command line
         Case("no_config", ["--quiet", "--output", OUT, "--experiment", "accuracy"], "--config"),
@@ -229,6 +232,20 @@ def cases(configs):
                "--experiment", "handles"),
         config("handles_angle_too_large", held + "        rotation_deg: 361\n", "rotation_deg",
                "--experiment", "handles"),
+        # every setup of every scenario and variant is built before the first run: refused in seconds
+        # held_cloth's 20 x 20 cloth by two 2 x 2 corner grips: no constraint modes at its equilibrium
+        config("handles_scenario_that_cannot_be_built", cloth + "handle_scenarios:\n"
+               "  - {name: lift, handles: [{particles: [0, 1, 2, 3], translation: [0, 0, 0.1]}]}\n"
+               "  - {name: corners, handles: [{particles: [0, 1, 20, 21]}, {particles: [18, 19, 38, 39]}]}\n",
+               "corners", "--experiment", "handles"),
+        config("handles_move_shorter_than_its_steps", held + "    move_time: 1e-12\n", "move_time",
+               "--experiment", "handles"),
+        setting("cubature_pose_size", "1e-300"),
+        tool("vary_cubature_pose_size_overflowing", "cubature_pose_size=1e200", "--experiment", "accuracy",
+             "--vary", "cubature_pose_size=0.4,1e200"),
+        tool("tag_too_long", "--tag", "--tag", "t" * 250),
+        tool("results_beyond_memory", "--steps", "--experiment", "accuracy", "--steps", "100000000",
+             "--sample", "1", "--interval", "1000"),
         # also refused when another experiment runs: the config is read whole
         config("handles_bad_in_accuracy_run", held.replace("name: lift", "name: 'lift,now'"),
                "handle_scenarios[0].name", "--experiment", "accuracy"),

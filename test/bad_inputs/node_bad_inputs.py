@@ -53,6 +53,7 @@ CASES = [
     ({"num_modes": 60}, [], ["num_modes"]),
     ({"alpha": -1.0}, [], ["alpha"]),
     ({"beta": -1.0}, [], ["beta"]),
+    ({"alpha": 1e6}, [], ["alpha"]),  # the explicit integrator's damping bound, alpha * time_step <= 2
     ({"time_step": 0.0}, [], ["time_step"]),
     ({"time_step": -0.001}, [], ["time_step"]),
     ({"divergence_limit": -1.0}, [], ["divergence_limit"]),

@@ -12,6 +12,7 @@
 #include <functional>
 #include <fstream>
 #include <string>
+#include <sys/stat.h>
 #include <unistd.h>
 #include <vector>
 
@@ -208,6 +209,27 @@ TEST_F(CacheTest, CorruptTruncatedAndOtherVersionFilesAreRejectedAndRebuilt)
     EXPECT_TRUE(warnings_.empty());
     ASSERT_EQ(fs::file_size(file), size);
   }
+}
+
+// An entry that is a directory or a FIFO is skipped with a warning naming it: never opened (a FIFO
+// would block the reader, a directory read as a file asks for a huge buffer), the run goes on.
+TEST_F(CacheTest, EntriesThatAreNotRegularFilesAreSkippedWithAWarning)
+{
+  const auto first = build(sheet(), sheetParams(), options());
+  const std::string basis_file = first->cacheReport().basis_file;
+  const std::string cubature_file = first->cacheReport().cubature_file;
+  ASSERT_FALSE(cubature_file.empty());
+  fs::remove(basis_file);
+  fs::create_directory(basis_file);
+  fs::remove(cubature_file);
+  ASSERT_EQ(::mkfifo(cubature_file.c_str(), 0600), 0);
+  warnings_.clear();
+  const auto rebuilt = build(sheet(), sheetParams(), options());
+  EXPECT_FALSE(rebuilt->cacheReport().basis_loaded);
+  EXPECT_FALSE(rebuilt->cacheReport().cubature_loaded);
+  EXPECT_TRUE(mentions(warnings_, basis_file, "not a regular file"));
+  EXPECT_TRUE(mentions(warnings_, cubature_file, "not a regular file"));
+  expectSamePrecomputation(*first, *rebuilt);
 }
 
 TEST_F(CacheTest, AChangedParameterMissesTheOldEntryAndAFileOfOtherParametersIsRejected)

@@ -413,6 +413,23 @@ TEST(Cubature, PosesWhoseForcesOverflowAreRefusedNotTrainedToZeroError)
   EXPECT_FALSE(sim.step().diverged);
 }
 
+TEST(Cubature, PosesTooSmallForAnyForceAreRefusedNotTrainedToNoSprings)
+{
+  // 1e-300 m poses: every spring's force change underflows to zero. The training refuses by name
+  // instead of a cubature of no springs at 0% error (which then diverges), and the cache gets nothing.
+  SimulationParams s = paperParams(Method::Cubature, 4);
+  s.cubature_pose_size = 1e-300;
+  try
+  {
+    Simulation sim(paper2D(), s);
+    ADD_FAILURE() << "trained a cubature of " << sim.cubature()->springs.size() << " springs";
+  }
+  catch (const std::runtime_error& error)
+  {
+    EXPECT_TRUE(contains(error.what(), "cubature_pose_size = 1e-300 m")) << error.what();
+  }
+}
+
 TEST(Cubature, TrainingIsReproducibleAndStopsAtMaxSprings)
 {
   SimulationParams s = paperParams(Method::Cubature, 30);

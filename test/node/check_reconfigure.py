@@ -71,7 +71,8 @@ class LiveDamping(unittest.TestCase):
         client = Client(NODE, timeout=30)
         start = client.get_configuration(timeout=30)
         for change in ({"num_modes": 0}, {"num_modes": 100}, {"mass": -1.0}, {"real_time_factor": 0.0},
-                       {"publish_rate": 5000.0}, {"strain_scale": -0.1}, {"beta": -1.0}):
+                       {"publish_rate": 5000.0}, {"strain_scale": -0.1}, {"beta": -1.0}, {"alpha": math.inf},
+                       {"structural_stiffness": math.inf}):
             result = client.update_configuration(change)
             for name in change:
                 self.assertEqual(result[name], start[name], "%s was not refused" % change)
@@ -81,6 +82,12 @@ class LiveDamping(unittest.TestCase):
         got = subprocess.run(["rosrun", "dynamic_reconfigure", "dynparam", "get", NODE], stdout=subprocess.PIPE,
                              stderr=subprocess.STDOUT, text=True, timeout=60)
         self.assertIn("'structural_stiffness': %r" % start["structural_stiffness"], got.stdout, run.stdout + got.stdout)
+        # inf is refused by the node, not clamped to a limit on the way.
+        run = subprocess.run(["rosrun", "dynamic_reconfigure", "dynparam", "set", NODE, "alpha", "inf"],
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=60)
+        got = subprocess.run(["rosrun", "dynamic_reconfigure", "dynparam", "get", NODE], stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT, text=True, timeout=60)
+        self.assertIn("'alpha': %r" % start["alpha"], got.stdout, run.stdout + got.stdout)
         # Nothing was rebuilt: the node runs on, never REBUILDING.
         recorder = Recorder(NODE + "/status", Status)
         time.sleep(1.0)

@@ -607,6 +607,89 @@ TEST(HandleFrames, ParticlesFollowTheirFrame)
   EXPECT_LT((x - expected(first, first)).norm(), 1e-12) << "a reset puts them back at the start";
 }
 
+// On a 2D grid a frame that turns out of the x-z plane is refused, whatever the formulation: the
+// particles hold where they are (they would be projected onto the plane, onto one point) and the
+// status says why. A turn about y is followed.
+TEST(HandleFrames, A2DGridRefusesAFrameTurnedOutOfItsPlane)
+{
+  GridParams grid_params;
+  grid_params.rows = 3;
+  grid_params.cols = 3;
+  grid_params.dimension = 2;
+  grid_params.fixed = {2};
+  grid_params.handles = {{0, 1}};
+  const Grid grid(grid_params);
+  HandleFrames frames({{"gripper", {0, 1}}}, grid, grid.initialPositions(), Eigen::Vector3d::Zero());
+  FramePose start;
+  frames.setTargets({start});
+  frames.finishTick(1.0);
+  Eigen::VectorXd x0, x, v, a;
+  frames.motion(0.1, 1.0, x0, v, a);
+
+  FramePose turned;
+  turned.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitZ()));
+  frames.setTargets({turned});
+  EXPECT_NE(frames.status().find("held: frame 'gripper' refused: it turns out of the 2D grid's x-z plane"),
+            std::string::npos) << frames.status();
+  ASSERT_EQ(frames.refusals().size(), 1u);
+  frames.motion(0.1, 1.0, x, v, a);
+  EXPECT_LT((x - x0).norm(), 1e-12) << "held where they were";
+  EXPECT_LT(v.norm(), 1e-12);
+  frames.finishTick(1.0);
+  frames.setTargets({turned});
+  EXPECT_FALSE(frames.status().empty()) << "an out-of-plane pose is refused however long it stays";
+
+  FramePose about_y;
+  about_y.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(0.5, Eigen::Vector3d::UnitY()));
+  frames.setTargets({about_y});
+  EXPECT_EQ(frames.status(), "");
+  frames.motion(0.1, 1.0, x, v, a);
+  EXPECT_GT((x - x0).norm(), 1e-3) << "a turn about y is followed";
+}
+
+// A frame that flips 180 degrees at every tick is refused and its particles hold still (a broken
+// broadcaster, or faster than any cloth follows); a large turn that stays is a new grip: no jump, and
+// the particles follow the frame from there.
+TEST(HandleFrames, AFlippingFrameIsHeldAndALargeTurnThatStaysIsGrippedAnew)
+{
+  GridParams grid_params;
+  grid_params.rows = 3;
+  grid_params.cols = 3;
+  grid_params.dimension = 3;
+  grid_params.handles = {{0, 2}};
+  const Grid grid(grid_params);
+  HandleFrames frames({{"gripper", {0, 2}}}, grid, grid.initialPositions(), Eigen::Vector3d::Zero());
+  FramePose upright, flipped;
+  flipped.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(3.14159, Eigen::Vector3d::UnitX()));
+  frames.setTargets({upright});
+  frames.finishTick(1.0);
+  Eigen::VectorXd x0, x, v, a;
+  frames.motion(0.1, 1.0, x0, v, a);
+  for (int tick = 0; tick < 6; ++tick)
+  {
+    frames.setTargets({tick % 2 ? upright : flipped});
+    frames.motion(0.1, 1.0, x, v, a);
+    EXPECT_LT((x - x0).norm(), 1e-12) << tick;
+    EXPECT_LT(v.norm() + a.norm(), 1e-12) << tick;
+    frames.finishTick(1.0);
+  }
+  frames.setTargets({flipped});
+  EXPECT_NE(frames.status().find("refused: it turned 180 degrees since the last tick"), std::string::npos)
+      << frames.status();
+  frames.finishTick(1.0);
+  frames.setTargets({flipped});  // it stays: gripped anew where the particles are
+  EXPECT_EQ(frames.status(), "");
+  frames.motion(0.1, 1.0, x, v, a);
+  EXPECT_LT((x - x0).norm(), 1e-12) << "a new grip does not move the particles";
+  frames.finishTick(1.0);
+  FramePose moved = flipped;
+  moved.translation = Eigen::Vector3d(0.1, 0.0, 0.0);
+  frames.setTargets({moved});
+  frames.motion(0.1, 1.0, x, v, a);
+  for (int p = 0; p < 2; ++p)
+    EXPECT_NEAR(x[3 * p] - x0[3 * p], 0.1, 1e-12) << "and they follow the frame from there";
+}
+
 // The one frame's motion for the moving-frame formulation moves the handle particles exactly as
 // motion() does: the same lookups, the same interpolation, in grid coordinates.
 TEST(HandleFrames, OneFrameMotionIsTheParticlesMotion)

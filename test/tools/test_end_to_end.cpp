@@ -328,7 +328,8 @@ TEST_F(ModalCompareTool, BadHandleScenariosStopBeforeAnyWorkWithAMessageNamingTh
   EXPECT_NE(r.output.find("'handle_scenarios'"), std::string::npos) << r.output;
 }
 
-// Item 1: when the memory estimate passes but the machine cannot give the memory, the tool says so.
+// When the memory estimate passes but the machine cannot give the memory, the tool says so: while it
+// builds every setup before the first run, as bad input (exit code 2).
 TEST_F(ModalCompareTool, OutOfMemoryIsAClearMessageNotACrash)
 {
 #ifdef __SANITIZE_ADDRESS__
@@ -338,8 +339,59 @@ TEST_F(ModalCompareTool, OutOfMemoryIsAClearMessageNotACrash)
   const CommandResult r = run("ulimit -v 300000; " + tool("--config " + config("paper_2d.yaml") +
                                                            " --set rows=1000 --set cols=1000 --set memory_limit_gb=100"
                                                            " --experiment accuracy --steps 10 --interval 10 --sample 10"));
-  EXPECT_EQ(r.status, 1) << r.output;  // run() maps a signal to -1
+  EXPECT_EQ(r.status, 2) << r.output;  // run() maps a signal to -1
   EXPECT_NE(r.output.find("out of memory"), std::string::npos) << r.output;
+}
+
+// A failure late in a run (here the machine's memory, taken by the second variant's snapshots of
+// every particle at every step) names the variant and the cause, and the first variant's results,
+// finished before it, are written.
+TEST_F(ModalCompareTool, AFailureLateInARunKeepsWhatFinishedBeforeIt)
+{
+#ifdef __SANITIZE_ADDRESS__
+  GTEST_SKIP() << "AddressSanitizer's shadow memory does not fit under ulimit -v; the plain build runs this test";
+#endif
+  const CommandResult r = run("ulimit -v 500000; " + tool("--config " + config("paper_2d.yaml") +
+                                                           " --set cols=100 --set memory_limit_gb=100 --vary rows=5,100"
+                                                           " --experiment accuracy --steps 1000 --interval 1 --sample 1"
+                                                           " --methods linear"));
+  EXPECT_EQ(r.status, 1) << r.output;
+  EXPECT_NE(r.output.find("accuracy experiment, variant 'rows=100': out of memory"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("the results of the 1 accuracy setup(s) finished before it are written"), std::string::npos)
+      << r.output;
+  std::ifstream in(dir_ / "data" / "accuracy_paper_2d_error.csv");
+  ASSERT_TRUE(in) << r.output;
+  std::string line;
+  int first = 0, second = 0;
+  while (std::getline(in, line))
+  {
+    first += line.rfind("rows=5,linear,", 0) == 0;
+    second += line.rfind("rows=100,", 0) == 0;
+  }
+  EXPECT_EQ(first, 1001);
+  EXPECT_EQ(second, 0);
+}
+
+// A parameter the handles experiment needs (the moving frame holds one handle) is checked on its
+// scenarios, not on the config's setup without handles: one scenario with one handle runs, and a
+// scenario with two handles is refused by name before anything runs.
+TEST_F(ModalCompareTool, HandleFormulationIsCheckedOnTheScenariosThatRunIt)
+{
+  std::string one = kHeldSheet;
+  one = one.substr(0, one.find("  - name: apart"));
+  std::ofstream(dir_ / "one.yaml") << one;
+  const CommandResult r = run(tool("--config " + (dir_ / "one.yaml").string() +
+                                   " --experiment handles --set handle_formulation=moving_frame --methods linear"));
+  ASSERT_EQ(r.status, 0) << r.output;
+  EXPECT_TRUE(fs::exists(dir_ / "data" / "handles_one_summary.csv")) << r.output;
+  fs::remove_all(dir_ / "data");
+
+  std::ofstream(dir_ / "two.yaml") << kHeldSheet;
+  const CommandResult two = run(tool("--config " + (dir_ / "two.yaml").string() +
+                                     " --experiment handles --set handle_formulation=moving_frame --methods linear"));
+  EXPECT_EQ(two.status, 2) << two.output;
+  EXPECT_NE(two.output.find("(apart): invalid parameter 'handle_formulation'"), std::string::npos) << two.output;
+  EXPECT_FALSE(fs::exists(dir_ / "data")) << two.output;
 }
 
 TEST_F(ModalCompareTool, PlottingScriptRefusesACsvWithoutItsColumns)

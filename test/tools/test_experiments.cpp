@@ -283,6 +283,29 @@ TEST(Accuracy, ConvergedReferenceMeasuresFullAndTheModalMethodsAlike)
   EXPECT_THROW(runAccuracy(setup, options), std::invalid_argument);
 }
 
+// A method that diverged before its first sample after step 0 has no error to report: its means are
+// NaN (printed "-", an empty CSV field), never 0, which would read as perfect agreement.
+TEST(Accuracy, SummaryOfAMethodDivergedBeforeItsFirstSampleIsNotZero)
+{
+  std::vector<ErrorSample> rows;
+  for (long step : {0L, 10L, 20L})
+  {
+    ErrorSample e;
+    e.variant = "base";
+    e.method = "linear";
+    e.step = step;
+    e.diverged = step > 0;
+    rows.push_back(e);
+  }
+  const std::vector<AccuracySummary> summary = summarizeAccuracy(rows);
+  ASSERT_EQ(summary.size(), 1u);
+  EXPECT_TRUE(summary[0].diverged);
+  EXPECT_TRUE(std::isnan(summary[0].mean_rms));
+  EXPECT_TRUE(std::isnan(summary[0].max_rms));
+  EXPECT_TRUE(std::isnan(summary[0].mean_max));
+  EXPECT_TRUE(std::isnan(summary[0].final_rms));
+}
+
 // The number of reference substeps is checked before it is converted to int.
 TEST(Accuracy, ReferenceSubstepsRefusesRatiosBeyondItsLimit)
 {
