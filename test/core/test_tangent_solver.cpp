@@ -2,6 +2,7 @@
 // implicit step used before them), on single solves and on whole implicit steps of grids with slack and
 // compressed springs and with handles; and the pattern-keeping tangent assembly against the one from
 // triplets.
+#include "modal_mass_spring/equilibrium.h"
 #include "modal_mass_spring/force_model.h"
 #include "modal_mass_spring/integrator.h"
 #include "modal_mass_spring/spring_forces.h"
@@ -11,7 +12,9 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <stdexcept>
 #include <string>
+#include <vector>
 
 using namespace modal_mass_spring;
 
@@ -203,4 +206,36 @@ TEST(TangentSolver, ANonConvergingStepIsStillSplitOrRefused)
     ImplicitNewmark refused(massDamping(grid, 0.5), 0.05, 1, -0.1, 1e-9, kind);
     EXPECT_FALSE(refused.step(model, state, next)) << name(kind);
   }
+}
+
+TEST(Equilibrium, TellsItsProgressAndNamesItsIterationLimit)
+{
+  const Grid grid(cloth(12));
+  std::vector<double> residuals;
+  double target = 0.0;
+  const Equilibrium found = solveEquilibrium(grid, grid.initialPositions(), 1000, 1e-9,
+                                             [&](int iteration, double residual, double goal) {
+                                               EXPECT_EQ(iteration, static_cast<int>(residuals.size()));
+                                               residuals.push_back(residual);
+                                               target = goal;
+                                             });
+  ASSERT_EQ(static_cast<int>(residuals.size()), found.iterations + 1);
+  ASSERT_GT(found.iterations, 2);
+  EXPECT_EQ(residuals.back(), found.residual);
+  EXPECT_LE(found.residual, target);
+  EXPECT_GT(residuals.front(), 1e3 * target);  // the flat sheet hangs far from balance
+
+  // Two iterations are not enough: refused, saying the limit stopped it, after telling both.
+  residuals.clear();
+  try
+  {
+    solveEquilibrium(grid, grid.initialPositions(), 2, 1e-9,
+                     [&](int, double residual, double) { residuals.push_back(residual); });
+    FAIL() << "two iterations found the equilibrium";
+  }
+  catch (const std::runtime_error& e)
+  {
+    EXPECT_NE(std::string(e.what()).find("Newton stopped after 2 iterations (its limit)"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(residuals.size(), 2u);
 }
