@@ -354,6 +354,26 @@ BENCHMARK(BM_ImplicitFullSolver)->ArgsProduct({{50}, {0, 1, 2, 3, 4}})->Iteratio
 BENCHMARK(BM_ImplicitFullSolver)->ArgsProduct({{100}, {0, 1, 2, 3, 4}})->Iterations(100)->Unit(benchmark::kMillisecond);
 BENCHMARK(BM_ImplicitFullSolver)->ArgsProduct({{200}, {0, 1, 2, 3, 4}})->Iterations(20)->Unit(benchmark::kMillisecond);
 
+// The hanging equilibrium of a 100 x 100 cloth (0.99 m, top row fixed, bending springs of a tenth of
+// the structural stiffness, shear 0.4 of it) of range(0) grams in all with range(1) N/m structural springs,
+// from the flat sheet: what a start with linearization 'equilibrium' solves first.
+void BM_Equilibrium100(benchmark::State& state)
+{
+  GridParams g = swingingCloth(100);
+  g.rotation_deg = 0.0;
+  g.mass = 1e-3 * static_cast<double>(state.range(0)) / (100 * 100);
+  g.structural_stiffness = static_cast<double>(state.range(1));
+  g.shear_stiffness = 0.4 * g.structural_stiffness;
+  g.bending_stiffness = 0.1 * g.structural_stiffness;
+  const Grid grid(g);
+  Equilibrium found;
+  for (auto _ : state)
+    found = solveEquilibrium(grid, grid.initialPositions());
+  state.counters["newton_iterations"] = found.iterations;
+  state.counters["residual_N"] = found.residual;
+}
+BENCHMARK(BM_Equilibrium100)->ArgsProduct({{200, 2000, 5000}, {50, 300, 1000}})->Iterations(1)->Unit(benchmark::kSecond);
+
 // The cubature's training alone, on the basis of a sheet (built once, outside the timing), with the
 // size of T and the errors it reached as counters.
 void BM_TrainCubature(benchmark::State& state)
