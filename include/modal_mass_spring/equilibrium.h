@@ -5,6 +5,8 @@
 
 #include <Eigen/Core>
 
+#include <functional>
+
 namespace modal_mass_spring
 {
 
@@ -23,8 +25,11 @@ struct Equilibrium
 // component is below `tolerance` times one particle's weight, or, once the line search can make no
 // more progress (round-off), below its square root; never below ten times the round-off of the
 // spring forces (about stiffness x coordinates x machine epsilon), which on stiff grids is the
-// larger. Throws std::runtime_error otherwise.
+// larger. Throws std::runtime_error otherwise, saying whether the iteration limit stopped it.
+// `progress`, when given, is told each iteration's number, its largest unbalanced force and the
+// target (N) before the iteration, so that a slow solve can be reported.
+using EquilibriumProgress = std::function<void(int iteration, double residual, double target)>;
 Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int max_iterations = 1000,
-                             double tolerance = 1e-9);
+                             double tolerance = 1e-9, const EquilibriumProgress& progress = {});
 
 }  // namespace modal_mass_spring

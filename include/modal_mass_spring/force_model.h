@@ -3,8 +3,11 @@
 
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/modal_basis.h"
+#include "modal_mass_spring/spring_forces.h"
 
 #include <Eigen/Core>
+
+#include <memory>
 
 namespace modal_mass_spring
 {
@@ -81,6 +84,7 @@ private:
   const Grid& grid_;
   Eigen::VectorXd x_ref_, x_, f_all_;
   EnergyCache cache_;
+  std::unique_ptr<TangentAssembler> assembler_;  // built at the first tangent (explicit steps need none)
 };
 
 // A force model in modal coordinates: X = 0 stands for a reference configuration that a method

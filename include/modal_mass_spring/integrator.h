@@ -4,6 +4,7 @@
 
 #include "modal_mass_spring/force_model.h"
 #include "modal_mass_spring/spring_forces.h"
+#include "modal_mass_spring/tangent_solver.h"
 
 #include <Eigen/Core>
 #include <Eigen/SparseCholesky>
@@ -80,15 +81,6 @@ private:
   Eigen::VectorXd force_, rhs_, gyroscopic_force_, velocity_;
 };
 
-// The sparsity pattern a factorisation was analysed for, so that it is analysed again only when the
-// pattern changes.
-struct SparsityPattern
-{
-  std::vector<int> outer, inner;
-  // True, and `m`'s pattern recorded, when it differs from the one recorded.
-  bool changedTo(const SparseMatrix& m);
-};
-
 // Implicit Newmark with the Hilber-Hughes-Taylor alpha: each step solves
 //   R(q') = M a' + (1 + alpha) (C v' - F(q')) - alpha (C v - F(q)) = 0,
 // beta = (1 - alpha)^2 / 4, gamma = 1/2 - alpha, by Newton with the tangent
@@ -104,20 +96,26 @@ class ImplicitNewmark : public Integrator
 {
 public:
   ImplicitNewmark(MassDamping system, double dt, int max_iterations = 50, double hht_alpha = 0.0,
-                  double tolerance = 1e-9);
+                  double tolerance = 1e-9, TangentSolverKind linear_solver = TangentSolverKind::JacobiCg);
+  // The symmetric tangents' solver, for its counters.
+  const TangentSolver& linearSolver() const { return linear_solver_; }
   bool step(ForceModel& model, const State& state, State& next) override;
   int lastIterations() const override { return last_iterations_; }
   int lastSubsteps() const override { return substeps_; }
 
 private:
   static constexpr int kMaxHalvings = 4;
+  static constexpr double kForcing = 1e-3;  // an inexact Newton direction's relative linear residual
   void setStepSize(double h);
   bool advance(ForceModel& model, const State& s, State& next, double h, int depth);
   // One Newton solve of a step of size h_.
   bool solve(ForceModel& model, const State& s, State& next);
-  // The Newton direction -J^-1 R at next.q (empty when J cannot be factorised).
-  Eigen::VectorXd direction(ForceModel& model, const State& next, bool symmetric);
+  // The Newton direction -J^-1 R at next.q (empty when J cannot be factorised); with a symmetric J it
+  // may leave a residual |R + J delta| up to `slack`.
+  Eigen::VectorXd direction(ForceModel& model, const State& next, bool symmetric, double slack);
   void gyroscopicChanged() override;
+  // jacobian_ <- inertia_factor inertia_ + tangent_factor tangent_
+  void assembleJacobian(double inertia_factor, double tangent_factor);
   // a' and v' that the Newmark relations give for a trial q'.
   void kinematics(const State& s, State& next) const;
   // Sets next.v, next.a from next.q, stores R(q') in residual_ and returns its norm.
@@ -132,12 +130,17 @@ private:
   int substeps_ = 0;
   double h_ = 0.0;             // the step size being solved
   SparseMatrix mass_matrix_;
-  Eigen::SimplicialLDLT<SparseMatrix> ldlt_;
+  TangentSolver linear_solver_;
   Eigen::SparseLU<SparseMatrix> lu_;
-  SparsityPattern ldlt_pattern_, lu_pattern_;  // what ldlt_ and lu_ were analysed for
+  SparsityPattern lu_pattern_;  // what lu_ was analysed for
   SparseMatrix damping_;  // C + G
   SparseMatrix inertia_;  // M / (beta h^2) + (1 + alpha) gamma / (beta h) (C + G)
-  SparseMatrix tangent_;
+  SparseMatrix tangent_, jacobian_;
+  // The inertia's values at their places in the tangent's pattern, when it holds them (the full model),
+  // so that J is assembled without a sparse sum; for the tangent pattern recorded.
+  SparsityPattern tangent_pattern_;
+  Eigen::VectorXd inertia_on_tangent_;
+  bool inertia_mapped_ = false, inertia_fits_ = false;
   Eigen::VectorXd force_, residual_;
   Eigen::VectorXd old_terms_;  // alpha (C v - F(q)): the HHT part of R from the start of the step
   Eigen::VectorXd predicted_;  // y = q + h v + h^2 (1/2 - beta) a: q' = y + beta h^2 a

@@ -2,8 +2,7 @@
 #include "modal_mass_spring/equilibrium.h"
 
 #include "modal_mass_spring/spring_forces.h"
-
-#include <Eigen/SparseCholesky>
+#include "modal_mass_spring/tangent_solver.h"
 
 #include <cmath>
 #include <limits>
@@ -30,7 +29,8 @@ Eigen::VectorXd unbalanced(const Grid& grid, const Eigen::VectorXd& x)
 
 }  // namespace
 
-Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int max_iterations, double tolerance)
+Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int max_iterations, double tolerance,
+                             const EquilibriumProgress& progress)
 {
   const GridParams& p = grid.params();
   // Forces are compared with one particle's weight, or without gravity with a small spring force.
@@ -45,10 +45,15 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
   Equilibrium result;
   result.positions = start;
   Eigen::VectorXd r = unbalanced(grid, start);
-  Eigen::SimplicialLDLT<SparseMatrix> ldlt;
+  // K's pattern never changes: assembled in place, CHOLMOD's analysis done once.
+  const TangentAssembler assembler(grid);
+  TangentSolver solver(TangentSolverKind::Cholmod);
+  SparseMatrix k;
   for (result.iterations = 0; result.iterations < max_iterations; ++result.iterations)
   {
     result.residual = r.cwiseAbs().maxCoeff();
+    if (progress)
+      progress(result.iterations, result.residual, target);
     if (result.residual <= target)
       return result;
 
@@ -58,18 +63,13 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
     Eigen::VectorXd direction;
     for (CompressedSprings compressed : {CompressedSprings::Keep, CompressedSprings::Drop})
     {
-      SparseMatrix k = tangentStiffness(grid, result.positions, compressed);
+      assembler.assemble(result.positions, k, compressed);
       const double regularisation = 1e-8 * k.diagonal().cwiseAbs().maxCoeff();
       for (int i = 0; i < k.rows(); ++i)
         k.coeffRef(i, i) += regularisation;
-      if (result.iterations == 0)
-        ldlt.analyzePattern(k);
-      ldlt.factorize(k);
-      if (ldlt.info() == Eigen::Success && ldlt.vectorD().minCoeff() > 0.0)
-      {
-        direction = ldlt.solve(r);
+      if (solver.solve(k, r, direction, 0.0))
         break;
-      }
+      direction.resize(0);
     }
     if (direction.size() == 0 || !direction.allFinite())
       break;
@@ -108,8 +108,8 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
   if (result.residual <= target)
     return result;
   std::ostringstream msg;
-  msg << "static equilibrium not found: Newton stopped after " << result.iterations
-      << " iterations with an unbalanced force of " << result.residual << " N (tolerance " << target
+  msg << "static equilibrium not found: Newton stopped after " << result.iterations << " iterations"
+      << (result.iterations >= max_iterations ? " (its limit)" : " (no descent left)") << " with an unbalanced force of " << result.residual << " N (tolerance " << target
       << " N, of which the spring forces' round-off is about " << roundoff
       << " N); use linearization 'rest' and initial_state 'initial', which need no equilibrium";
   throw std::runtime_error(msg.str());

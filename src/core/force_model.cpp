@@ -42,7 +42,9 @@ void FullForceModel::force(const Eigen::VectorXd& u, Eigen::VectorXd& f)
 void FullForceModel::tangentStiffness(const Eigen::VectorXd& u, SparseMatrix& k)
 {
   setPositions(u);
-  k = modal_mass_spring::tangentStiffness(grid_, x_);
+  if (!assembler_)
+    assembler_ = std::make_unique<TangentAssembler>(grid_);
+  assembler_->assemble(x_, k);
 }
 
 double FullForceModel::energy(const Eigen::VectorXd& u)

@@ -30,6 +30,26 @@ void springForcesDim(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd
     *energy = 0.5 * twice_energy;
 }
 
+// The spring's Hessian block Ke = k u u^T + k (1 - l0 / l) (I - u u^T); with Drop, a compressed
+// spring's second term is left out and counted in `dropped`.
+template <int Dim>
+Eigen::Matrix<double, Dim, Dim> springHessian(const Spring& s, const Eigen::VectorXd& x, CompressedSprings compressed,
+                                              int& dropped)
+{
+  using Vec = Eigen::Matrix<double, Dim, 1>;
+  using Mat = Eigen::Matrix<double, Dim, Dim>;
+  const Vec d = x.segment<Dim>(Dim * s.j) - x.segment<Dim>(Dim * s.i);
+  const double l = d.norm();
+  const Vec u = d / l;
+  const Mat uu = u * u.transpose();
+  Mat ke = s.stiffness * uu;
+  if (l >= s.rest_length || compressed == CompressedSprings::Keep)
+    ke += s.stiffness * (1.0 - s.rest_length / l) * (Mat::Identity() - uu);
+  else
+    ++dropped;
+  return ke;
+}
+
 template <int Dim>
 SparseMatrix tangentStiffnessDim(const Grid& grid, const Eigen::VectorXd& x, CompressedSprings compressed,
                                  int* num_dropped)
@@ -58,15 +78,7 @@ SparseMatrix tangentStiffnessDim(const Grid& grid, const Eigen::VectorXd& x, Com
 
   for (const Spring& s : grid.springs())
   {
-    const Vec d = x.segment<Dim>(Dim * s.j) - x.segment<Dim>(Dim * s.i);
-    const double l = d.norm();
-    const Vec u = d / l;
-    const Mat uu = u * u.transpose();
-    Mat ke = s.stiffness * uu;
-    if (l >= s.rest_length || compressed == CompressedSprings::Keep)
-      ke += s.stiffness * (1.0 - s.rest_length / l) * (Mat::Identity() - uu);
-    else
-      ++dropped;
+    const Mat ke = springHessian<Dim>(s, x, compressed, dropped);
     addBlock(s.i, s.i, ke, 1.0);
     addBlock(s.j, s.j, ke, 1.0);
     addBlock(s.i, s.j, ke, -1.0);
@@ -173,6 +185,61 @@ SparseMatrix tangentStiffnessDerivative(const Grid& grid, const Eigen::VectorXd&
   if (grid.dimension() == 2)
     return tangentStiffnessDerivativeDim<2>(grid, x, direction);
   return tangentStiffnessDerivativeDim<3>(grid, x, direction);
+}
+
+TangentAssembler::TangentAssembler(const Grid& grid) : grid_(grid)
+{
+  pattern_ = modal_mass_spring::tangentStiffness(grid, grid.initialPositions());
+  pattern_.makeCompressed();
+  const int dim = grid.dimension();
+  slots_.reserve(grid.springs().size() * 4 * dim * dim);
+  // Where entry (row, col) of K lies in its values; -1 for a fixed dof's.
+  auto slot = [&](int row, int col) {
+    if (row < 0 || col < 0)
+      return -1;
+    const int* begin = pattern_.innerIndexPtr() + pattern_.outerIndexPtr()[col];
+    const int* end = pattern_.innerIndexPtr() + pattern_.outerIndexPtr()[col + 1];
+    return static_cast<int>(std::lower_bound(begin, end, row) - pattern_.innerIndexPtr());
+  };
+  for (const Spring& s : grid.springs())
+    for (const auto& [a, b] : {std::pair{s.i, s.i}, std::pair{s.j, s.j}, std::pair{s.i, s.j}, std::pair{s.j, s.i}})
+      for (int c = 0; c < dim; ++c)
+        for (int r = 0; r < dim; ++r)
+          slots_.push_back(slot(grid.freeIndex(dim * a + r), grid.freeIndex(dim * b + c)));
+}
+
+template <int Dim>
+void TangentAssembler::assembleDim(const Eigen::VectorXd& x, SparseMatrix& k, CompressedSprings compressed,
+                                   int& dropped) const
+{
+  using Mat = Eigen::Matrix<double, Dim, Dim>;
+  double* values = k.valuePtr();
+  std::fill(values, values + k.nonZeros(), 0.0);
+  const int* slot = slots_.data();
+  for (const Spring& s : grid_.springs())
+  {
+    const Mat ke = springHessian<Dim>(s, x, compressed, dropped);
+    for (const double sign : {1.0, 1.0, -1.0, -1.0})  // blocks (i, i), (j, j), (i, j), (j, i)
+      for (int c = 0; c < Dim; ++c)
+        for (int r = 0; r < Dim; ++r, ++slot)
+          if (*slot >= 0)
+            values[*slot] += sign * ke(r, c);
+  }
+}
+
+void TangentAssembler::assemble(const Eigen::VectorXd& x, SparseMatrix& k, CompressedSprings compressed,
+                                int* num_dropped) const
+{
+  if (k.rows() != pattern_.rows() || k.nonZeros() != pattern_.nonZeros() || !k.isCompressed() ||
+      !std::equal(pattern_.outerIndexPtr(), pattern_.outerIndexPtr() + pattern_.outerSize() + 1, k.outerIndexPtr()))
+    k = pattern_;
+  int dropped = 0;
+  if (grid_.dimension() == 2)
+    assembleDim<2>(x, k, compressed, dropped);
+  else
+    assembleDim<3>(x, k, compressed, dropped);
+  if (num_dropped)
+    *num_dropped = dropped;
 }
 
 void tangentTimesBasis(const Grid& grid, const Eigen::VectorXd& x, const Eigen::MatrixXd& phi_t,
