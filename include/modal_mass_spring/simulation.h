@@ -116,7 +116,7 @@ class Simulation
 public:
   // Validates both parameter sets (validateParameters) before building anything, then builds the
   // linearization point and the basis, telling on_stage as each stage starts ("equilibrium",
-  // "stiffness", "factorisation", "eigensolver", "modal derivatives" with that basis, and "cubature"
+  // "stiffness", "factorisation", "eigensolver", "modal derivatives" or "skinning" with that basis, and "cubature"
   // when the method is `cubature`). Throws std::invalid_argument naming the offending
   // parameter, std::runtime_error when a stage fails.
   // With a cache directory (CacheOptions), the equilibrium, the bases and the cubature are loaded

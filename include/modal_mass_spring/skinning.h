@@ -11,6 +11,9 @@
 
 #include <Eigen/Core>
 
+#include <random>
+#include <string>
+
 namespace modal_mass_spring
 {
 
@@ -28,7 +31,7 @@ Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int 
 // centroid of xbar (for conditioning; the span does not depend on it).
 Eigen::MatrixXd skinningMap(const Grid& grid, const Eigen::VectorXd& xbar, const Eigen::MatrixXd& weights);
 
-// What building the subspace found, for the start-up report.
+// What building the subspace found, for the start-up report (describeSkinning).
 struct SkinningInfo
 {
   int weights = 0;
@@ -38,6 +41,10 @@ struct SkinningInfo
   int basis_size = 0;         // the interior subspace's dimension (coordinates - rank, less any direction that moves no free dof)
   double seconds = 0.0;
 };
+
+// "skinning: 24 weights, 288 coordinates, 24 of 24 constraint dofs met (fixed and handles), 264 left
+// to the free particles, built in 41 ms"; "... 60 constraint dofs, rank 52: 8 met by least squares ...".
+std::string describeSkinning(const SkinningInfo& info);
 
 struct SkinningBasis
 {
@@ -49,6 +56,19 @@ struct SkinningBasis
   Eigen::MatrixXd constraint_modes;
   SkinningInfo info;
 };
+
+// P = Phi^T M B_i (basis size x coordinates): the M-orthogonal projection of a skinning pose z onto
+// the basis' coordinates, X = P z (handles at rest).
+Eigen::MatrixXd skinningProjection(const Grid& grid, const Eigen::VectorXd& x_ref, const ModalBasis& basis,
+                                   const Eigen::VectorXd& mass, int num_weights);
+
+// `count` cubature training poses (columns of X) that turn the cloth: the whole cloth (the first,
+// constant weight) by a random rotation of up to 180 degrees, every further weight's transform by
+// one of up to 90 / sqrt(j) degrees, projected by P, plus a pose of trainingPoses' law (stretches up
+// to `size`). The rotations of the further weights are halved while a spring would be shortened
+// below kShortestTrainingSpring of its length (the pose would fold the cloth).
+Eigen::MatrixXd skinningTrainingPoses(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref,
+                                      const Eigen::MatrixXd& projection, int count, double size, std::mt19937_64& rng);
 
 // `stiffness` and `mass`: K at x_ref and the diagonal of M on the free dofs. Throws
 // std::invalid_argument naming num_skinning_weights when the span leaves the free particles nothing

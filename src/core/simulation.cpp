@@ -439,7 +439,17 @@ void Simulation::prepareCubature()
   }
   if (cubature_)
     return;
-  cubature_ = trainCubature(grid_, physical_basis_, x_ref_, cubatureParams(params_));
+  // On the skinning span the poses turn the cloth (its motions are large rotations), else the modes'.
+  PoseSampler sampler;
+  if (params_.basis == BasisKind::Skinning)
+  {
+    const Eigen::MatrixXd projection =
+        skinningProjection(grid_, x_ref_, physical_basis_, mass_, params_.num_skinning_weights);
+    sampler = [this, projection](int count, std::mt19937_64& rng) {
+      return skinningTrainingPoses(grid_, physical_basis_, x_ref_, projection, count, params_.cubature_pose_size, rng);
+    };
+  }
+  cubature_ = trainCubature(grid_, physical_basis_, x_ref_, cubatureParams(params_), sampler);
   if (!cache_report_.cubature_file.empty())
     cache_report_.cubature_stored = storeCubature(cache_report_.cubature_file, key, *cubature_, cache_);
 }

@@ -2,13 +2,18 @@
 // subspace with the fixed particles and handles as equality constraints on its coordinates.
 #include "modal_mass_spring/skinning.h"
 
+#include "modal_mass_spring/cubature.h"
 #include "modal_mass_spring/validation.h"
+
+#include <Eigen/Geometry>
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/SVD>
 
 #include <chrono>
+#include <sstream>
 #include <cmath>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -73,6 +78,112 @@ Eigen::MatrixXd skinningMap(const Grid& grid, const Eigen::VectorXd& xbar, const
       }
     }
   return b;
+}
+
+std::string describeSkinning(const SkinningInfo& info)
+{
+  std::ostringstream out;
+  out.precision(3);
+  out << "skinning: " << info.weights << " weights, " << info.coordinates << " coordinates, ";
+  if (info.constraint_rank == info.constraint_dofs)
+    out << info.constraint_dofs << " constraint dofs (fixed and handles) met exactly";
+  else
+    out << info.constraint_dofs << " constraint dofs (fixed and handles) of rank " << info.constraint_rank << ": "
+        << info.constraint_dofs - info.constraint_rank << " met by least squares only";
+  out << ", " << info.basis_size << " left to the free particles, built in " << 1e3 * info.seconds << " ms";
+  return out.str();
+}
+
+Eigen::MatrixXd skinningProjection(const Grid& grid, const Eigen::VectorXd& x_ref, const ModalBasis& basis,
+                                   const Eigen::VectorXd& mass, int num_weights)
+{
+  const Eigen::MatrixXd b = skinningMap(grid, x_ref, skinningWeights(grid, x_ref, num_weights));
+  return basis.phi.transpose() * mass.asDiagonal() * b(grid.freeDofs(), Eigen::all);
+}
+
+namespace
+{
+
+// A rotation by `angle` about a uniformly random axis (3D), or in the grid's plane (2D).
+Eigen::MatrixXd randomRotation(int dim, double angle, std::mt19937_64& rng)
+{
+  if (dim == 2)
+  {
+    Eigen::Matrix2d r;
+    r << std::cos(angle), -std::sin(angle), std::sin(angle), std::cos(angle);
+    return r;
+  }
+  std::normal_distribution<double> normal;
+  Eigen::Vector3d axis(normal(rng), normal(rng), normal(rng));
+  if (axis.norm() == 0.0)
+    axis = Eigen::Vector3d::UnitZ();
+  return Eigen::AngleAxisd(angle, axis.normalized()).toRotationMatrix();
+}
+
+// The smallest ratio of a spring's length at x_ref + u (u on the free dofs) to its length at x_ref.
+double shortestSpringRatio(const Grid& grid, const Eigen::VectorXd& x_ref, const Eigen::VectorXd& u)
+{
+  Eigen::VectorXd x = x_ref;
+  grid.addFree(u, x);
+  const int dim = grid.dimension();
+  double shortest = std::numeric_limits<double>::infinity();
+  for (const Spring& s : grid.springs())
+  {
+    const double before = (x_ref.segment(dim * s.j, dim) - x_ref.segment(dim * s.i, dim)).norm();
+    const double after = (x.segment(dim * s.j, dim) - x.segment(dim * s.i, dim)).norm();
+    shortest = std::min(shortest, after / before);
+  }
+  return shortest;
+}
+
+}  // namespace
+
+Eigen::MatrixXd skinningTrainingPoses(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref,
+                                      const Eigen::MatrixXd& projection, int count, double size, std::mt19937_64& rng)
+{
+  const int dim = grid.dimension();
+  const int per_weight = skinningCoordinatesPerWeight(dim);
+  const Eigen::Index weights = projection.cols() / per_weight;
+  const double pi = 3.14159265358979323846;
+  std::uniform_real_distribution<double> uniform;
+  Eigen::MatrixXd poses = trainingPoses(grid, basis, x_ref, count, size, rng);
+  Eigen::VectorXd z(projection.cols());
+  for (int p = 0; p < count; ++p)
+  {
+    std::vector<double> angles(static_cast<size_t>(weights));
+    for (Eigen::Index j = 0; j < weights; ++j)
+      angles[static_cast<size_t>(j)] = (dim == 2 && uniform(rng) < 0.5 ? -1.0 : 1.0) * uniform(rng) *
+                                       (j == 0 ? pi : 0.5 * pi / std::sqrt(static_cast<double>(j)));
+    std::vector<Eigen::MatrixXd> rotations;
+    for (Eigen::Index j = 0; j < weights; ++j)
+      rotations.push_back(randomRotation(dim, 1.0, rng));  // the axis; the angle is set below
+    for (int halving = 0; halving < 20; ++halving)
+    {
+      z.setZero();
+      for (Eigen::Index j = 0; j < weights; ++j)
+      {
+        const double angle = angles[static_cast<size_t>(j)] * (j == 0 ? 1.0 : std::pow(0.5, halving));
+        Eigen::MatrixXd r;
+        if (dim == 2)
+          r = randomRotation(2, angle, rng);
+        else
+          r = Eigen::AngleAxisd(angle, Eigen::AngleAxisd(Eigen::Matrix3d(rotations[static_cast<size_t>(j)])).axis())
+                  .toRotationMatrix();
+        r -= Eigen::MatrixXd::Identity(dim, dim);
+        for (int a = 0; a < dim; ++a)
+          for (int c = 0; c < dim; ++c)
+            z[j * per_weight + a * (dim + 1) + c] = r(a, c);
+      }
+      const Eigen::VectorXd turned = poses.col(p) + projection * z;
+      // A pose that still folds keeps its stretch alone.
+      if (shortestSpringRatio(grid, x_ref, basis.phi * turned) >= kShortestTrainingSpring)
+      {
+        poses.col(p) = turned;
+        break;
+      }
+    }
+  }
+  return poses;
 }
 
 SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref, const SparseMatrix& stiffness,

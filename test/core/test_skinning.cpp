@@ -13,6 +13,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <random>
 #include <vector>
 
 using namespace modal_mass_spring;
@@ -256,10 +257,48 @@ TEST(Skinning, TurnedHeldClothStaysCloseToFull)
     turnHandles(*sim, kPi / 2, centre, 1.0, 0.5);
   const double skinning_error = rmsFreeDistance(full.grid(), skinning.positions(), full.positions());
   const double modes_error = rmsFreeDistance(full.grid(), modes.positions(), full.positions());
-  std::printf("[ turned held cloth ] RMS distance to full: skinning (24 weights) %.4f m, linear modes (30) %.4f m\n",
+  std::printf("[ turned held cloth ] RMS distance to full: physical on skinning (24 weights) %.4f m, on linear modes "
+              "(30) %.4f m\n",
               skinning_error, modes_error);
   EXPECT_LT(skinning_error, 0.03);
   EXPECT_LT(skinning_error, 0.25 * modes_error);
+}
+
+TEST(Skinning, CubatureTrainsOnPosesThatTurnTheCloth)
+{
+  const int n = 10;
+  const GridParams g = heldCloth(cornerGrips(n), n);
+  SimulationParams s = heldParams(Method::Cubature, BasisKind::Skinning, 6);
+  s.num_modes = 10;
+  Simulation sim(g, s);
+  const Grid& grid = sim.grid();
+  const ModalBasis& basis = sim.physicalBasis();
+  const Eigen::VectorXd mass = Eigen::VectorXd::Constant(grid.numFreeDofs(), g.mass);
+  std::mt19937_64 rng(3);
+  const Eigen::MatrixXd poses = skinningTrainingPoses(
+      grid, basis, sim.linearizationPositions(), skinningProjection(grid, sim.linearizationPositions(), basis, mass, 6),
+      50, s.cubature_pose_size, rng);
+  // The poses turn the cloth: particles move by more than the cloth's half-width (0.225 m), far
+  // beyond what the stretches of the pose size alone would give, and no spring folds.
+  double largest = 0.0, shortest = 1.0;
+  for (Eigen::Index p = 0; p < poses.cols(); ++p)
+  {
+    Eigen::VectorXd x = sim.linearizationPositions();
+    grid.addFree(basis.phi * poses.col(p), x);
+    for (Eigen::Index k = 0; k < x.size(); k += 3)
+      largest = std::max(largest, (x.segment<3>(k) - sim.linearizationPositions().segment<3>(k)).norm());
+    for (const Spring& spring : grid.springs())
+      shortest = std::min(shortest, (x.segment<3>(3 * spring.j) - x.segment<3>(3 * spring.i)).norm() /
+                                        (sim.linearizationPositions().segment<3>(3 * spring.j) -
+                                         sim.linearizationPositions().segment<3>(3 * spring.i))
+                                            .norm());
+  }
+  EXPECT_GT(largest, 0.3);
+  EXPECT_GE(shortest, kShortestTrainingSpring);
+  // The training fits them as it fits the modes' poses, and reports as usual.
+  const Cubature& cubature = *sim.cubature();
+  std::printf("[ skinning cubature ] %s\n", describeCubature(cubature, static_cast<int>(grid.springs().size())).c_str());
+  EXPECT_LT(cubature.heldout_error, 2.0 * s.cubature_tolerance);
 }
 
 TEST(Skinning, BadSizesAreRefusedByName)
