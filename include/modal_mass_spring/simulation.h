@@ -45,7 +45,8 @@ struct SimulationParams
   // The basis of `physical` and `cubature`: the num_modes lowest modes, or those plus
   // num_derivative_modes directions from their modal derivatives (0 unless basis is
   // modal_derivatives), or the skinning subspace of num_skinning_weights weights (0 unless basis is
-  // skinning; see skinning.h). `linear` always keeps the num_modes lowest modes.
+  // skinning; see skinning.h) together with the num_modes modes. `linear` always keeps the num_modes
+  // lowest modes.
   BasisKind basis = BasisKind::LinearModes;
   int num_derivative_modes = 0;
   int num_skinning_weights = 0;

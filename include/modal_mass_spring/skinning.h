@@ -38,12 +38,14 @@ struct SkinningInfo
   int coordinates = 0;        // (dim + 1) dim weights: the transforms' entries
   int constraint_dofs = 0;    // fixed and handle dofs, the equations B_c z = dx_c
   int constraint_rank = 0;    // of B_c: constraint_dofs - constraint_rank of them the span meets only by least squares
-  int basis_size = 0;         // the interior subspace's dimension (coordinates - rank, less any direction that moves no free dof)
+  int modes = 0;              // fixed-interface modes added to the span
+  int basis_size = 0;         // the interior subspace's dimension (coordinates - rank + modes, less dependent directions)
   double seconds = 0.0;
 };
 
-// "skinning: 24 weights, 288 coordinates, 24 of 24 constraint dofs met (fixed and handles), 264 left
-// to the free particles, built in 41 ms"; "... 60 constraint dofs, rank 52: 8 met by least squares ...".
+// "skinning: 24 weights, 288 coordinates, 24 constraint dofs (fixed and handles) met exactly, with 30
+// modes 294 directions for the free particles, built in 41 ms"; "... 60 constraint dofs (fixed and
+// handles) of rank 52: 8 met by least squares only ...".
 std::string describeSkinning(const SkinningInfo& info);
 
 struct SkinningBasis
@@ -70,10 +72,12 @@ Eigen::MatrixXd skinningProjection(const Grid& grid, const Eigen::VectorXd& x_re
 Eigen::MatrixXd skinningTrainingPoses(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref,
                                       const Eigen::MatrixXd& projection, int count, double size, std::mt19937_64& rng);
 
-// `stiffness` and `mass`: K at x_ref and the diagonal of M on the free dofs. Throws
-// std::invalid_argument naming num_skinning_weights when the span leaves the free particles nothing
-// to move.
+// `stiffness` and `mass`: K at x_ref and the diagonal of M on the free dofs. `modes` (free dofs x r,
+// may be empty): interior directions added to the span, the fixed-interface modes, which carry the
+// local bending near a clamp that a few smooth weights cannot. Throws std::invalid_argument naming
+// num_skinning_weights when the span leaves the free particles nothing to move.
 SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref, const SparseMatrix& stiffness,
-                                 const Eigen::VectorXd& mass, int num_weights);
+                                 const Eigen::VectorXd& mass, int num_weights,
+                                 const Eigen::MatrixXd& modes = Eigen::MatrixXd());
 
 }  // namespace modal_mass_spring

@@ -392,6 +392,7 @@ std::optional<Precomputed> loadPrecomputed(const std::string& file, const std::s
   k.constraint_dofs = r.get<std::int32_t>();
   k.constraint_rank = r.get<std::int32_t>();
   k.basis_size = r.get<std::int32_t>();
+  k.modes = r.get<std::int32_t>();
   k.seconds = r.get<double>();
   std::string why = !r.ok() || !r.atEnd() ? "its content does not have the layout of this format version" : "";
   if (why.empty())
@@ -438,7 +439,7 @@ bool storePrecomputed(const std::string& file, const std::string& key, const Pre
   w.put(d.largest_dropped_singular_value);
   w.put(p.skinning_constraint_modes);
   const SkinningInfo& k = p.skinning_info;
-  for (int value : {k.weights, k.coordinates, k.constraint_dofs, k.constraint_rank, k.basis_size})
+  for (int value : {k.weights, k.coordinates, k.constraint_dofs, k.constraint_rank, k.basis_size, k.modes})
     w.put<std::int32_t>(value);
   w.put(k.seconds);
   return writeFile(file, key, w.bytes, options);

@@ -215,7 +215,7 @@ HandleFormulation resolveHandleFormulation(const GridParams& grid, const Simulat
 static double physicalBasisSize(const GridParams& g, const SimulationParams& p)
 {
   if (p.basis == BasisKind::Skinning)
-    return static_cast<double>(skinningCoordinatesPerWeight(g.dimension)) * p.num_skinning_weights;
+    return static_cast<double>(skinningCoordinatesPerWeight(g.dimension)) * p.num_skinning_weights + p.num_modes;
   return static_cast<double>(p.num_modes) + (p.basis == BasisKind::ModalDerivatives ? p.num_derivative_modes : 0);
 }
 
@@ -388,7 +388,7 @@ void Simulation::precompute(const StageFn& on_stage)
     {
       stage("skinning");
       SkinningBasis skinning =
-          buildSkinningBasis(grid_, x_ref_, stiffness_, mass_, params_.num_skinning_weights);
+          buildSkinningBasis(grid_, x_ref_, stiffness_, mass_, params_.num_skinning_weights, data.basis.phi);
       if (!skinning.basis.phi.allFinite() || !skinning.constraint_modes.allFinite())
         throw std::runtime_error("skinning: the subspace is not finite");
       data.physical_basis = std::move(skinning.basis);

@@ -90,7 +90,7 @@ std::string describeSkinning(const SkinningInfo& info)
   else
     out << info.constraint_dofs << " constraint dofs (fixed and handles) of rank " << info.constraint_rank << ": "
         << info.constraint_dofs - info.constraint_rank << " met by least squares only";
-  out << ", " << info.basis_size << " left to the free particles, built in " << 1e3 * info.seconds << " ms";
+  out << ", with " << info.modes << " modes " << info.basis_size << " directions for the free particles, built in " << 1e3 * info.seconds << " ms";
   return out.str();
 }
 
@@ -187,7 +187,7 @@ Eigen::MatrixXd skinningTrainingPoses(const Grid& grid, const ModalBasis& basis,
 }
 
 SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref, const SparseMatrix& stiffness,
-                                 const Eigen::VectorXd& mass, int num_weights)
+                                 const Eigen::VectorXd& mass, int num_weights, const Eigen::MatrixXd& modes)
 {
   const auto start = std::chrono::steady_clock::now();
   const Eigen::MatrixXd b = skinningMap(grid, x_ref, skinningWeights(grid, x_ref, num_weights));
@@ -224,7 +224,15 @@ SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref,
   // free dof dropped), then rotated to diagonalise K (Rayleigh-Ritz): mass is I and Rayleigh damping
   // diagonal, as for the eigenbasis.
   const Eigen::MatrixXd b_i = b(grid.freeDofs(), Eigen::all);
-  const Eigen::MatrixXd interior = b_i * null_space;
+  Eigen::MatrixXd interior(b_i.rows(), null_space.cols() + modes.cols());
+  interior << b_i * null_space, modes;
+  // Unit mass norm each, so that the rank tolerance compares directions, not their scales.
+  for (Eigen::Index k = 0; k < interior.cols(); ++k)
+  {
+    const double norm = std::sqrt(interior.col(k).cwiseAbs2().dot(mass));
+    if (norm > 0.0)
+      interior.col(k) /= norm;
+  }
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> gram(interior.transpose() * mass.asDiagonal() * interior);
   const Eigen::VectorXd& g = gram.eigenvalues();  // ascending
   Eigen::Index kept = 0;
@@ -264,6 +272,7 @@ SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref,
   out.info.constraint_dofs = static_cast<int>(c);
   out.info.constraint_rank = rank;
   out.info.basis_size = static_cast<int>(kept);
+  out.info.modes = static_cast<int>(modes.cols());
   out.info.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   basis.build_seconds = out.info.seconds;
   return out;
