@@ -7,6 +7,7 @@
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/modal_basis.h"
 #include "modal_mass_spring/modal_derivatives.h"
+#include "modal_mass_spring/skinning.h"
 
 #include <Eigen/Core>
 
@@ -22,7 +23,7 @@ struct SimulationParams;
 
 // Bumped whenever the file layout or anything that changes the computed result (the eigensolver, the
 // derivative basis, the training) changes: a file of another version is rebuilt.
-constexpr std::uint32_t kCacheFormatVersion = 3;
+constexpr std::uint32_t kCacheFormatVersion = 4;
 
 // Where a Simulation keeps its cache. Not a SimulationParams: it changes no result, only whether the
 // start-up recomputes it, and its default is the caller's ($ROS_HOME for the node).
@@ -61,8 +62,10 @@ struct Precomputed
   double equilibrium_residual = 0.0;
   double equilibrium_seconds = 0.0;
   ModalBasis basis;           // the eigenbasis
-  ModalBasis physical_basis;  // the same, or with the derivative directions
+  ModalBasis physical_basis;  // the same, or with the derivative directions, or the skinning subspace
   DerivativeBasisInfo derivative_info;
+  Eigen::MatrixXd skinning_constraint_modes;  // with basis: skinning and handles, else empty
+  SkinningInfo skinning_info;
 };
 
 // The text of every parameter the equilibrium and the bases depend on (doubles exact), and the same

@@ -8,6 +8,7 @@
 
 #include <Eigen/Core>
 
+#include <functional>
 #include <random>
 #include <string>
 #include <vector>
@@ -76,8 +77,11 @@ Eigen::MatrixXd trainingPoses(const Grid& grid, const ModalBasis& basis, const E
 // training matrix. Once the training error is below params.tolerance, the fit is measured on as many
 // fresh poses: above the tolerance there, they join the training set and the selection goes on, while
 // the set may double within max_training_poses. Stops there, at max_springs, or when no candidate helps.
+// `sampler` draws the poses instead of trainingPoses (a subspace whose poses follow another law, as
+// the skinning span's rotations); empty: trainingPoses.
+using PoseSampler = std::function<Eigen::MatrixXd(int count, std::mt19937_64& rng)>;
 Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref,
-                       const CubatureParams& params);
+                       const CubatureParams& params, const PoseSampler& sampler = {});
 
 // `cubature`: F(X) = Phi^T f_g + F_exact(ref) + sum over T of w_s (g_s(X) - g_s(0)), g_s the force of
 // spring s projected onto its particles' rows of Phi. Exact at the reference (an equilibrium stays

@@ -31,6 +31,9 @@ struct LinearizedGrid
   // With handles: K_ib at x_ref, and the constraint modes Psi (needed by the modal methods only).
   const SparseMatrix* handle_coupling = nullptr;
   const Eigen::MatrixXd* constraint_modes = nullptr;
+  // Psi is the static response -K_ii^-1 K_ib (Craig-Bampton); false for another particular solution
+  // of the handles (the skinning span's), whose stiffness coupling K_ii Psi + K_ib is not zero.
+  bool static_constraint_modes = true;
 };
 
 // A method's force model plus a constant external load G in the same coordinates: F(q) + G, with
@@ -256,6 +259,9 @@ private:
   mutable Eigen::VectorXd psi_dx_, psi_v_;  // empty without handles
   mutable bool psi_dx_stale_ = false, psi_v_stale_ = false;
   Eigen::MatrixXd interface_mass_;  // Phi^T M Psi (r x handle dofs)
+  // Phi^T (K_ii Psi + K_ib): the stiffness-proportional damping of the handles' velocity; empty when
+  // Psi is static (zero).
+  Eigen::MatrixXd interface_stiffness_;
   Eigen::VectorXd anchor_;
   // |offset + Phi X - anchor|_M^2 = c + 2 b.X + X.X with b = Phi^T M (offset - anchor).
   Eigen::VectorXd anchor_b_;

@@ -41,6 +41,7 @@ enum class BasisKind
 {
   LinearModes,       // the r lowest modes (the paper)
   ModalDerivatives,  // the modes plus directions from their modal derivatives (Barbic & James)
+  Skinning,          // linear-blend skinning: a few affine transforms blended by stiffness-derived weights
 };
 
 // How the modal methods follow moving handles.
@@ -64,7 +65,7 @@ std::string toString(IntegratorKind integrator);
 IntegratorKind parseIntegrator(const std::string& name);
 std::string toString(InitialState initial_state);
 InitialState parseInitialState(const std::string& name);
-// "linear_modes", "modal_derivatives"
+// "linear_modes", "modal_derivatives", "skinning"
 std::string toString(BasisKind basis);
 BasisKind parseBasis(const std::string& name);
 // "auto", "constraint_modes", "moving_frame"

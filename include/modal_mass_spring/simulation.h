@@ -8,6 +8,7 @@
 #include "modal_mass_spring/modal_basis.h"
 #include "modal_mass_spring/modal_derivatives.h"
 #include "modal_mass_spring/options.h"
+#include "modal_mass_spring/skinning.h"
 
 #include <memory>
 #include <optional>
@@ -41,10 +42,14 @@ struct SimulationParams
   // Refuse a problem whose build would need more memory than this (GB, estimated before anything is
   // allocated): the default leaves room on a 24 GB machine.
   double memory_limit_gb = 12.0;
-  // The basis of `physical`: the num_modes lowest modes, or those plus num_derivative_modes
-  // directions from their modal derivatives (0 unless basis is modal_derivatives).
+  // The basis of `physical` and `cubature`: the num_modes lowest modes, or those plus
+  // num_derivative_modes directions from their modal derivatives (0 unless basis is
+  // modal_derivatives), or the skinning subspace of num_skinning_weights weights (0 unless basis is
+  // skinning; see skinning.h) together with the num_modes modes. `linear` always keeps the num_modes
+  // lowest modes.
   BasisKind basis = BasisKind::LinearModes;
   int num_derivative_modes = 0;
+  int num_skinning_weights = 0;
   // `cubature`'s training (see CubatureParams): the relative force error to reach, in (0, 1); the
   // most springs (0: min(number of springs, 1000)); the random poses, and the most they may grow to
   // (0: 8 times as many); the largest particle displacement of a pose (m); the seed of the poses and
@@ -112,7 +117,7 @@ class Simulation
 public:
   // Validates both parameter sets (validateParameters) before building anything, then builds the
   // linearization point and the basis, telling on_stage as each stage starts ("equilibrium",
-  // "stiffness", "factorisation", "eigensolver", "modal derivatives" with that basis, and "cubature"
+  // "stiffness", "factorisation", "eigensolver", "modal derivatives" or "skinning" with that basis, and "cubature"
   // when the method is `cubature`). Throws std::invalid_argument naming the offending
   // parameter, std::runtime_error when a stage fails.
   // With a cache directory (CacheOptions), the equilibrium, the bases and the cubature are loaded
@@ -137,6 +142,8 @@ public:
   const ModalBasis& physicalBasis() const { return physical_basis_; }
   // What building the derivative directions did (all zero with basis: linear_modes).
   const DerivativeBasisInfo& derivativeInfo() const { return derivative_info_; }
+  // What building the skinning subspace did (all zero unless basis: skinning).
+  const SkinningInfo& skinningInfo() const { return skinning_info_; }
   const SimulationParams& params() const { return params_; }
   Method method() const { return model_->method(); }
 
@@ -203,8 +210,11 @@ public:
   void setHandleState(const Eigen::VectorXd& positions, const Eigen::VectorXd& velocities = {},
                       const Eigen::VectorXd& accelerations = {});
   // The constraint modes Psi = -K_ii^-1 K_ib (built when a modal method is first used with handles;
-  // empty before), and K_ib at the linearization point.
+  // empty before), and K_ib at the linearization point. With basis: skinning the methods but `linear`
+  // use skinningConstraintModes() instead: the handles' part in the skinning span (no K_ii solve, so
+  // grips that do not hold the cloth alone work).
   const Eigen::MatrixXd& constraintModes() const { return constraint_modes_; }
+  const Eigen::MatrixXd& skinningConstraintModes() const { return skinning_constraint_modes_; }
   const SparseMatrix& handleCoupling() const { return handle_coupling_; }
   // True while the energy check is off because handles moved since the start of the run.
   bool energyCheckSuspended() const { return handles_moved_; }
@@ -291,6 +301,8 @@ private:
   ModalBasis basis_;            // the eigenbasis (`linear`)
   ModalBasis physical_basis_;   // the basis of the modal methods other than `linear`
   DerivativeBasisInfo derivative_info_;
+  SkinningInfo skinning_info_;
+  Eigen::MatrixXd skinning_constraint_modes_;  // with basis: skinning and handles
   SparseMatrix stiffness_;  // K at x_ref on the free dofs
   Eigen::VectorXd mass_;    // diagonal of M on the free dofs
   std::optional<Cubature> cubature_;  // trained at the linearization point when first needed

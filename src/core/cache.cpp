@@ -330,7 +330,8 @@ std::string basisKey(const GridParams& g, const SimulationParams& p)
   keyLine(key, "rotation_deg", g.rotation_deg);
   key << "linearization=" << toString(p.linearization) << "\ninitial_state=" << toString(p.initial_state)
       << "\nnum_modes=" << p.num_modes << "\nbasis=" << toString(p.basis)
-      << "\nnum_derivative_modes=" << p.num_derivative_modes << '\n';
+      << "\nnum_derivative_modes=" << p.num_derivative_modes << "\nnum_skinning_weights=" << p.num_skinning_weights
+      << '\n';
   return key.str();
 }
 
@@ -392,11 +393,23 @@ std::optional<Precomputed> loadPrecomputed(const std::string& file, const std::s
   d.seconds = r.get<double>();
   d.smallest_kept_singular_value = r.get<double>();
   d.largest_dropped_singular_value = r.get<double>();
+  p.skinning_constraint_modes = r.matrix();
+  SkinningInfo& k = p.skinning_info;
+  k.weights = r.get<std::int32_t>();
+  k.coordinates = r.get<std::int32_t>();
+  k.constraint_dofs = r.get<std::int32_t>();
+  k.constraint_rank = r.get<std::int32_t>();
+  k.basis_size = r.get<std::int32_t>();
+  k.modes = r.get<std::int32_t>();
+  k.seconds = r.get<double>();
   std::string why = !r.ok() || !r.atEnd() ? "its content does not have the layout of this format version" : "";
   if (why.empty())
     why = basisMismatch(p.basis, free_dofs);
   if (why.empty())
     why = basisMismatch(p.physical_basis, free_dofs);
+  if (why.empty() && p.skinning_constraint_modes.size() > 0 &&
+      (p.skinning_constraint_modes.rows() != free_dofs || !p.skinning_constraint_modes.allFinite()))
+    why = "its skinning constraint modes do not fit " + std::to_string(free_dofs) + " free degrees of freedom";
   if (why.empty() && p.equilibrium.size() != equilibrium_dofs)
     why = "its equilibrium has " + std::to_string(p.equilibrium.size()) + " values where " +
           std::to_string(equilibrium_dofs) + " are needed";
@@ -432,6 +445,11 @@ bool storePrecomputed(const std::string& file, const std::string& key, const Pre
   w.put(d.seconds);
   w.put(d.smallest_kept_singular_value);
   w.put(d.largest_dropped_singular_value);
+  w.put(p.skinning_constraint_modes);
+  const SkinningInfo& k = p.skinning_info;
+  for (int value : {k.weights, k.coordinates, k.constraint_dofs, k.constraint_rank, k.basis_size, k.modes})
+    w.put<std::int32_t>(value);
+  w.put(k.seconds);
   return writeFile(file, key, w.bytes, options);
 }
 

@@ -261,12 +261,15 @@ int effectiveMaxSprings(const CubatureParams& params, int num_springs)
 }
 
 Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref,
-                       const CubatureParams& params)
+                       const CubatureParams& params, const PoseSampler& sampler)
 {
+  auto draw = [&](int count, std::mt19937_64& stream) {
+    return sampler ? sampler(count, stream) : trainingPoses(grid, basis, x_ref, count, params.pose_size, stream);
+  };
   const auto start = std::chrono::steady_clock::now();
   std::mt19937_64 rng(static_cast<std::uint64_t>(params.seed));
   std::mt19937_64 validation_rng = poseStream(params.seed, 1), heldout_rng = poseStream(params.seed, 2);
-  TrainingSet training(grid, basis, x_ref, trainingPoses(grid, basis, x_ref, params.training_poses, params.pose_size, rng));
+  TrainingSet training(grid, basis, x_ref, draw(params.training_poses, rng));
   if (!training.target().allFinite())
   {
     char text[160];
@@ -341,7 +344,7 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
     // Otherwise those poses join the training set (twice as many poses, the same springs refitted) and
     // the selection goes on, as long as the training set may grow.
     TrainingSet validation(grid, basis, x_ref,
-                           trainingPoses(grid, basis, x_ref, static_cast<int>(training.size()), params.pose_size, validation_rng));
+                           draw(static_cast<int>(training.size()), validation_rng));
     Eigen::MatrixXd validation_columns;
     validation_error = relativeError(validation, selected, weights_fit.weights(), &validation_columns);
     if (validation_error <= params.tolerance || error > params.tolerance || 2 * training.size() > max_poses)
@@ -380,7 +383,7 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
 
   // Held-out poses, as many as the training's, that neither the selection nor the stop saw.
   const TrainingSet heldout(grid, basis, x_ref,
-                            trainingPoses(grid, basis, x_ref, cubature.training_poses, params.pose_size, heldout_rng));
+                            draw(cubature.training_poses, heldout_rng));
   cubature.heldout_error = relativeError(heldout, cubature.springs, cubature.weights);
   cubature.training_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return cubature;

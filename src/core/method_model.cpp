@@ -207,6 +207,9 @@ ModalMethod::ModalMethod(Method method, const LinearizedGrid& linearized, const 
   if (lin_.constraint_modes)
   {
     interface_mass_ = lin_.basis.phi.transpose() * (lin_.mass.asDiagonal() * *lin_.constraint_modes);
+    if (!lin_.static_constraint_modes && lin_.handle_coupling)
+      interface_stiffness_ =
+          lin_.basis.phi.transpose() * (lin_.stiffness * *lin_.constraint_modes + Eigen::MatrixXd(*lin_.handle_coupling));
     const Eigen::VectorXd rest = Eigen::VectorXd::Zero(lin_.constraint_modes->cols());
     handle_motion_ = HandleMotion{rest, rest, rest};
   }
@@ -342,7 +345,10 @@ void ModalMethod::setHandleMotion(const HandleMotion& motion)
     updateReference();
   // The interior's acceleration Psi a_b and the mass-proportional damping of its velocity Psi v_b
   // (the stiffness-proportional part cancels with the coupling: beta (K_ii Psi + K_ib) v_b = 0).
-  setHandleLoad(-interface_mass_ * (handle_motion_.acceleration + settings_.alpha * handle_motion_.velocity));
+  Eigen::VectorXd load = -interface_mass_ * (handle_motion_.acceleration + settings_.alpha * handle_motion_.velocity);
+  if (interface_stiffness_.size() > 0 && settings_.beta != 0.0)
+    load.noalias() -= settings_.beta * (interface_stiffness_ * handle_motion_.velocity);
+  setHandleLoad(load);
 }
 
 double ModalMethod::assign(const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder)

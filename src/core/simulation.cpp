@@ -74,6 +74,21 @@ void validateBasis(const GridParams& grid, const SimulationParams& p, long long 
   const long long d = p.num_derivative_modes;
   if (d < 0)
     rejectParameter("num_derivative_modes", d, "must be an integer >= 0");
+  const long long w = p.num_skinning_weights;
+  const long long particles = static_cast<long long>(grid.rows) * grid.cols;
+  if (p.basis == BasisKind::Skinning)
+  {
+    if (w < 1 || w > particles)
+      rejectParameter("num_skinning_weights", w,
+                      "must be an integer in [1, " + std::to_string(particles) +
+                          "] with basis: skinning (at most one weight per particle)");
+    if (d != 0)
+      rejectParameter("num_derivative_modes", d, "must be 0 with basis: skinning");
+    return;
+  }
+  if (w != 0)
+    rejectParameter("num_skinning_weights", w,
+                    "must be 0 unless basis is skinning (weights are used only by the skinning subspace)");
   if (p.basis == BasisKind::LinearModes)
   {
     if (d != 0)
@@ -188,11 +203,20 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
 
 HandleFormulation resolveHandleFormulation(const GridParams& grid, const SimulationParams& params)
 {
+  // The skinning span holds the handles' rigid motion itself: auto needs no moving frame there.
   if (params.handle_formulation == HandleFormulation::Auto)
-    return !grid.handles.empty() && effectiveFixed(grid).empty() && params.handles_one_body
+    return !grid.handles.empty() && params.basis != BasisKind::Skinning && effectiveFixed(grid).empty() && params.handles_one_body
                ? HandleFormulation::MovingFrame
                : HandleFormulation::ConstraintModes;
   return params.handle_formulation;
+}
+
+// The most columns of the basis of the methods but `linear`.
+static double physicalBasisSize(const GridParams& g, const SimulationParams& p)
+{
+  if (p.basis == BasisKind::Skinning)
+    return static_cast<double>(skinningCoordinatesPerWeight(g.dimension)) * p.num_skinning_weights + p.num_modes;
+  return static_cast<double>(p.num_modes) + (p.basis == BasisKind::ModalDerivatives ? p.num_derivative_modes : 0);
 }
 
 // The selected springs' columns (with a copy while they grow) and those on the last validation set,
@@ -201,7 +225,7 @@ double cubatureTrainingBytes(const GridParams& g, const SimulationParams& p)
 {
   const double max_springs = effectiveMaxSprings(cubatureParams(p), static_cast<int>(std::min<long long>(countSprings(g), 1 << 30)));
   const double max_poses = static_cast<double>(effectiveMaxTrainingPoses(cubatureParams(p)));
-  return 8.0 * (3.0 * max_poses * p.num_modes * max_springs + 4.0 * max_springs * max_springs);
+  return 8.0 * (3.0 * max_poses * physicalBasisSize(g, p) * max_springs + 4.0 * max_springs * max_springs);
 }
 
 double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
@@ -224,8 +248,15 @@ double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
   bytes += 8.0 * n * (3.0 * r + std::min(n, static_cast<double>(maxLanczosVectors(p.num_modes))) + 2.0 * r);
   // The physical basis (a copy, or the modes and their derivative directions, three times for the
   // force model), and while it is built the derivatives of every pair with their right-hand sides.
-  const double d = p.basis == BasisKind::ModalDerivatives ? p.num_derivative_modes : 0.0;
-  bytes += 8.0 * n * 3.0 * (r + d);
+  bytes += 8.0 * n * 3.0 * physicalBasisSize(g, p);
+  if (p.basis == BasisKind::Skinning)
+  {
+    // The weights' eigensolver over the particles, and B with its interior copies (all dofs x
+    // coordinates, four at once) and the skinning constraint modes.
+    const double coordinates = physicalBasisSize(g, p);
+    bytes += 8.0 * particles * (3.0 * p.num_skinning_weights + maxLanczosVectors(p.num_skinning_weights));
+    bytes += 8.0 * 4.0 * dim * particles * coordinates + 8.0 * 4.0 * coordinates * coordinates;
+  }
   if (p.basis == BasisKind::ModalDerivatives)
   {
     // Derivatives, right-hand sides and weighted copies (n x pairs), and the mass-PCA's Gram matrix
@@ -353,7 +384,18 @@ void Simulation::precompute(const StageFn& on_stage)
                       "give a modal basis that is not finite; keep stiffness / mass and spacing in a range where "
                       "frequencies and lengths are representable");
     }
-    if (params_.basis == BasisKind::ModalDerivatives)
+    if (params_.basis == BasisKind::Skinning)
+    {
+      stage("skinning");
+      SkinningBasis skinning =
+          buildSkinningBasis(grid_, x_ref_, stiffness_, mass_, params_.num_skinning_weights, data.basis.phi);
+      if (!skinning.basis.phi.allFinite() || !skinning.constraint_modes.allFinite())
+        throw std::runtime_error("skinning: the subspace is not finite");
+      data.physical_basis = std::move(skinning.basis);
+      data.skinning_constraint_modes = std::move(skinning.constraint_modes);
+      data.skinning_info = skinning.info;
+    }
+    else if (params_.basis == BasisKind::ModalDerivatives)
     {
       stage("modal derivatives");
       data.physical_basis = buildDerivativeBasis(grid_, x_ref_, stiffness_, mass_, data.basis,
@@ -374,10 +416,13 @@ void Simulation::precompute(const StageFn& on_stage)
     data.basis.build_seconds = data.basis.factorization_seconds = 0.0;
     data.physical_basis.build_seconds = data.physical_basis.factorization_seconds = 0.0;
     data.derivative_info.seconds = 0.0;
+    data.skinning_info.seconds = 0.0;
   }
   basis_ = std::move(data.basis);
   physical_basis_ = std::move(data.physical_basis);
   derivative_info_ = data.derivative_info;
+  skinning_info_ = data.skinning_info;
+  skinning_constraint_modes_ = std::move(data.skinning_constraint_modes);
 }
 
 void Simulation::prepareCubature()
@@ -394,7 +439,17 @@ void Simulation::prepareCubature()
   }
   if (cubature_)
     return;
-  cubature_ = trainCubature(grid_, physical_basis_, x_ref_, cubatureParams(params_));
+  // On the skinning span the poses turn the cloth (its motions are large rotations), else the modes'.
+  PoseSampler sampler;
+  if (params_.basis == BasisKind::Skinning)
+  {
+    const Eigen::MatrixXd projection =
+        skinningProjection(grid_, x_ref_, physical_basis_, mass_, params_.num_skinning_weights);
+    sampler = [this, projection](int count, std::mt19937_64& rng) {
+      return skinningTrainingPoses(grid_, physical_basis_, x_ref_, projection, count, params_.cubature_pose_size, rng);
+    };
+  }
+  cubature_ = trainCubature(grid_, physical_basis_, x_ref_, cubatureParams(params_), sampler);
   if (!cache_report_.cubature_file.empty())
     cache_report_.cubature_stored = storeCubature(cache_report_.cubature_file, key, *cubature_, cache_);
 }
@@ -414,9 +469,11 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
     prepareCubature();
   // The modal methods carry the handles' static influence with the constraint modes; in the moving
   // frame the handles never leave x_ref and the fixed-interface modes are the whole basis.
+  // With basis: skinning the methods but `linear` carry them in the skinning span instead.
   const bool handles = grid_.numHandleDofs() > 0;
   const bool moving_frame = formulation_ == HandleFormulation::MovingFrame;
-  if (handles && !moving_frame && method != Method::Full && constraint_modes_.size() == 0)
+  const bool skinning = params_.basis == BasisKind::Skinning && method != Method::Linear;
+  if (handles && !moving_frame && method != Method::Full && !skinning && constraint_modes_.size() == 0)
   {
     try
     {
@@ -431,19 +488,21 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
       throw std::runtime_error(
           "handles: the stiffness of the interior dofs with the handles held is singular at the hanging equilibrium "
           "(linearization: equilibrium), so the constraint modes Psi = -K_ii^-1 K_ib do not exist: cloth hanging "
-          "slack from these handles (small grips far apart) has no stiffness across it there; hold it by larger "
-          "grips (e.g. a whole row, or the top row's outer particles), fix some particles, or hold it by one "
-          "handle with handle_formulation: moving_frame");
+          "slack from these handles (small grips far apart) has no stiffness across it there; use basis: skinning "
+          "(physical or cubature), hold it by larger grips (e.g. a whole row, or the top row's outer particles), fix "
+          "some particles, or hold it by one handle with handle_formulation: moving_frame");
     }
   }
-  const LinearizedGrid linearized{grid_,
-                                  basis,
-                                  x_ref_,
-                                  stiffness_,
-                                  mass_,
-                                  cubature_ ? &*cubature_ : nullptr,
-                                  handles ? &handle_coupling_ : nullptr,
-                                  constraint_modes_.size() > 0 ? &constraint_modes_ : nullptr};
+  const Eigen::MatrixXd& psi = skinning ? skinning_constraint_modes_ : constraint_modes_;
+  LinearizedGrid linearized{grid_,
+                            basis,
+                            x_ref_,
+                            stiffness_,
+                            mass_,
+                            cubature_ ? &*cubature_ : nullptr,
+                            handles ? &handle_coupling_ : nullptr,
+                            handles && !moving_frame && psi.size() > 0 ? &psi : nullptr};
+  linearized.static_constraint_modes = !skinning;
   model_ = makeMethod(method, linearized, integratorSettings());
   params_.method = method;
   if (handles)

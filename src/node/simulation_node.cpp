@@ -272,7 +272,8 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
                   std::to_string(simulation->projectionError()) + " m")
                      .c_str()
                : "");
-  ROS_INFO("%s", describeBasis(sim_params, simulation->derivativeInfo(), simulation->physicalBasis()).c_str());
+  ROS_INFO("%s", describeBasis(sim_params, simulation->derivativeInfo(), simulation->physicalBasis(),
+                                  simulation->skinningInfo()).c_str());
   ROS_INFO("%s", describeCache(simulation->cacheReport()).c_str());
   if (const Cubature* cubature = simulation->cubature())
     ROS_INFO("%s", describeCubature(*cubature, static_cast<int>(grid.springs().size()), sim_params.cubature_tolerance).c_str());
@@ -707,7 +708,7 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     status.basis = toString(simulation.params().basis);
     status.linear_modes = simulation.basis().phi.cols();
     status.derivative_directions = derivatives.derivative_directions;
-    status.basis_seconds = simulation.basis().build_seconds + derivatives.seconds;
+    status.basis_seconds = simulation.basis().build_seconds + derivatives.seconds + simulation.skinningInfo().seconds;
     status.largest_dropped_singular_value = derivatives.largest_dropped_singular_value;
     if (const Cubature* cubature = simulation.cubature())
     {

@@ -70,12 +70,21 @@ std::string describeStartupTimes(const LinearizationInfo& linearization, const M
   return out.str();
 }
 
-std::string describeBasis(const SimulationParams& params, const DerivativeBasisInfo& info, const ModalBasis& physical_basis)
+std::string describeBasis(const SimulationParams& params, const DerivativeBasisInfo& info, const ModalBasis& physical_basis,
+                          const SkinningInfo& skinning)
 {
   std::ostringstream out;
   out << "basis " << toString(params.basis);
   if (params.basis == BasisKind::LinearModes)
     return out.str();
+  if (params.basis == BasisKind::Skinning)
+  {
+    out << " (" << describeSkinning(skinning);
+    if (physical_basis.frequencies.size() > 0)
+      out << ", frequencies up to " << number(physical_basis.frequencies.maxCoeff()) << " rad/s";
+    out << "); `linear` keeps the " << params.num_modes << " lowest modes";
+    return out.str();
+  }
   out << ": " << info.linear_modes << " linear modes kept, " << info.derivative_directions
       << " derivative directions added (from " << info.derivatives_computed << " derivatives) in "
       << seconds(info.seconds);
@@ -97,18 +106,24 @@ std::string describeHandleFormulation(const GridParams& grid, const SimulationPa
            "' (one rigid body holds every held particle and nothing is fixed: every method simulates in its frame, "
            "whose motion enters exactly at any turn; " + why + ")";
   std::ostringstream line;
-  line << "handles: constraint modes (Craig-Bampton) for the modal methods, prescribed positions for full; "
-       << grid.handles.size() << (grid.handles.size() == 1 ? " handle" : " handles") << " on " << frames.size()
+  if (params.basis == BasisKind::Skinning)
+    line << "handles: constraints on the skinning coordinates for physical and cubature, constraint modes "
+            "(Craig-Bampton) for linear, prescribed positions for full; ";
+  else
+    line << "handles: constraint modes (Craig-Bampton) for the modal methods, prescribed positions for full; ";
+  line << grid.handles.size() << (grid.handles.size() == 1 ? " handle" : " handles") << " on " << frames.size()
        << (frames.size() == 1 ? " frame" : " frames") << " (";
   const size_t fixed = effectiveFixed(grid).size();
   if (asked)
     line << "as " << why << " asks";
+  else if (params.basis == BasisKind::Skinning)
+    line << "the skinning span holds their rigid motion; no moving frame is needed";
   else if (frames.size() > 1)
     line << "they can move apart; the moving frame needs one rigid body";
   else
     line << fixed << " fixed " << (fixed == 1 ? "particle cannot" : "particles cannot")
          << " move with the frame; the moving frame needs none fixed";
-  line << "; large turns distort the constraint modes)";
+  line << (params.basis == BasisKind::Skinning ? ")" : "; large turns distort the constraint modes)");
   return line.str();
 }
 
@@ -124,6 +139,8 @@ std::string describeStage(const std::string& stage)
     return "computing the modes (eigensolver)";
   if (stage == "modal derivatives")
     return "computing the modal derivatives and their directions (modal derivatives)";
+  if (stage == "skinning")
+    return "computing the skinning weights and subspace (skinning)";
   if (stage == "cubature")
     return "training the cubature's springs and weights (cubature)";
   return stage;

@@ -29,7 +29,9 @@ std::string describeStartupTimes(const LinearizationInfo& linearization, const M
 // "basis linear_modes" or "basis modal_derivatives: 6 linear modes kept, 6 derivative directions added
 // (from 21 derivatives) in 12.3 ms, frequencies up to 126 rad/s; singular values (relative) smallest
 // kept 0.12, largest dropped 0.081".
-std::string describeBasis(const SimulationParams& params, const DerivativeBasisInfo& info, const ModalBasis& physical_basis);
+// With basis: skinning, describeSkinning's line and the highest frequency.
+std::string describeBasis(const SimulationParams& params, const DerivativeBasisInfo& info, const ModalBasis& physical_basis,
+                          const SkinningInfo& skinning = {});
 
 // The start-up line on the handles' formulation and why it was chosen: "handles: moving frame of
 // 'gripper' (...)" or "handles: constraint modes (Craig-Bampton) ..., 2 handles on 2 frames ...".

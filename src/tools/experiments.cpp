@@ -339,6 +339,7 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
   result.num_zero_modes = modal.basis().num_zero_modes;
   result.basis = setup.sim.basis;
   result.derivatives = modal.derivativeInfo();
+  result.skinning = modal.skinningInfo();
   result.physical_frequencies = modal.physicalBasis().frequencies;
   for (const AccuracyRun& run : runs)
     if (const Cubature* c = run.sim->cubature())

@@ -131,6 +131,7 @@ struct AccuracyResult
   int num_zero_modes = 0;
   BasisKind basis = BasisKind::LinearModes;
   DerivativeBasisInfo derivatives;
+  SkinningInfo skinning;  // with basis: skinning
   Eigen::VectorXd physical_frequencies;
   // The training of `cubature` when it was compared, and the grid's number of springs.
   std::optional<CubatureRow> cubature;

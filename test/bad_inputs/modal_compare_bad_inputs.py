@@ -169,6 +169,12 @@ def cases(configs):
         setting("handle_formulation", "frame"),
         setting("handle_formulation", "moving_frame"),  # no handles
         setting("num_derivative_modes", "2"),  # with basis: linear_modes
+        setting("num_skinning_weights", "4"),  # with basis: linear_modes
+        tool("num_skinning_weights_zero", "num_skinning_weights", "--set", "basis=skinning"),
+        tool("num_skinning_weights_beyond_particles", "num_skinning_weights", "--set", "basis=skinning",
+             "--set", "num_skinning_weights=26"),
+        tool("num_skinning_weights_not_an_integer", "num_skinning_weights", "--set", "basis=skinning",
+             "--set", "num_skinning_weights=2.5"),
         tool("num_derivative_modes_negative", "num_derivative_modes", "--set", "basis=modal_derivatives",
              "--set", "num_derivative_modes=-1"),
         tool("num_derivative_modes_beyond_pairs", "num_derivative_modes", "--set", "basis=modal_derivatives",

@@ -69,6 +69,11 @@ CASES = [
     ({"basis": "modal_derivatives", "num_modes": 38, "num_derivative_modes": 3}, [], ["num_derivative_modes"]),
     ({"basis": "modal_derivatives", "num_derivative_modes": 2, "dimension": 3}, [], ["basis"]),
     ({"num_derivative_modes": "two"}, [], ["num_derivative_modes"]),
+    ({"num_skinning_weights": 4}, [], ["num_skinning_weights"]),  # with basis: linear_modes
+    ({"basis": "skinning", "num_skinning_weights": 0}, [], ["num_skinning_weights"]),
+    ({"basis": "skinning", "num_skinning_weights": -2}, [], ["num_skinning_weights"]),
+    ({"basis": "skinning", "num_skinning_weights": 26}, [], ["num_skinning_weights"]),  # 25 particles
+    ({"basis": "skinning", "num_skinning_weights": 2.5}, [], ["num_skinning_weights"]),
     ({"memory_limit_gb": -1.0}, [], ["memory_limit_gb"]),
     ({"method": "cubature", "cubature_tolerance": 0.0}, [], ["cubature_tolerance"]),
     ({"cubature_tolerance": 1.5}, [], ["cubature_tolerance"]),

@@ -319,6 +319,7 @@ TEST(CacheKey, EveryParameterOfThePrecomputationChangesTheKey)
       {"linearization", [](GridParams&, SimulationParams& s) { s.linearization = Linearization::Rest; }},
       {"num_modes", [](GridParams&, SimulationParams& s) { ++s.num_modes; }},
       {"num_derivative_modes", [](GridParams&, SimulationParams& s) { ++s.num_derivative_modes; }},
+      {"num_skinning_weights", [](GridParams&, SimulationParams& s) { ++s.num_skinning_weights; }},
   };
   for (const auto& [name, change] : changes)
   {

@@ -286,7 +286,7 @@ TEST(ModalDerivatives, BadParametersAreNamed)
   catch (const std::invalid_argument& e)
   {
     EXPECT_EQ(std::string(e.what()),
-              "invalid parameter 'basis' = 'derivatives': must be one of linear_modes, modal_derivatives");
+              "invalid parameter 'basis' = 'derivatives': must be one of linear_modes, modal_derivatives, skinning");
   }
   s.num_derivative_modes = -1;
   EXPECT_EQ(refusal(g2, s).rfind("invalid parameter 'num_derivative_modes' = -1: must be an integer >= 0", 0), 0u);

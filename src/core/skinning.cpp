@@ -1,0 +1,281 @@
+// Skinning weights from the spring graph's Laplacian, the linear-blend map B, and the interior
+// subspace with the fixed particles and handles as equality constraints on its coordinates.
+#include "modal_mass_spring/skinning.h"
+
+#include "modal_mass_spring/cubature.h"
+#include "modal_mass_spring/validation.h"
+
+#include <Eigen/Geometry>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/SVD>
+
+#include <chrono>
+#include <sstream>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <vector>
+
+namespace modal_mass_spring
+{
+namespace
+{
+
+// Singular values of B_c and eigenvalues of the subspace's Gram matrix below this, relative to the
+// largest, are round-off: those directions are not in the span.
+constexpr double kRankTolerance = 1e-9;
+
+}  // namespace
+
+Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int m)
+{
+  const int particles = grid.numParticles();
+  if (m < 1 || m > particles)
+    rejectParameter("num_skinning_weights", m,
+                    "must be in [1, " + std::to_string(particles) + "], the number of particles");
+  const int dim = grid.dimension();
+  std::vector<Eigen::Triplet<double>> entries;
+  entries.reserve(4 * grid.springs().size());
+  for (const Spring& s : grid.springs())
+  {
+    const double length = (x.segment(dim * s.j, dim) - x.segment(dim * s.i, dim)).norm();
+    const double w = s.stiffness / (length * length);
+    entries.emplace_back(s.i, s.i, w);
+    entries.emplace_back(s.j, s.j, w);
+    entries.emplace_back(s.i, s.j, -w);
+    entries.emplace_back(s.j, s.i, -w);
+  }
+  SparseMatrix laplacian(particles, particles);
+  laplacian.setFromTriplets(entries.begin(), entries.end());
+  const Eigen::VectorXd mass = Eigen::VectorXd::Constant(particles, grid.particleMass());
+  Eigen::MatrixXd weights = computeModalBasis(laplacian, mass, m).phi;
+  // Each of order one, so that B's columns are of the size of the cloth's coordinates.
+  for (int j = 0; j < m; ++j)
+    weights.col(j) /= weights.col(j).cwiseAbs().maxCoeff();
+  return weights;
+}
+
+Eigen::MatrixXd skinningMap(const Grid& grid, const Eigen::VectorXd& xbar, const Eigen::MatrixXd& weights)
+{
+  const int dim = grid.dimension();
+  const int particles = grid.numParticles();
+  const int per_weight = skinningCoordinatesPerWeight(dim);
+  const Eigen::Map<const Eigen::MatrixXd> points(xbar.data(), dim, particles);
+  const Eigen::VectorXd centroid = points.rowwise().mean();
+  Eigen::MatrixXd b = Eigen::MatrixXd::Zero(grid.numDofs(), per_weight * weights.cols());
+  for (Eigen::Index j = 0; j < weights.cols(); ++j)
+    for (int i = 0; i < particles; ++i)
+    {
+      const double w = weights(i, j);
+      const Eigen::VectorXd from_centroid = points.col(i) - centroid;
+      for (int a = 0; a < dim; ++a)
+      {
+        const Eigen::Index column = j * per_weight + a * (dim + 1);
+        for (int c = 0; c < dim; ++c)
+          b(dim * i + a, column + c) = w * from_centroid[c];
+        b(dim * i + a, column + dim) = w;
+      }
+    }
+  return b;
+}
+
+std::string describeSkinning(const SkinningInfo& info)
+{
+  std::ostringstream out;
+  out.precision(3);
+  out << "skinning: " << info.weights << " weights, " << info.coordinates << " coordinates, ";
+  if (info.constraint_rank == info.constraint_dofs)
+    out << info.constraint_dofs << " constraint dofs (fixed and handles) met exactly";
+  else
+    out << info.constraint_dofs << " constraint dofs (fixed and handles) of rank " << info.constraint_rank << ": "
+        << info.constraint_dofs - info.constraint_rank << " met by least squares only";
+  out << ", with " << info.modes << " modes " << info.basis_size << " directions for the free particles, built in " << 1e3 * info.seconds << " ms";
+  return out.str();
+}
+
+Eigen::MatrixXd skinningProjection(const Grid& grid, const Eigen::VectorXd& x_ref, const ModalBasis& basis,
+                                   const Eigen::VectorXd& mass, int num_weights)
+{
+  const Eigen::MatrixXd b = skinningMap(grid, x_ref, skinningWeights(grid, x_ref, num_weights));
+  return basis.phi.transpose() * mass.asDiagonal() * b(grid.freeDofs(), Eigen::all);
+}
+
+namespace
+{
+
+// A rotation by `angle` about a uniformly random axis (3D), or in the grid's plane (2D).
+Eigen::MatrixXd randomRotation(int dim, double angle, std::mt19937_64& rng)
+{
+  if (dim == 2)
+  {
+    Eigen::Matrix2d r;
+    r << std::cos(angle), -std::sin(angle), std::sin(angle), std::cos(angle);
+    return r;
+  }
+  std::normal_distribution<double> normal;
+  Eigen::Vector3d axis(normal(rng), normal(rng), normal(rng));
+  if (axis.norm() == 0.0)
+    axis = Eigen::Vector3d::UnitZ();
+  return Eigen::AngleAxisd(angle, axis.normalized()).toRotationMatrix();
+}
+
+// The smallest ratio of a spring's length at x_ref + u (u on the free dofs) to its length at x_ref.
+double shortestSpringRatio(const Grid& grid, const Eigen::VectorXd& x_ref, const Eigen::VectorXd& u)
+{
+  Eigen::VectorXd x = x_ref;
+  grid.addFree(u, x);
+  const int dim = grid.dimension();
+  double shortest = std::numeric_limits<double>::infinity();
+  for (const Spring& s : grid.springs())
+  {
+    const double before = (x_ref.segment(dim * s.j, dim) - x_ref.segment(dim * s.i, dim)).norm();
+    const double after = (x.segment(dim * s.j, dim) - x.segment(dim * s.i, dim)).norm();
+    shortest = std::min(shortest, after / before);
+  }
+  return shortest;
+}
+
+}  // namespace
+
+Eigen::MatrixXd skinningTrainingPoses(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref,
+                                      const Eigen::MatrixXd& projection, int count, double size, std::mt19937_64& rng)
+{
+  const int dim = grid.dimension();
+  const int per_weight = skinningCoordinatesPerWeight(dim);
+  const Eigen::Index weights = projection.cols() / per_weight;
+  const double pi = 3.14159265358979323846;
+  std::uniform_real_distribution<double> uniform;
+  Eigen::MatrixXd poses = trainingPoses(grid, basis, x_ref, count, size, rng);
+  Eigen::VectorXd z(projection.cols());
+  for (int p = 0; p < count; ++p)
+  {
+    std::vector<double> angles(static_cast<size_t>(weights));
+    for (Eigen::Index j = 0; j < weights; ++j)
+      angles[static_cast<size_t>(j)] = (dim == 2 && uniform(rng) < 0.5 ? -1.0 : 1.0) * uniform(rng) *
+                                       (j == 0 ? pi : 0.5 * pi / std::sqrt(static_cast<double>(j)));
+    std::vector<Eigen::MatrixXd> rotations;
+    for (Eigen::Index j = 0; j < weights; ++j)
+      rotations.push_back(randomRotation(dim, 1.0, rng));  // the axis; the angle is set below
+    for (int halving = 0; halving < 20; ++halving)
+    {
+      z.setZero();
+      for (Eigen::Index j = 0; j < weights; ++j)
+      {
+        const double angle = angles[static_cast<size_t>(j)] * (j == 0 ? 1.0 : std::pow(0.5, halving));
+        Eigen::MatrixXd r;
+        if (dim == 2)
+          r = randomRotation(2, angle, rng);
+        else
+          r = Eigen::AngleAxisd(angle, Eigen::AngleAxisd(Eigen::Matrix3d(rotations[static_cast<size_t>(j)])).axis())
+                  .toRotationMatrix();
+        r -= Eigen::MatrixXd::Identity(dim, dim);
+        for (int a = 0; a < dim; ++a)
+          for (int c = 0; c < dim; ++c)
+            z[j * per_weight + a * (dim + 1) + c] = r(a, c);
+      }
+      const Eigen::VectorXd turned = poses.col(p) + projection * z;
+      // A pose that still folds keeps its stretch alone.
+      if (shortestSpringRatio(grid, x_ref, basis.phi * turned) >= kShortestTrainingSpring)
+      {
+        poses.col(p) = turned;
+        break;
+      }
+    }
+  }
+  return poses;
+}
+
+SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref, const SparseMatrix& stiffness,
+                                 const Eigen::VectorXd& mass, int num_weights, const Eigen::MatrixXd& modes)
+{
+  const auto start = std::chrono::steady_clock::now();
+  const Eigen::MatrixXd b = skinningMap(grid, x_ref, skinningWeights(grid, x_ref, num_weights));
+  const Eigen::Index p = b.cols();
+  const int dim = grid.dimension();
+
+  // The constraints' rows of B: the fixed particles' dofs (held at 0), then the handle dofs (at dx_b).
+  std::vector<int> held;
+  for (int particle : grid.fixedParticles())
+    for (int a = 0; a < dim; ++a)
+      held.push_back(dim * particle + a);
+  held.insert(held.end(), grid.handleDofs().begin(), grid.handleDofs().end());
+  const Eigen::Index c = static_cast<Eigen::Index>(held.size()), nb = grid.numHandleDofs();
+
+  // B_c = U S V^T: the null space N is V's columns past the rank, and the least-squares (minimum-norm)
+  // solution of B_c z = (0, dx_b) is G dx_b with G = V_k S_k^-1 U_k^T's handle columns.
+  Eigen::MatrixXd null_space = Eigen::MatrixXd::Identity(p, p);
+  Eigen::MatrixXd particular;  // p x nb
+  int rank = 0;
+  if (c > 0)
+  {
+    const Eigen::MatrixXd b_c = b(held, Eigen::all);
+    const Eigen::BDCSVD<Eigen::MatrixXd> svd(b_c, Eigen::ComputeFullV | Eigen::ComputeThinU);
+    const Eigen::VectorXd& sigma = svd.singularValues();
+    while (rank < sigma.size() && sigma[rank] > kRankTolerance * sigma[0])
+      ++rank;
+    null_space = svd.matrixV().rightCols(p - rank);
+    if (nb > 0)
+      particular = svd.matrixV().leftCols(rank) * sigma.head(rank).cwiseInverse().asDiagonal() *
+                   svd.matrixU().bottomRows(nb).leftCols(rank).transpose();
+  }
+
+  // The interior subspace B_i N, made mass-orthonormal from its Gram matrix (directions that move no
+  // free dof dropped), then rotated to diagonalise K (Rayleigh-Ritz): mass is I and Rayleigh damping
+  // diagonal, as for the eigenbasis.
+  const Eigen::MatrixXd b_i = b(grid.freeDofs(), Eigen::all);
+  Eigen::MatrixXd interior(b_i.rows(), null_space.cols() + modes.cols());
+  interior << b_i * null_space, modes;
+  // Unit mass norm each, so that the rank tolerance compares directions, not their scales.
+  for (Eigen::Index k = 0; k < interior.cols(); ++k)
+  {
+    const double norm = std::sqrt(interior.col(k).cwiseAbs2().dot(mass));
+    if (norm > 0.0)
+      interior.col(k) /= norm;
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> gram(interior.transpose() * mass.asDiagonal() * interior);
+  const Eigen::VectorXd& g = gram.eigenvalues();  // ascending
+  Eigen::Index kept = 0;
+  while (kept < g.size() && g[g.size() - 1 - kept] > kRankTolerance * g[g.size() - 1])
+    ++kept;
+  if (interior.cols() == 0 || kept == 0 || !(g[g.size() - 1] > 0.0))
+    rejectParameter("num_skinning_weights", num_weights,
+                    "leaves the free particles no motion: the fixed particles and handles take every direction of "
+                    "the span; use more weights");
+  const Eigen::MatrixXd orthonormal =
+      interior * (gram.eigenvectors().rightCols(kept) * g.tail(kept).cwiseSqrt().cwiseInverse().asDiagonal());
+  const Eigen::MatrixXd k_reduced = orthonormal.transpose() * (stiffness * orthonormal);
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> ritz(0.5 * (k_reduced + k_reduced.transpose()));
+
+  SkinningBasis out;
+  ModalBasis& basis = out.basis;
+  basis.phi = orthonormal * ritz.eigenvectors();
+  basis.eigenvalues = ritz.eigenvalues();
+  // Zero below 1e-8 of the largest diagonal stiffness per mass, as computeModalBasis counts them.
+  const double scale = stiffness.diagonal().cwiseQuotient(mass).cwiseAbs().maxCoeff();
+  for (Eigen::Index k = 0; k < basis.eigenvalues.size(); ++k)
+    if (std::abs(basis.eigenvalues[k]) < 1e-8 * scale)
+    {
+      basis.eigenvalues[k] = 0.0;
+      ++basis.num_zero_modes;
+    }
+  basis.eigenvalues = basis.eigenvalues.cwiseMax(0.0);
+  basis.frequencies = basis.eigenvalues.cwiseSqrt();
+  basis.sparse = false;
+  if (nb > 0)
+  {
+    out.constraint_modes = b_i * particular;
+    out.constraint_modes -= basis.phi * (basis.phi.transpose() * mass.asDiagonal() * out.constraint_modes);
+  }
+  out.info.weights = num_weights;
+  out.info.coordinates = static_cast<int>(p);
+  out.info.constraint_dofs = static_cast<int>(c);
+  out.info.constraint_rank = rank;
+  out.info.basis_size = static_cast<int>(kept);
+  out.info.modes = static_cast<int>(modes.cols());
+  out.info.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  basis.build_seconds = out.info.seconds;
+  return out;
+}
+
+}  // namespace modal_mass_spring
