@@ -73,7 +73,10 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
   handles:    every scenario of the config's handle_scenarios (a list of {name, handles: [{particles,
                 translation, rotation_axis, rotation_deg}], move_time, hold_time}; see config/compare/
                 held_cloth.yaml): the grid's handles are the scenario's particle groups, each moved as a
-                rigid frame over move_time s along a smooth ramp, then held for hold_time s; every method
+                rigid frame over move_time s along a smooth ramp, then held for hold_time s (or, with
+                waypoints: [{translation, rotation_deg}, ...] instead, through each in turn, one ramp
+                from rest to rest a leg, move_time split evenly; config/compare/large_motion.yaml); a
+                method that cannot be built on a scenario is reported as "did not build"; every method
                 against the reference as in accuracy (--sample, --reference-time-step, --methods), each
                 scenario run for its move_time + hold_time; writes handles_<tag>_error.csv,
                 handles_<tag>_summary.csv and (unless --no-snapshots) handles_<tag>_snapshots.csv,
@@ -691,7 +694,7 @@ void printAccuracyHeader(const Options& o, const ExperimentSetup& setup, const A
     freq << (k ? " " : "") << fmt(result.frequencies[k]);
   std::cout << "basis (" << setup.variant << "): " << result.frequencies.size() << " modes, "
             << result.num_zero_modes << " zero, omega [rad/s] = " << freq.str() << "\n";
-  if (result.basis == BasisKind::ModalDerivatives)
+  if (result.basis == BasisKind::ModalDerivatives && result.physical_frequencies.size() > 0)
   {
     const DerivativeBasisInfo& d = result.derivatives;
     std::cout << "physical basis (" << setup.variant << "): modal_derivatives, " << d.linear_modes
@@ -737,6 +740,8 @@ void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>&
     errors.insert(errors.end(), result.reference_check.begin(), result.reference_check.end());
     snapshots.insert(snapshots.end(), result.snapshots.begin(), result.snapshots.end());
     messages.insert(messages.end(), result.messages.begin(), result.messages.end());
+    for (const auto& [method, reason] : result.not_built)
+      messages.push_back(setup.variant + ": " + method + " did not build: " + reason);
     printAccuracyHeader(o, setup, result);
     if (result.cubature)
     {
@@ -822,6 +827,7 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
   std::vector<ErrorSample> errors;
   std::vector<Snapshot> snapshots;
   std::vector<std::string> messages;
+  std::vector<AccuracySummary> not_built;  // methods that could not be built on a scenario
   for (const ExperimentSetup& setup : setups)
   {
     AccuracyOptions options = o.accuracy;
@@ -836,6 +842,8 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
     errors.insert(errors.end(), result.errors.begin(), result.errors.end());
     errors.insert(errors.end(), result.reference_check.begin(), result.reference_check.end());
     messages.insert(messages.end(), result.messages.begin(), result.messages.end());
+    const std::vector<AccuracySummary> failed = notBuiltSummaries(setup.variant, result);
+    not_built.insert(not_built.end(), failed.begin(), failed.end());
     const HandleScenario& scenario = *setup.handle_scenario;
     std::cout << "handle scenario " << setup.variant << ": " << scenario.handles.size() << " handle(s), "
               << setup.grid.rows << "x" << setup.grid.cols << " grid, moved over " << fmt(scenario.move_time)
@@ -848,7 +856,8 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
   }
   std::ofstream out = openCsv(o, "handles_" + o.tag + "_error.csv");
   writeErrorCsv(out, errors);
-  const std::vector<AccuracySummary> summaries = summarizeAccuracy(errors);
+  std::vector<AccuracySummary> summaries = summarizeAccuracy(errors);
+  summaries.insert(summaries.end(), not_built.begin(), not_built.end());
   std::ofstream summary_out = openCsv(o, "handles_" + o.tag + "_summary.csv");
   writeAccuracySummaryCsv(summary_out, summaries);
   if (o.accuracy.snapshots && !setups.empty())
@@ -859,7 +868,9 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
   std::vector<std::vector<std::string>> table{
       {"scenario", "method", "mean RMS m", "largest RMS m", "RMS at the end m", "step us (median)"}};
   for (const AccuracySummary& s : summaries)
-    if (s.method != reference && s.method != "reference_half_step")
+    if (!s.not_built.empty())
+      table.push_back({s.variant, s.method, "did not build: " + s.not_built, "", "", ""});
+    else if (s.method != reference && s.method != "reference_half_step")
       table.push_back({s.variant, s.method, fmt(s.mean_rms), fmt(s.max_rms),
                        s.diverged ? "diverged" : fmt(s.final_rms), fmt(1e6 * s.step_seconds_median)});
   printTable("handles (" + o.tag + "): distance of the free particles to " + reference +
