@@ -264,6 +264,11 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
     p.linearization = Linearization::Rest;
     // In the world, handles prescribed: the same reference whichever formulation the methods use.
     p.handle_formulation = HandleFormulation::ConstraintModes;
+    // `full` projects onto no basis: the same reference whichever basis the methods are given (an
+    // enriched basis could not even be built at rest).
+    p.basis = BasisKind::LinearModes;
+    p.num_derivative_modes = 0;
+    p.num_skinning_weights = 0;
     p.time_step = setup.sim.time_step / divide;
     return p;
   };

@@ -449,3 +449,29 @@ TEST(HandleScenarios, AMethodThatCannotBeBuiltIsReportedAndTheOthersRun)
   EXPECT_NE(csv.str().find(",not_built\n"), std::string::npos) << csv.str();
   EXPECT_NE(csv.str().find("grips,linear,,,,,,,0,\"handles: "), std::string::npos) << csv.str();
 }
+
+// The converged reference is `full` at rest linearization whatever basis the methods use: an enriched
+// basis, which needs the equilibrium, must not be asked of it.
+TEST(HandleScenarios, TheConvergedReferenceRunsWhateverTheMethodsBasis)
+{
+  const HandleScenario scenario =
+      parse("[{name: lift, move_time: 0.05, hold_time: 0, handles: [{particles: [0, 1, 2, 3], translation: [0, 0, 0.01]}]}]")
+          .front();
+  ExperimentSetup setup = heldSheet(scenario);
+  setup.sim.basis = BasisKind::ModalDerivatives;
+  setup.sim.num_modes = 3;
+  setup.sim.num_derivative_modes = 3;
+  AccuracyOptions options;
+  options.methods = {Method::Physical};
+  options.sample = 10;
+  options.steps = options.interval = 100;
+  options.snapshots = false;
+  options.reference_time_step = setup.sim.time_step / 2;
+  const AccuracyResult result = runAccuracy(setup, options);
+  EXPECT_TRUE(result.not_built.empty());
+  ASSERT_FALSE(result.errors.empty());
+  EXPECT_EQ(result.errors.front().method, "reference");
+  EXPECT_EQ(result.errors.back().method, "physical");
+  EXPECT_FALSE(result.errors.back().diverged);
+  EXPECT_EQ(result.reference_check.size(), result.errors.size() / 2);
+}
