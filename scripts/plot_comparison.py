@@ -394,7 +394,9 @@ def handle_tables(data):
     for path in sorted(data.glob("handles_*_summary.csv")):
         rows = read_csv(path, "summary")
         base = "reference" if any(r["method"] == "reference" for r in rows) else "full"
-        body = [[r["variant"], r["method"], fmt(1e3 * number(r["mean_rms"])), fmt(1e3 * number(r["max_rms"])),
+        # A method that could not be built on a scenario says why (files before not_built have no column).
+        body = [[r["variant"], r["method"], "did not build: " + r["not_built"], "", "", ""] if r.get("not_built") else
+                [r["variant"], r["method"], fmt(1e3 * number(r["mean_rms"])), fmt(1e3 * number(r["max_rms"])),
                  "diverged" if r["diverged"] == "1" else fmt(1e3 * number(r["final_rms"])),
                  fmt(1e6 * number(r["step_seconds_median"]))]
                 for r in rows if r["method"] != base]

@@ -255,7 +255,8 @@ struct AccuracyRun
 // The reference (runs[0]: `full` at the setup's step, or the converged `full` at the reference
 // step) and every compared method; the check at half the reference step goes into `check`.
 std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const AccuracyOptions& options, int divisor,
-                                      std::unique_ptr<AccuracyRun>& check)
+                                      std::unique_ptr<AccuracyRun>& check,
+                                      std::vector<std::pair<std::string, std::string>>& not_built)
 {
   auto referenceParams = [&](int divide) {
     SimulationParams p = withMethod(setup.sim, Method::Full);
@@ -263,6 +264,11 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
     p.linearization = Linearization::Rest;
     // In the world, handles prescribed: the same reference whichever formulation the methods use.
     p.handle_formulation = HandleFormulation::ConstraintModes;
+    // `full` projects onto no basis: the same reference whichever basis the methods are given (an
+    // enriched basis could not even be built at rest).
+    p.basis = BasisKind::LinearModes;
+    p.num_derivative_modes = 0;
+    p.num_skinning_weights = 0;
     p.time_step = setup.sim.time_step / divide;
     return p;
   };
@@ -282,10 +288,22 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
   for (Method m : options.methods)
     if ((divisor > 0 || m != Method::Full) && std::find(compared.begin(), compared.end(), m) == compared.end())
       compared.push_back(m);
+  // A method that cannot be built on this setup (a basis or constraint modes that do not exist) is
+  // reported and left out; the reference must build.
   for (Method m : compared)
-    runs.push_back({toString(m), std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, m), StageFn{}, options.cache),
-                    options.sample,
-                    true});
+    try
+    {
+      runs.push_back({toString(m), std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, m), StageFn{}, options.cache),
+                      options.sample, true});
+    }
+    catch (const std::bad_alloc&)
+    {
+      throw;
+    }
+    catch (const std::exception& e)
+    {
+      not_built.emplace_back(toString(m), e.what());
+    }
   if (setup.handle_scenario)
   {
     for (AccuracyRun& run : runs)
@@ -330,10 +348,10 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
   const int divisor =
       options.reference_time_step > 0.0 ? referenceSubsteps(setup.sim.time_step, options.reference_time_step) : 0;
   std::unique_ptr<AccuracyRun> check;
-  std::vector<AccuracyRun> runs = accuracyRuns(setup, options, divisor, check);
+  AccuracyResult result;
+  std::vector<AccuracyRun> runs = accuracyRuns(setup, options, divisor, check, result.not_built);
   const Grid& grid = runs[0].sim->grid();
 
-  AccuracyResult result;
   const Simulation& modal = *runs.back().sim;  // every run of the setup has the same basis
   result.frequencies = modal.basis().frequencies;
   result.num_zero_modes = modal.basis().num_zero_modes;
@@ -395,7 +413,9 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
     });
     if (it == out.end())
     {
-      out.push_back({e.variant, e.method});
+      out.emplace_back();
+      out.back().variant = e.variant;
+      out.back().method = e.method;
       times.emplace_back();
       counts.push_back(0);
       it = out.end() - 1;
@@ -705,13 +725,29 @@ void writeCubatureCsv(std::ostream& out, const std::vector<CubatureRow>& rows)
         << Field{r.training_seconds} << '\n';
 }
 
+std::vector<AccuracySummary> notBuiltSummaries(const std::string& variant, const AccuracyResult& result)
+{
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  std::vector<AccuracySummary> out;
+  for (const auto& [method, reason] : result.not_built)
+    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, false, reason});
+  return out;
+}
+
 void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummary>& rows)
 {
-  precise(out) << "variant,method,mean_rms,max_rms,mean_max,final_rms,step_seconds_median,step_seconds_mean,diverged\n";
+  precise(out) << "variant,method,mean_rms,max_rms,mean_max,final_rms,step_seconds_median,step_seconds_mean,diverged,"
+                  "not_built\n";
   for (const AccuracySummary& s : rows)
+  {
+    // The reason is free text: quoted, its quotes doubled.
+    std::string reason;
+    for (char c : s.not_built)
+      reason += c == '"' ? std::string("\"\"") : std::string(1, c);
     out << s.variant << ',' << s.method << ',' << Field{s.mean_rms} << ',' << Field{s.max_rms} << ','
         << Field{s.mean_max} << ',' << Field{s.final_rms} << ',' << Field{s.step_seconds_median} << ','
-        << Field{s.step_seconds_mean} << ',' << (s.diverged ? 1 : 0) << '\n';
+        << Field{s.step_seconds_mean} << ',' << (s.diverged ? 1 : 0) << ",\"" << reason << "\"\n";
+  }
 }
 
 void writeSnapshotCsv(std::ostream& out, const Grid& grid, const std::vector<Snapshot>& snapshots)

@@ -135,6 +135,9 @@ struct AccuracyResult
   Eigen::VectorXd physical_frequencies;
   // The training of `cubature` when it was compared, and the grid's number of springs.
   std::optional<CubatureRow> cubature;
+  // Compared methods whose Simulation could not be built on the setup (e.g. no constraint modes),
+  // with the reason; the other methods run without them.
+  std::vector<std::pair<std::string, std::string>> not_built;
 };
 
 AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& options, const ProgressFn& progress = {});
@@ -232,7 +235,10 @@ struct AccuracySummary
   double mean_rms = 0.0, max_rms = 0.0, mean_max = 0.0, final_rms = 0.0;
   double step_seconds_median = 0.0, step_seconds_mean = 0.0;
   bool diverged = false;
+  std::string not_built;  // why the method could not be built (no samples, distances NaN); empty when it ran
 };
+// The summaries of the methods of `result` that did not build, for its variant.
+std::vector<AccuracySummary> notBuiltSummaries(const std::string& variant, const AccuracyResult& result);
 std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& rows);
 void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummary>& rows);
 void writeSnapshotCsv(std::ostream& out, const Grid& grid, const std::vector<Snapshot>& snapshots);

@@ -17,6 +17,7 @@ namespace
 constexpr double kPi = 3.14159265358979323846;
 constexpr double kMaxSeconds = 1000.0;   // a move or hold longer than this is a typo, not an experiment
 constexpr double kMaxTranslation = 1e3;  // m
+constexpr size_t kMaxWaypoints = 1000;
 
 // The value as written, on one line and cut short.
 std::string shown(const YAML::Node& node)
@@ -86,23 +87,58 @@ void checkKeys(const YAML::Node& map, const std::string& name, const std::set<st
                       "unknown key: the keys are " + allowed);
 }
 
+double rotationDeg(const YAML::Node& node, const std::string& name)
+{
+  const double deg = number(node, name);
+  if (std::abs(deg) > 360.0)
+    rejectParameter(name, deg, "must be in [-360, 360] degrees");
+  return deg;
+}
+
+Eigen::Vector3d translation(const YAML::Node& node, const std::string& name)
+{
+  const Eigen::Vector3d t = vector3(node, name);
+  if (t.cwiseAbs().maxCoeff() > kMaxTranslation)
+    rejectParameter(name, "'" + shown(node) + "'",
+                    "each component must be within +-" + std::to_string(static_cast<int>(kMaxTranslation)) + " m");
+  return t;
+}
+
+std::vector<HandlePose> waypointList(const YAML::Node& node, const std::string& name)
+{
+  if (!node.IsSequence() || node.size() == 0 || node.size() > kMaxWaypoints)
+    rejectParameter(name, "'" + shown(node) + "'",
+                    "must be a list of 1 to " + std::to_string(kMaxWaypoints) +
+                        " poses {translation: [x, y, z], rotation_deg: D}, visited in turn");
+  std::vector<HandlePose> poses;
+  for (size_t k = 0; k < node.size(); ++k)
+  {
+    const std::string item = name + "[" + std::to_string(k) + "]";
+    if (!node[k].IsMap())
+      rejectParameter(item, "'" + shown(node[k]) + "'", "must be a map {translation: [x, y, z], rotation_deg: D}");
+    checkKeys(node[k], item, {"translation", "rotation_deg"});
+    HandlePose pose;
+    if (node[k]["translation"])
+      pose.translation = translation(node[k]["translation"], item + ".translation");
+    if (node[k]["rotation_deg"])
+      pose.rotation_deg = rotationDeg(node[k]["rotation_deg"], item + ".rotation_deg");
+    poses.push_back(pose);
+  }
+  return poses;
+}
+
 HandlePath parseHandle(const YAML::Node& node, const std::string& name)
 {
   if (!node.IsMap())
     rejectParameter(name, "'" + shown(node) + "'",
                     "must be a map {particles: [...], translation: [x, y, z], rotation_axis: [x, y, z], rotation_deg: D}");
-  checkKeys(node, name, {"particles", "translation", "rotation_axis", "rotation_deg"});
+  checkKeys(node, name, {"particles", "translation", "rotation_axis", "rotation_deg", "waypoints"});
   HandlePath path;
   if (!node["particles"])
     rejectParameter(name, "'" + shown(node) + "'", "needs 'particles', the indices the handle holds");
   path.particles = particleList(node["particles"], name + ".particles");
   if (node["translation"])
-  {
-    path.translation = vector3(node["translation"], name + ".translation");
-    if (path.translation.cwiseAbs().maxCoeff() > kMaxTranslation)
-      rejectParameter(name + ".translation", "'" + shown(node["translation"]) + "'",
-                      "each component must be within +-" + std::to_string(static_cast<int>(kMaxTranslation)) + " m");
-  }
+    path.translation = translation(node["translation"], name + ".translation");
   if (node["rotation_axis"])
   {
     const Eigen::Vector3d axis = vector3(node["rotation_axis"], name + ".rotation_axis");
@@ -111,10 +147,13 @@ HandlePath parseHandle(const YAML::Node& node, const std::string& name)
     path.rotation_axis = axis.normalized();
   }
   if (node["rotation_deg"])
+    path.rotation_deg = rotationDeg(node["rotation_deg"], name + ".rotation_deg");
+  if (node["waypoints"])
   {
-    path.rotation_deg = number(node["rotation_deg"], name + ".rotation_deg");
-    if (std::abs(path.rotation_deg) > 360.0)
-      rejectParameter(name + ".rotation_deg", path.rotation_deg, "must be in [-360, 360] degrees");
+    if (node["translation"] || node["rotation_deg"])
+      rejectParameter(name + ".waypoints", "'" + shown(node["waypoints"]) + "'",
+                      "give either waypoints or one target (translation, rotation_deg), not both");
+    path.waypoints = waypointList(node["waypoints"], name + ".waypoints");
   }
   return path;
 }
@@ -166,16 +205,31 @@ Ramp moveRamp(double t, double move_time)
           60.0 * tau * rest * (1.0 - 2.0 * tau) / (move_time * move_time)};
 }
 
+std::vector<HandlePose> pathLegs(const HandlePath& path)
+{
+  if (!path.waypoints.empty())
+    return path.waypoints;
+  return {HandlePose{path.translation, path.rotation_deg}};
+}
+
 RigidFrameMotion frameMotion(const HandlePath& path, const Eigen::Vector3d& start_origin, double move_time, double t)
 {
-  const Ramp ramp = moveRamp(t, move_time);
-  const double angle = path.rotation_deg * kPi / 180.0;
+  const std::vector<HandlePose> legs = pathLegs(path);
+  const int n = static_cast<int>(legs.size());
+  const double leg_time = move_time / n;
+  const int k = std::clamp(static_cast<int>(std::floor(t / leg_time)), 0, n - 1);
+  const HandlePose from = k > 0 ? legs[k - 1] : HandlePose{};
+  const HandlePose& to = legs[k];
+  const Ramp ramp = moveRamp(t - k * leg_time, leg_time);
+  const Eigen::Vector3d shift = to.translation - from.translation;
+  const double from_angle = from.rotation_deg * kPi / 180.0;
+  const double angle = (to.rotation_deg - from.rotation_deg) * kPi / 180.0;
   RigidFrameMotion frame;
-  frame.origin = start_origin + ramp.s * path.translation;
-  frame.velocity = ramp.ds * path.translation;
-  frame.acceleration = ramp.dds * path.translation;
+  frame.origin = start_origin + from.translation + ramp.s * shift;
+  frame.velocity = ramp.ds * shift;
+  frame.acceleration = ramp.dds * shift;
   // A fixed axis: the angular velocity and acceleration are the ramp's rates along it.
-  frame.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(ramp.s * angle, path.rotation_axis));
+  frame.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(from_angle + ramp.s * angle, path.rotation_axis));
   frame.angular_velocity = ramp.ds * angle * path.rotation_axis;
   frame.angular_acceleration = ramp.dds * angle * path.rotation_axis;
   return frame;
@@ -227,11 +281,15 @@ GridParams gridWithHandles(const GridParams& grid, const HandleScenario& scenari
         const HandlePath& path = scenario.handles[h];
         const std::string name = "handles[" + std::to_string(h) + "]";
         // A 2D grid lives in the x-z plane: it can move along x and z and turn about y only.
-        if (path.translation.y() != 0.0)
-          rejectParameter(name + ".translation", path.translation.y(), "a 2D grid moves in the x-z plane: y must be 0");
-        if (path.rotation_deg != 0.0 && std::abs(std::abs(path.rotation_axis.y()) - 1.0) > 1e-12)
-          rejectParameter(name + ".rotation_axis", path.rotation_axis.transpose(),
-                          "a 2D grid turns in the x-z plane: the axis must be [0, 1, 0]");
+        for (const HandlePose& pose : pathLegs(path))
+        {
+          if (pose.translation.y() != 0.0)
+            rejectParameter(name + (path.waypoints.empty() ? "" : ".waypoints") + ".translation", pose.translation.y(),
+                            "a 2D grid moves in the x-z plane: y must be 0");
+          if (pose.rotation_deg != 0.0 && std::abs(std::abs(path.rotation_axis.y()) - 1.0) > 1e-12)
+            rejectParameter(name + ".rotation_axis", path.rotation_axis.transpose(),
+                            "a 2D grid turns in the x-z plane: the axis must be [0, 1, 0]");
+        }
       }
   }
   catch (const std::invalid_argument& e)

@@ -17,18 +17,31 @@
 namespace modal_mass_spring
 {
 
+// Where a handle's frame is at a waypoint, relative to where it starts.
+struct HandlePose
+{
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();  // m, grid coordinates
+  double rotation_deg = 0.0;                              // about the path's rotation_axis
+};
+
 // One handle: its particles and where its frame goes. The frame's origin is the particles' centroid
 // at the start, its axes the grid's; over the move it translates by `translation` and turns by
-// `rotation_deg` about `rotation_axis` through its origin.
+// `rotation_deg` about `rotation_axis` through its origin. With `waypoints` it visits them in turn
+// instead (a shake, a return), one leg each, each leg a ramp from rest to rest.
 struct HandlePath
 {
   std::vector<int> particles;  // row * cols + col
   Eigen::Vector3d translation = Eigen::Vector3d::Zero();  // m, grid coordinates
   Eigen::Vector3d rotation_axis = Eigen::Vector3d::UnitZ();  // unit length
   double rotation_deg = 0.0;
+  std::vector<HandlePose> waypoints;  // empty: one leg to (translation, rotation_deg)
 };
 
-// Every handle moves over [0, move_time] along the same ramp, then holds still for hold_time.
+// The poses a path visits after its start, in order: its waypoints, or its one target.
+std::vector<HandlePose> pathLegs(const HandlePath& path);
+
+// Every handle moves over [0, move_time] along the same ramp (with waypoints, move_time split evenly
+// among its legs), then holds still for hold_time.
 struct HandleScenario
 {
   std::string name;
@@ -58,7 +71,8 @@ struct RigidFrameMotion
   Eigen::Vector3d angular_velocity = Eigen::Vector3d::Zero(), angular_acceleration = Eigen::Vector3d::Zero();
 };
 
-// The frame of `path` at time t, its origin starting at `start_origin`.
+// The frame of `path` at time t, its origin starting at `start_origin`: on leg k of n (of length
+// move_time / n), the pose ramps from waypoint k - 1 (the start for k = 0) to waypoint k.
 RigidFrameMotion frameMotion(const HandlePath& path, const Eigen::Vector3d& start_origin, double move_time, double t);
 
 // Particles at `offsets` (3 x N, from the origin, in the start orientation) carried by the frame:

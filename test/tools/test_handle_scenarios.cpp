@@ -6,7 +6,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <algorithm>
 #include <functional>
+#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -320,4 +322,156 @@ TEST(HandleScenarios, InTheMovingFrameEveryInteriorModeUnderPhysicalFollowsFullT
   EXPECT_LT(physical, 1e-6) << "physical with every interior mode against full, both in the frame (m)";
   // The frame's forces swing the sheet far from its linearization: the linear force is not enough.
   EXPECT_GT(linear, 1e-3) << "linear with every interior mode against full in the frame (m)";
+}
+
+// A shake: out along x while turning, back past the start, and home; each leg a ramp from rest to rest.
+TEST(HandleScenarios, AWaypointPathStartsAndEndsAtRestAtEachWaypointAndItsRatesAreItsDerivatives)
+{
+  const HandleScenario scenario = parse(R"(
+- name: shake
+  move_time: 0.45
+  handles:
+    - particles: [0]
+      rotation_axis: [0, 0, 1]
+      waypoints: [{translation: [0.15, 0, 0], rotation_deg: 30}, {translation: [-0.1, 0.05, 0]}, {}]
+)")
+                                      .front();
+  const HandlePath& path = scenario.handles[0];
+  ASSERT_EQ(path.waypoints.size(), 3u);
+  const Eigen::Vector3d start(0.1, 0.2, -0.3);
+  Eigen::Matrix3Xd offsets(3, 2);
+  offsets << 0.1, -0.2,  //
+      0.0, 0.05,         //
+      -0.1, 0.2;
+  const double move = scenario.move_time, leg = move / 3, h = 1e-6;
+  auto at = [&](double t) { return pointsOnFrame(frameMotion(path, start, move, t), offsets); };
+  // At rest where it starts, at each waypoint, and after; there at the waypoint's pose.
+  const Eigen::Vector3d expected_origin[] = {start, start + Eigen::Vector3d(0.15, 0, 0),
+                                             start + Eigen::Vector3d(-0.1, 0.05, 0), start, start};
+  const double expected_deg[] = {0.0, 30.0, 0.0, 0.0, 0.0};
+  const double times[] = {0.0, leg, 2 * leg, move, move + 1.0};
+  for (int k = 0; k < 5; ++k)
+  {
+    const RigidFrameMotion f = frameMotion(path, start, move, times[k]);
+    EXPECT_LT((f.origin - expected_origin[k]).norm(), 1e-14) << "t = " << times[k];
+    EXPECT_NEAR(Eigen::AngleAxisd(f.rotation).angle() * 180.0 / 3.14159265358979323846, expected_deg[k], 1e-9)
+        << "t = " << times[k];
+    const RigidPointMotion m = at(times[k]);
+    EXPECT_LT(m.velocity.cwiseAbs().maxCoeff(), 1e-12) << "t = " << times[k];
+    EXPECT_LT(m.acceleration.cwiseAbs().maxCoeff(), 1e-9) << "t = " << times[k];
+  }
+  // Within each leg, and just across a waypoint, the rates are the derivatives of the positions
+  // (central differences), and a rigid motion keeps the particles' distance.
+  double fastest = 0.0;
+  for (double t : {0.01, 0.07, 0.12, leg - 1e-4, leg + 1e-4, 0.2, 0.27, 2 * leg + 1e-4, 0.38, 0.44})
+  {
+    const RigidPointMotion m = at(t);
+    const Eigen::Matrix3Xd velocity = (at(t + h).position - at(t - h).position) / (2 * h);
+    const Eigen::Matrix3Xd acceleration = (at(t + h).velocity - at(t - h).velocity) / (2 * h);
+    EXPECT_LT((m.velocity - velocity).cwiseAbs().maxCoeff(), 1e-6) << t;
+    EXPECT_LT((m.acceleration - acceleration).cwiseAbs().maxCoeff(), 1e-4) << t;
+    EXPECT_NEAR((m.position.col(0) - m.position.col(1)).norm(), (offsets.col(0) - offsets.col(1)).norm(), 1e-14);
+    fastest = std::max(fastest, m.velocity.cwiseAbs().maxCoeff());
+  }
+  EXPECT_GT(fastest, 0.5) << "the path did not move";
+}
+
+TEST(HandleScenarios, BadWaypointsAreRefusedNamingTheElement)
+{
+  struct Case
+  {
+    std::string yaml, named;
+  };
+  auto handle = [](const std::string& keys) { return "[{name: a, handles: [{particles: [0], " + keys + "}]}]"; };
+  const std::string w = "'handle_scenarios[0].handles[0].waypoints";
+  for (const Case& c : {
+           Case{handle("waypoints: []"), w + "'"},
+           Case{handle("waypoints: {translation: [0, 0, 1]}"), w + "'"},
+           Case{handle("waypoints: [[0, 0, 1]]"), w + "[0]'"},
+           Case{handle("waypoints: [{}, {translation: [0, 1]}]"), w + "[1].translation'"},
+           Case{handle("waypoints: [{translation: [0, .inf, 1]}]"), w + "[0].translation'"},
+           Case{handle("waypoints: [{translation: [0, 2000, 1]}]"), w + "[0].translation'"},
+           Case{handle("waypoints: [{rotation_deg: 400}]"), w + "[0].rotation_deg'"},
+           Case{handle("waypoints: [{rotation_deg: half}]"), w + "[0].rotation_deg'"},
+           Case{handle("waypoints: [{rotation_axis: [1, 0, 0]}]"), w + "[0].rotation_axis'"},
+           Case{handle("translation: [0, 0, 1], waypoints: [{}]"), w + "'"},
+           Case{handle("rotation_deg: 10, waypoints: [{}]"), w + "'"},
+       })
+  {
+    const std::string message = invalidArgument([&] { parse(c.yaml); });
+    EXPECT_NE(message.find("invalid parameter " + c.named), std::string::npos) << c.yaml << "\n" << message;
+  }
+  // A 2D grid moves in its x-z plane at every waypoint.
+  GridParams grid;
+  grid.fixed = {20, 21, 22, 23, 24};
+  const std::string m = invalidArgument([&] {
+    gridWithHandles(grid, parse(handle("waypoints: [{translation: [0.1, 0, 0]}, {translation: [0, 0.1, 0]}]")).front());
+  });
+  EXPECT_NE(m.find("'handles[0].waypoints.translation'"), std::string::npos) << m;
+}
+
+// Two single-particle grips on a flat 3D sheet with nothing fixed, linearized at rest: K_ii is singular
+// (no out-of-plane stiffness), so no modal method can be built; `full` still runs, and the experiment
+// says why the others did not.
+TEST(HandleScenarios, AMethodThatCannotBeBuiltIsReportedAndTheOthersRun)
+{
+  const HandleScenario scenario =
+      parse("[{name: grips, move_time: 0.1, hold_time: 0, handles: [{particles: [0], translation: [0.05, 0, 0]}, "
+            "{particles: [3], translation: [-0.05, 0, 0]}]}]")
+          .front();
+  ExperimentSetup setup = heldSheet(scenario);
+  setup.sim.linearization = Linearization::Rest;
+  setup.sim.initial_state = InitialState::Initial;
+  setup.sim.num_modes = 6;
+  AccuracyOptions options;
+  options.methods = {Method::Linear, Method::Physical};
+  options.sample = 10;
+  options.steps = options.interval = 200;
+  options.snapshots = false;
+  const AccuracyResult result = runAccuracy(setup, options);
+  ASSERT_EQ(result.not_built.size(), 2u);
+  EXPECT_EQ(result.not_built[0].first, "linear");
+  EXPECT_EQ(result.not_built[1].first, "physical");
+  EXPECT_NE(result.not_built[0].second.find("singular"), std::string::npos) << result.not_built[0].second;
+  int full_samples = 0;
+  for (const ErrorSample& e : result.errors)
+  {
+    EXPECT_EQ(e.method, "full");
+    full_samples += !e.diverged;
+  }
+  EXPECT_EQ(full_samples, 21);
+  const std::vector<AccuracySummary> rows = notBuiltSummaries("grips", result);
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[1].method, "physical");
+  EXPECT_TRUE(std::isnan(rows[1].mean_rms));
+  std::ostringstream csv;
+  writeAccuracySummaryCsv(csv, rows);
+  EXPECT_NE(csv.str().find(",not_built\n"), std::string::npos) << csv.str();
+  EXPECT_NE(csv.str().find("grips,linear,,,,,,,0,\"handles: "), std::string::npos) << csv.str();
+}
+
+// The converged reference is `full` at rest linearization whatever basis the methods use: an enriched
+// basis, which needs the equilibrium, must not be asked of it.
+TEST(HandleScenarios, TheConvergedReferenceRunsWhateverTheMethodsBasis)
+{
+  const HandleScenario scenario =
+      parse("[{name: lift, move_time: 0.05, hold_time: 0, handles: [{particles: [0, 1, 2, 3], translation: [0, 0, 0.01]}]}]")
+          .front();
+  ExperimentSetup setup = heldSheet(scenario);
+  setup.sim.basis = BasisKind::ModalDerivatives;
+  setup.sim.num_modes = 3;
+  setup.sim.num_derivative_modes = 3;
+  AccuracyOptions options;
+  options.methods = {Method::Physical};
+  options.sample = 10;
+  options.steps = options.interval = 100;
+  options.snapshots = false;
+  options.reference_time_step = setup.sim.time_step / 2;
+  const AccuracyResult result = runAccuracy(setup, options);
+  EXPECT_TRUE(result.not_built.empty());
+  ASSERT_FALSE(result.errors.empty());
+  EXPECT_EQ(result.errors.front().method, "reference");
+  EXPECT_EQ(result.errors.back().method, "physical");
+  EXPECT_FALSE(result.errors.back().diverged);
+  EXPECT_EQ(result.reference_check.size(), result.errors.size() / 2);
 }
