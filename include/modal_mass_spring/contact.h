@@ -109,10 +109,12 @@ public:
   // (absolute, from the basis); corrects the modal coordinates q and velocities qv through the
   // free-dof basis phi (mass-orthonormal) by projected Gauss-Seidel.
   void correctModal(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x, const Eigen::VectorXd& v,
-                    const Eigen::MatrixXd& phi, Eigen::VectorXd& q, Eigen::VectorXd& qv, double dt);
+                    const Eigen::VectorXd& mass, const Eigen::MatrixXd& phi, Eigen::VectorXd& q, Eigen::VectorXd& qv, double dt);
 
   // Projected Gauss-Seidel sweeps of the modal correction.
   static constexpr int kSweeps = 20;
+  // A touch's compliance in the modal correction, times 1 / (particle mass).
+  static constexpr double kCompliance = 0.05;
 
 private:
   struct Touch;  // one particle against one collider

@@ -267,7 +267,7 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
 }
 
 void Contact::correctModal(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x, const Eigen::VectorXd& v,
-                           const Eigen::MatrixXd& phi, Eigen::VectorXd& q, Eigen::VectorXd& qv, double dt)
+                           const Eigen::VectorXd& mass, const Eigen::MatrixXd& phi, Eigen::VectorXd& q, Eigen::VectorXd& qv, double dt)
 {
   const int dim = grid_.dimension();
   const std::vector<Touch> touches = detect(x, dt);
@@ -301,8 +301,11 @@ void Contact::correctModal(const Eigen::VectorXd& x_start, const Eigen::VectorXd
         const double component = dim == 3 ? row.e[j][a] : row.e[j][a == 0 ? 0 : 2];
         row.g[j] += component * phi.row(dim * t.particle + a).transpose();
       }
-      const double size = row.g[j].squaredNorm();
-      row.inverse[j] = size > 1e-300 ? 1.0 / size : 0.0;
+      // |g|^2 <= 1 / m (the basis moves a particle at most as freely as its own dofs would): where
+      // it is far smaller, the particle barely moves in the basis and a full correction would throw
+      // the whole grid; the compliance kCompliance / m bounds the modal step a touch can ask for.
+      const double size = row.g[j].squaredNorm() + kCompliance / mass[dim * t.particle];
+      row.inverse[j] = 1.0 / size;
     }
     row.gap = t.distance - thickness_;
     row.slip = point(x, t.particle) - point(x_start, t.particle) - t.surface_step;

@@ -26,7 +26,7 @@ void ModalMethod::correctContacts(Contact& contact)
   State& next = mutableNext();
   const Eigen::VectorXd& reference = freeReference();
   contact.correctModal(reference + displacement(state()), reference + displacement(next), velocity(next),
-                       lin_.basis.phi, next.q, next.v, settings_.time_step);
+                       lin_.mass, lin_.basis.phi, next.q, next.v, settings_.time_step);
 }
 
 }  // namespace modal_mass_spring
