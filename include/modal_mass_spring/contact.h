@@ -22,6 +22,7 @@
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 
+#include <map>
 #include <string>
 #include <vector>
 
@@ -61,6 +62,19 @@ constexpr double kDefaultThicknessFraction = 0.1;
 // non-finite value, a zero plane normal, a size <= 0 (radius, half_extents), a capsule with a = b, a
 // negative friction.
 void validateCollider(const Collider& collider, const std::string& name);
+// One element of the parameter `colliders` as a source read it: text values (type, frame) and
+// numeric ones (a scalar is a list of one), so that the node's and the tools' sources share one
+// reading. Keys: type (required); plane: point, normal; box: center, half_extents; sphere: center,
+// radius; capsule: a, b, radius; friction (default 0.5), frame (the node). Throws
+// std::invalid_argument naming `name.key` for an unknown key, a key of another shape, a missing one,
+// and then whatever validateCollider refuses.
+struct ColliderFields
+{
+  std::map<std::string, std::string> text;
+  std::map<std::string, std::vector<double>> numbers;
+};
+Collider colliderFromFields(const ColliderFields& fields, const std::string& name);
+
 // contact_thickness: finite and >= 0 (0: kDefaultThicknessFraction of the spacing).
 void validateContactThickness(double thickness);
 

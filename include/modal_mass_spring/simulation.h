@@ -239,6 +239,8 @@ public:
   // collider can do work on the grid, so the energy check is then off until the next reset().
   // Throws std::invalid_argument for an index out of range or a non-finite pose.
   void setColliderPose(int i, const Eigen::Isometry3d& pose);
+  // The time the last step's contact correction took (s; 0 without colliders).
+  double lastContactSeconds() const { return contact_seconds_; }
   // The force the grid puts on each handle (N, grid coordinates), what holding it takes reversed:
   // the springs' pull on its particles plus their weight and external force minus their mass times
   // their prescribed acceleration. A grid hanging at rest pulls its whole weight.
@@ -334,6 +336,7 @@ private:
   FrameMotion frame_current_, frame_target_;  // B's motion: where the state is, where the next step goes
   bool frame_pending_ = false;
   std::unique_ptr<Contact> contact_;  // null without colliders
+  double contact_seconds_ = 0.0;
 };
 
 }  // namespace modal_mass_spring

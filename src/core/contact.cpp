@@ -102,6 +102,76 @@ void validateCollider(const Collider& c, const std::string& name)
   }
 }
 
+Collider colliderFromFields(const ColliderFields& f, const std::string& name)
+{
+  const auto type_text = f.text.find("type");
+  if (type_text == f.text.end())
+    rejectParameter(name + ".type", "(absent)", "every collider needs a type: plane, box, sphere or capsule");
+  Collider c;
+  c.type = parseColliderType(type_text->second, name + ".type");
+  std::vector<std::string> vectors, scalars{"friction"};
+  switch (c.type)
+  {
+    case ColliderType::Plane: vectors = {"point", "normal"}; break;
+    case ColliderType::Box: vectors = {"center", "half_extents"}; break;
+    case ColliderType::Sphere: vectors = {"center"}; scalars.push_back("radius"); break;
+    case ColliderType::Capsule: vectors = {"a", "b"}; scalars.push_back("radius"); break;
+  }
+  std::string allowed = "type, frame, friction";
+  for (const std::string& key : vectors)
+    allowed += ", " + key;
+  for (size_t k = 1; k < scalars.size(); ++k)
+    allowed += ", " + scalars[k];
+  auto known = [](const std::vector<std::string>& keys, const std::string& key) {
+    return std::find(keys.begin(), keys.end(), key) != keys.end();
+  };
+  for (const auto& [key, value] : f.text)
+    if (key != "type" && key != "frame")
+      rejectParameter(name + "." + key, "'" + value + "'",
+                      known(vectors, key) || known(scalars, key) ? "must be a number or a list of numbers"
+                                                                 : "is not a key of a " + toString(c.type) + " (its keys: " + allowed + ")");
+  for (const auto& [key, value] : f.numbers)
+  {
+    const std::string field = name + "." + key;
+    if (key == "type" || key == "frame")
+      rejectParameter(field, value.empty() ? 0.0 : value[0], "must be a string");
+    if (known(vectors, key))
+    {
+      if (value.size() != 3)
+        rejectParameter(field, std::to_string(value.size()) + " numbers", "must be a list of three numbers [x, y, z]");
+      continue;
+    }
+    if (!known(scalars, key))
+      rejectParameter(field, "(given)", "is not a key of a " + toString(c.type) + " (its keys: " + allowed + ")");
+    if (value.size() != 1)
+      rejectParameter(field, std::to_string(value.size()) + " numbers", "must be one number");
+  }
+  for (const std::string& key : vectors)
+    if (!f.numbers.count(key))
+      rejectParameter(name + "." + key, "(absent)", "a " + toString(c.type) + " needs it (its keys: " + allowed + ")");
+  if (known(scalars, "radius") && !f.numbers.count("radius"))
+    rejectParameter(name + ".radius", "(absent)", "a " + toString(c.type) + " needs a radius");
+  auto vector = [&](const std::string& key) {
+    const std::vector<double>& v = f.numbers.at(key);
+    return Eigen::Vector3d(v[0], v[1], v[2]);
+  };
+  switch (c.type)
+  {
+    case ColliderType::Plane: c.point = vector("point"); c.normal = vector("normal"); break;
+    case ColliderType::Box: c.center = vector("center"); c.half_extents = vector("half_extents"); break;
+    case ColliderType::Sphere: c.center = vector("center"); break;
+    case ColliderType::Capsule: c.a = vector("a"); c.b = vector("b"); break;
+  }
+  if (f.numbers.count("radius"))
+    c.radius = f.numbers.at("radius")[0];
+  if (f.numbers.count("friction"))
+    c.friction = f.numbers.at("friction")[0];
+  if (f.text.count("frame"))
+    c.frame = f.text.at("frame");
+  validateCollider(c, name);
+  return c;
+}
+
 void validateContactThickness(double thickness)
 {
   if (!std::isfinite(thickness) || thickness < 0.0)

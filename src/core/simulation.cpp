@@ -718,7 +718,9 @@ StepResult Simulation::step(int steps)
     bool ok = model_->step();
     if (ok && contact_)
     {
+      const auto start = std::chrono::steady_clock::now();
       model_->correctContacts(*contact_);
+      contact_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
       handles_moved_ = handles_moved_ || contact_->moved();
     }
     const std::string why = divergence(ok, model_->next());

@@ -340,3 +340,38 @@ TEST(Contact, BadCollidersAreRefusedByName)
   s.handle_formulation = HandleFormulation::MovingFrame;
   EXPECT_TRUE(contains(refusal([&] { Simulation sim(held, s); }), "handle_formulation"));
 }
+
+TEST(Contact, CollidersReadFromFieldsRefuseUnknownAndMissingKeysByName)
+{
+  ColliderFields f;
+  f.text["type"] = "capsule";
+  f.numbers["a"] = {0.0, 0.0, 0.0};
+  f.numbers["b"] = {1.0, 0.0, 0.0};
+  f.numbers["radius"] = {0.05};
+  f.numbers["friction"] = {0.8};
+  f.text["frame"] = "finger";
+  const Collider c = colliderFromFields(f, "colliders[0]");
+  EXPECT_EQ(c.type, ColliderType::Capsule);
+  EXPECT_DOUBLE_EQ(c.radius, 0.05);
+  EXPECT_DOUBLE_EQ(c.friction, 0.8);
+  EXPECT_EQ(c.frame, "finger");
+  EXPECT_TRUE(c.b.isApprox(Eigen::Vector3d::UnitX()));
+  ColliderFields bad = f;
+  bad.numbers["center"] = {0.0, 0.0, 0.0};  // a sphere's key
+  EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].center"));
+  bad = f;
+  bad.numbers.erase("radius");
+  EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].radius"));
+  bad = f;
+  bad.numbers["a"] = {0.0, 0.0};
+  EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].a"));
+  bad = f;
+  bad.text["type"] = "cylinder";
+  EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].type"));
+  bad = f;
+  bad.numbers["radius"] = {std::numeric_limits<double>::quiet_NaN()};
+  EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].radius"));
+  bad = f;
+  bad.text.erase("type");
+  EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].type"));
+}
