@@ -3,6 +3,7 @@
 // for the modal methods.
 #pragma once
 
+#include "modal_mass_spring/contact.h"
 #include "modal_mass_spring/cubature.h"
 #include "modal_mass_spring/force_model.h"
 #include "modal_mass_spring/grid.h"
@@ -138,6 +139,9 @@ public:
   void commit() { std::swap(state_, next_); }
   const State& state() const { return state_; }
   const State& next() const { return next_; }
+  // Corrects next() for contact with the colliders (Contact), before commit(): per particle for
+  // `full`, through the basis for the modal methods. The acceleration is left as the forces gave it.
+  virtual void correctContacts(Contact& contact) = 0;
 
 protected:
   MethodModel(Method method, const LinearizedGrid& linearized, std::unique_ptr<ForceModel> force);
@@ -158,6 +162,9 @@ protected:
                           SparseMatrix& gyroscopic) = 0;
   // Computes the frame's terms again (after the reference they depend on moved).
   void applyFrame();
+  State& mutableNext() { return next_; }
+  // x_ref on the free dofs (computed when first asked for).
+  const Eigen::VectorXd& freeReference();
 
   const LinearizedGrid lin_;
   IntegratorSettings settings_;
@@ -170,6 +177,7 @@ private:
   // The external force on the free dofs (world), turned into B when a frame turns.
   Eigen::VectorXd bodyExternalForce() const;
 
+  Eigen::VectorXd free_reference_;
   LoadedForceModel loaded_;  // force_ plus the external force and handle load: what the integrator sees
   Eigen::VectorXd external_free_;  // world, free dofs; empty: none
   Eigen::VectorXd external_load_, handle_load_, frame_load_;  // generalized; empty: none
@@ -195,6 +203,7 @@ public:
   // The handle particles sit at their prescribed positions; their velocity damps the interior
   // through the coupling of Rayleigh damping, -beta K_ib v_b.
   void setHandleMotion(const HandleMotion& motion) override;
+  void correctContacts(Contact& contact) override;
 
 private:
   MassDamping massDamping(double alpha, double beta) const override;
@@ -225,6 +234,8 @@ public:
   void setAnchor(const Eigen::VectorXd& u_anchor) override;
   double anchorDistanceSquared(const Eigen::VectorXd& q) const override;
   void setHandleMotion(const HandleMotion& motion) override;
+  // The touching particles' impulses through Phi (Contact::correctModal): O(n r) to find them.
+  void correctContacts(Contact& contact) override;
 
 private:
   MassDamping massDamping(double alpha, double beta) const override;

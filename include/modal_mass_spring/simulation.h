@@ -2,6 +2,7 @@
 #pragma once
 
 #include "modal_mass_spring/cache.h"
+#include "modal_mass_spring/contact.h"
 #include "modal_mass_spring/cubature.h"
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/method_model.h"
@@ -70,6 +71,11 @@ struct SimulationParams
   // The caller moves every handle together as one rigid body, through setHandleFrameMotion (the node:
   // all handles name one TF frame).
   bool handles_one_body = false;
+  // Rigid colliders the free particles stay contact_thickness off, with Coulomb friction (contact.h);
+  // contact_thickness 0: a tenth of the spacing. With colliders, auto resolves to constraint_modes
+  // (contact is corrected in world coordinates; moving_frame is refused).
+  std::vector<Collider> colliders;
+  double contact_thickness = 0.0;
 };
 
 // The formulation a simulation with these parameters uses: auto resolved (ConstraintModes or
@@ -237,6 +243,19 @@ public:
   // Takes up to `steps` steps; stops at the first that diverges and keeps the state before it.
   StepResult step(int steps = 1);
 
+  // The colliders' contact (null without colliders): their poses, and what the last step did.
+  const Contact* contact() const { return contact_.get(); }
+  // Places collider i (its frame in the grid's coordinates) for the end of the next step; a moved
+  // collider can do work on the grid, so the energy check is then off until the next reset().
+  // Throws std::invalid_argument for an index out of range or a non-finite pose.
+  void setColliderPose(int i, const Eigen::Isometry3d& pose);
+  // The time the last step's contact correction took (s; 0 without colliders).
+  double lastContactSeconds() const { return contact_seconds_; }
+  // The force the grid puts on each handle (N, grid coordinates), what holding it takes reversed:
+  // the springs' pull on its particles plus their weight and external force minus their mass times
+  // their prescribed acceleration. A grid hanging at rest pulls its whole weight.
+  std::vector<Eigen::Vector3d> handleForces() const;
+
   bool diverged() const { return diverged_; }
   long stepCount() const { return step_count_; }
   double time() const { return step_count_ * params_.time_step; }
@@ -328,6 +347,8 @@ private:
   HandleFormulation formulation_ = HandleFormulation::ConstraintModes;  // resolved
   FrameMotion frame_current_, frame_target_;  // B's motion: where the state is, where the next step goes
   bool frame_pending_ = false;
+  std::unique_ptr<Contact> contact_;  // null without colliders
+  double contact_seconds_ = 0.0;
 };
 
 }  // namespace modal_mass_spring

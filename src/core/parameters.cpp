@@ -54,6 +54,7 @@ SimulationParams loadSimulationParams(const ParameterSource& s)
   p.newton_max_iterations = s.getInt("newton_max_iterations").value_or(p.newton_max_iterations);
   p.hht_alpha = s.getDouble("hht_alpha").value_or(p.hht_alpha);
   p.energy_tolerance = s.getDouble("energy_tolerance").value_or(p.energy_tolerance);
+  p.contact_thickness = s.getDouble("contact_thickness").value_or(p.contact_thickness);
   p.memory_limit_gb = s.getDouble("memory_limit_gb").value_or(p.memory_limit_gb);
   if (const auto name = s.getString("basis"))
     p.basis = parseBasis(*name);

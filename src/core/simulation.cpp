@@ -170,6 +170,12 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
                       "needs every handle moved as one rigid body (handles_one_body; in the node: every handle on "
                       "one TF frame); handles moving apart need constraint_modes or auto");
   }
+  for (size_t i = 0; i < p.colliders.size(); ++i)
+    validateCollider(p.colliders[i], "colliders[" + std::to_string(i) + "]");
+  validateContactThickness(p.contact_thickness);
+  if (!p.colliders.empty() && p.handle_formulation == HandleFormulation::MovingFrame)
+    rejectParameter("handle_formulation", "moving_frame",
+                    "cannot be used with colliders (contact is resolved in world coordinates); use auto or constraint_modes");
   if (!std::isfinite(p.memory_limit_gb) || p.memory_limit_gb <= 0.0)
     rejectParameter("memory_limit_gb", p.memory_limit_gb, "must be a finite number of GB > 0");
   const double needed_gb = estimateMemoryBytes(grid, p) / 1e9;
@@ -205,7 +211,8 @@ HandleFormulation resolveHandleFormulation(const GridParams& grid, const Simulat
 {
   // The skinning span holds the handles' rigid motion itself: auto needs no moving frame there.
   if (params.handle_formulation == HandleFormulation::Auto)
-    return !grid.handles.empty() && params.basis != BasisKind::Skinning && effectiveFixed(grid).empty() && params.handles_one_body
+    return !grid.handles.empty() && params.basis != BasisKind::Skinning && params.colliders.empty() &&
+                   effectiveFixed(grid).empty() && params.handles_one_body
                ? HandleFormulation::MovingFrame
                : HandleFormulation::ConstraintModes;
   return params.handle_formulation;
@@ -313,6 +320,10 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
       on_stage("cubature");
     prepareCubature();
   }
+  if (!params_.colliders.empty())
+    contact_ = std::make_unique<Contact>(grid_, params_.colliders,
+                                         params_.contact_thickness > 0.0 ? params_.contact_thickness
+                                                                         : kDefaultThicknessFraction * g.spacing);
   reset();
 }
 
@@ -717,6 +728,8 @@ void Simulation::reset()
   frame_current_ = frame_target_ = FrameMotion{};
   frame_pending_ = false;
   setPhysicalState(u_start_, Eigen::VectorXd::Zero(u_start_.size()));
+  if (contact_)
+    contact_->reset();
   step_count_ = 0;
 }
 
@@ -780,7 +793,14 @@ StepResult Simulation::step(int steps)
       model_->setFrameForces(frameForcesOf(frame_target_));
       handles_moved_ = handles_moved_ || !frame_target_.atRest();
     }
-    const bool ok = model_->step();
+    bool ok = model_->step();
+    if (ok && contact_)
+    {
+      const auto start = std::chrono::steady_clock::now();
+      model_->correctContacts(*contact_);
+      contact_seconds_ = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      handles_moved_ = handles_moved_ || contact_->moved();
+    }
     const std::string why = divergence(ok, model_->next());
     if (!why.empty())
     {
@@ -802,6 +822,8 @@ StepResult Simulation::step(int steps)
       return result;
     }
     model_->commit();
+    if (contact_)
+      contact_->commit();
     if (moving)
     {
       handle_current_ = handle_target_;
@@ -939,6 +961,60 @@ double Simulation::totalEnergy() const { return totalEnergy(positions()); }
 double Simulation::totalEnergy(const Eigen::VectorXd& x) const
 {
   return kineticEnergy() + springEnergy(grid_, x) + gravityEnergy(grid_, x);
+}
+
+void Simulation::setColliderPose(int i, const Eigen::Isometry3d& pose)
+{
+  const int count = contact_ ? static_cast<int>(contact_->colliders().size()) : 0;
+  if (i < 0 || i >= count)
+    throw std::invalid_argument("collider index " + std::to_string(i) + " is out of range: there are " +
+                                std::to_string(count) + " colliders");
+  if (!pose.matrix().allFinite())
+    throw std::invalid_argument("the pose of collider " + std::to_string(i) + " is not finite");
+  contact_->setPose(i, pose);
+}
+
+std::vector<Eigen::Vector3d> Simulation::handleForces() const
+{
+  const int dim = grid_.dimension();
+  const Eigen::VectorXd x = positions();
+  std::vector<int> handle_of(grid_.numParticles(), -1);
+  for (size_t h = 0; h < grid_.handles().size(); ++h)
+    for (int p : grid_.handles()[h])
+      handle_of[p] = static_cast<int>(h);
+  std::vector<Eigen::Vector3d> forces(grid_.handles().size(), Eigen::Vector3d::Zero());
+  auto add = [&](int particle, const Eigen::VectorXd& f) {
+    const int h = handle_of[particle];
+    if (h < 0)
+      return;
+    if (dim == 3)
+      forces[h] += f.head<3>();
+    else
+      forces[h] += Eigen::Vector3d(f[0], 0.0, f[1]);
+  };
+  // Only the springs that touch a handle particle.
+  for (const Spring& s : grid_.springs())
+  {
+    if (handle_of[s.i] < 0 && handle_of[s.j] < 0)
+      continue;
+    const Eigen::VectorXd d = x.segment(dim * s.j, dim) - x.segment(dim * s.i, dim);
+    const double length = d.norm();
+    if (length <= 0.0)
+      continue;
+    const Eigen::VectorXd f = s.stiffness * (length - s.rest_length) / length * d;  // on i, towards j
+    add(s.i, f);
+    add(s.j, -f);
+  }
+  const std::vector<int>& dofs = grid_.handleDofs();
+  for (size_t k = 0; k < dofs.size(); k += dim)
+  {
+    const int particle = dofs[k] / dim;
+    Eigen::VectorXd f = grid_.gravityForce().segment(dofs[k], dim) + external_force_.segment(dofs[k], dim);
+    if (handle_current_.acceleration.size() > 0)
+      f -= grid_.particleMass() * handle_current_.acceleration.segment(k, dim);
+    add(particle, f);
+  }
+  return forces;
 }
 
 }  // namespace modal_mass_spring

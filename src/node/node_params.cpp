@@ -51,6 +51,10 @@ public:
   {
     return note(key), source_.getHandleList(key);
   }
+  std::optional<std::vector<Collider>> getColliderList(const std::string& key) const override
+  {
+    return note(key), source_.getColliderList(key);
+  }
   const std::set<std::string>& queried() const { return queried_; }
 
 private:
@@ -241,6 +245,12 @@ NodeConfiguration loadNodeConfiguration(const NodeParameterSource& source, const
   NodeConfiguration c;
   c.grid = loadGridParams(recording);
   c.simulation = loadSimulationParams(recording);
+  c.simulation.colliders = recording.getColliderList("colliders").value_or(std::vector<Collider>{});
+  for (size_t i = 0; i < c.simulation.colliders.size(); ++i)
+    if (!c.simulation.colliders[i].frame.empty())
+      rejectParameter("colliders[" + std::to_string(i) + "].frame", "'" + c.simulation.colliders[i].frame + "'",
+                      "the node does not yet move colliders with TF frames: leave frame out (the collider stays "
+                      "where its pose in grid_frame puts it)");
   // The handles' particle groups are the core's to check (range, one handle each, not fixed).
   const std::vector<HandleParam> handles = loadHandles(recording);
   for (const auto& handle : handles)

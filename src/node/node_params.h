@@ -28,6 +28,9 @@ public:
   // A list of maps {frame: <string>, particles: [indices]}; throws std::invalid_argument naming the
   // element (`handles[1].particles`) when the value has another shape.
   virtual std::optional<std::vector<HandleParam>> getHandleList(const std::string& key) const = 0;
+  // A list of collider maps (contact.h, colliderFromFields); throws std::invalid_argument naming the
+  // element and key. A source without colliders need not override it.
+  virtual std::optional<std::vector<Collider>> getColliderList(const std::string& /*key*/) const { return std::nullopt; }
 };
 
 // Parameters of the node itself, on top of the core's GridParams and SimulationParams.

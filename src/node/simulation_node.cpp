@@ -2,6 +2,7 @@
 #include "simulation_node.h"
 
 #include "modal_mass_spring/Status.h"
+#include "contact_messages.h"
 #include "grid_messages.h"
 #include "startup_report.h"
 #include "xmlrpc_parameter_source.h"
@@ -131,6 +132,7 @@ struct SimulationNode::Output
     visualization_msgs::MarkerArray markers;
     Status status;
     sensor_msgs::PointCloud2 points;
+    std::vector<std::pair<ros::Publisher, geometry_msgs::WrenchStamped>> wrenches;
   };
   std::vector<Grid> grids;
   std::vector<geometry_msgs::TransformStamped> frames;  // empty: no TF this time
@@ -168,6 +170,12 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
     track.markers_pub = track_nh.advertise<visualization_msgs::MarkerArray>("markers", 1);
     track.status_pub = track_nh.advertise<Status>("status", 10);
     track.points_pub = track_nh.advertise<sensor_msgs::PointCloud2>("points", 1);
+    for (size_t h = 0; h < params.handles.size(); ++h)
+      track.handle_force_pubs.push_back(
+          track_nh.advertise<geometry_msgs::WrenchStamped>("handle_force/handle_" + std::to_string(h), 10));
+    for (size_t i = 0; i < config_.simulation.colliders.size(); ++i)
+      track.contact_force_pubs.push_back(
+          track_nh.advertise<geometry_msgs::WrenchStamped>("contact_force/collider_" + std::to_string(i), 10));
   }
   if (use_sim_time_)
     clock_pub_ = nh_.advertise<rosgraph_msgs::Clock>("/clock", 10);
@@ -665,6 +673,21 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     // One pass over the springs for both the surface's colours and the cloud.
     const Eigen::VectorXd strains = particleStrains(simulation.grid(), track.last_points);
     grid.markers = makeMarkers(simulation.grid(), options, track.last_points, stamp, strains);
+    if (const Contact* contact = simulation.contact())
+    {
+      const auto colliders = colliderMarkers(*contact, options.frame_id, track.offset, track.ns_prefix + "colliders", stamp);
+      grid.markers.markers.insert(grid.markers.markers.end(), colliders.markers.begin(), colliders.markers.end());
+      for (size_t i = 0; i < track.contact_force_pubs.size() && i < contact->report().force.size(); ++i)
+        grid.wrenches.emplace_back(track.contact_force_pubs[i],
+                                   forceWrench(contact->report().force[i], options.frame_id, stamp));
+    }
+    if (!track.handle_force_pubs.empty())
+    {
+      const std::vector<Eigen::Vector3d> forces = simulation.handleForces();
+      for (size_t h = 0; h < track.handle_force_pubs.size() && h < forces.size(); ++h)
+        if (forces[h].allFinite())
+          grid.wrenches.emplace_back(track.handle_force_pubs[h], forceWrench(forces[h], options.frame_id, stamp));
+    }
     if (measured && ref->shadow)
     {
       // The reference drawn faintly where the method is: the gap between them is the error.
@@ -756,7 +779,11 @@ void SimulationNode::send(const Output& output)
   if (!output.frames.empty())
     tf_broadcaster_.sendTransform(output.frames);
   for (const auto& grid : output.grids)
+  {
     grid.status_pub.publish(grid.status);
+    for (const auto& [publisher, wrench] : grid.wrenches)
+      publisher.publish(wrench);
+  }
 }
 
 uint8_t SimulationNode::state(const Track& track) const

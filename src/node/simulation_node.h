@@ -62,6 +62,8 @@ private:
     std::string grid_frame;
     std::string ns_prefix;  // of its marker namespaces
     ros::Publisher markers_pub, status_pub, points_pub;  // none for the shadow
+    // The force each handle and each collider takes from the grid (geometry_msgs/WrenchStamped).
+    std::vector<ros::Publisher> handle_force_pubs, contact_force_pubs;
     Eigen::Matrix3Xd last_points;  // the last finite positions
     double last_energy = 0.0;
     std::string divergence_message;

@@ -298,4 +298,60 @@ std::optional<std::vector<HandleParam>> XmlRpcParameterSource::getHandleList(con
   return handles;
 }
 
+std::optional<std::vector<Collider>> XmlRpcParameterSource::getColliderList(const std::string& key) const
+{
+  const XmlRpcValue* found = find(key);
+  if (!found)
+    return std::nullopt;
+  const std::string example = "[{type: plane, point: [0, 0, 0], normal: [0, 0, 1]}]";
+  const std::string expected = "a list of collider maps, e.g. " + example;
+  XmlRpcValue value = *found;
+  if (value.getType() == XmlRpcValue::TypeString)
+  {
+    const auto parsed = fromYamlText(asString(value));
+    if (!parsed || parsed->getType() != XmlRpcValue::TypeArray)
+      throwWrongType(key, expected, value);
+    value = *parsed;
+  }
+  if (value.getType() != XmlRpcValue::TypeArray)
+    throwWrongType(key, expected, value);
+  std::vector<Collider> colliders;
+  for (int i = 0; i < value.size(); ++i)
+  {
+    const std::string name = key + "[" + std::to_string(i) + "]";
+    XmlRpcValue& item = value[i];
+    if (item.getType() != XmlRpcValue::TypeStruct)
+      throwWrongType(name, "a map such as {type: sphere, center: [0, 0, 0], radius: 0.1}", item);
+    ColliderFields fields;
+    for (auto it = item.begin(); it != item.end(); ++it)
+    {
+      XmlRpcValue& field = it->second;
+      const bool named = it->first == "type" || it->first == "frame";
+      if (const auto number = named ? std::nullopt : toDouble(field))
+      {
+        fields.numbers[it->first] = {*number};
+        continue;
+      }
+      if (field.getType() == XmlRpcValue::TypeString)
+      {
+        fields.text[it->first] = asString(field);
+        continue;
+      }
+      if (field.getType() != XmlRpcValue::TypeArray)
+        throwWrongType(name + "." + it->first, "a number, a string or a list of numbers", field);
+      std::vector<double> numbers;
+      for (int k = 0; k < field.size(); ++k)
+      {
+        const auto number = toDouble(field[k]);
+        if (!number)
+          throwWrongType(name + "." + it->first, "a list of numbers", field);
+        numbers.push_back(*number);
+      }
+      fields.numbers[it->first] = numbers;
+    }
+    colliders.push_back(colliderFromFields(fields, name));
+  }
+  return colliders;
+}
+
 }  // namespace modal_mass_spring

@@ -32,6 +32,8 @@ public:
   std::optional<std::vector<std::string>> getStringList(const std::string& key) const override;
   // From a list of structs, or from the YAML text of one (`_handles:='[{frame: f, particles: [0]}]'`).
   std::optional<std::vector<HandleParam>> getHandleList(const std::string& key) const override;
+  // From a list of structs or the YAML text of one, as handles.
+  std::optional<std::vector<Collider>> getColliderList(const std::string& key) const override;
 
   // Every key present (the first level below the namespace).
   std::vector<std::string> keys() const;

@@ -1,5 +1,6 @@
 // modal_compare: runs the paper's experiments on a YAML config and writes CSV files and a summary.
 #include "experiments.h"
+#include "yaml_colliders.h"
 #include "yaml_parameter_source.h"
 
 #include "modal_mass_spring/parameters.h"
@@ -449,6 +450,8 @@ std::vector<ExperimentSetup> buildSetups(const Options& o, std::vector<HandleSce
     {
       setup.grid = loadGridParams(source);
       setup.sim = loadSimulationParams(source);
+      if (const YAML::Node node = source.getNode("colliders"); node.IsDefined())
+        setup.sim.colliders = parseColliders(node, "colliders");
       if (const YAML::Node node = source.getNode("handle_scenarios"); node.IsDefined())
         scenarios = parseHandleScenarios(node, "handle_scenarios");
     }

@@ -18,7 +18,7 @@ const std::set<std::string> kNodeParameters{
     "cache_dir",
     "handles"};  // the node moves their particles with TF frames; the tool does not read them
 
-const std::set<std::string> kToolParameters{"handle_scenarios"};
+const std::set<std::string> kToolParameters{"handle_scenarios", "colliders"};
 
 YamlParameterSource::YamlParameterSource(YAML::Node root, std::string origin)
   : root_(std::move(root)), origin_(std::move(origin))

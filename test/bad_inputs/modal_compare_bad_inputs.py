@@ -252,6 +252,18 @@ def cases(configs):
         # also refused when another experiment runs: the config is read whole
         config("handles_bad_in_accuracy_run", held.replace("name: lift", "name: 'lift,now'"),
                "handle_scenarios[0].name", "--experiment", "accuracy"),
+        # ------------------------------------------------ colliders (contact)
+        config("colliders_a_map", "colliders: {type: plane}\n", "colliders"),
+        config("colliders_unknown_type", "colliders:\n  - {type: cylinder}\n", "colliders[0].type"),
+        config("colliders_unknown_key", "colliders:\n  - {type: plane, point: [0, 0, 0], normal: [0, 0, 1], colour: red}\n",
+               "colliders[0].colour"),
+        config("colliders_zero_normal", "colliders:\n  - {type: plane, point: [0, 0, 0], normal: [0, 0, 0]}\n",
+               "colliders[0].normal"),
+        config("colliders_negative_radius", "colliders:\n  - {type: sphere, center: [0, 0, 0], radius: -1}\n",
+               "colliders[0].radius"),
+        config("colliders_nan_center", "colliders:\n  - {type: box, center: [.nan, 0, 0], half_extents: [1, 1, 1]}\n",
+               "colliders[0].center"),
+        config("contact_thickness_negative", "contact_thickness: -0.01\n", "contact_thickness"),
     ]
     return table
 

@@ -541,6 +541,35 @@ TEST(XmlRpcParameterSource, HandlesAsListsOfMapsOrTheirText)
             std::string::npos);
 }
 
+TEST(XmlRpcParameterSource, CollidersAsListsOfMapsOrTheirText)
+{
+  XmlRpc::XmlRpcValue sphere;
+  sphere["type"] = "sphere";
+  sphere["center"] = array({XmlRpc::XmlRpcValue(0.0), XmlRpc::XmlRpcValue(1), XmlRpc::XmlRpcValue(-0.5)});
+  sphere["radius"] = 0.1;
+  XmlRpc::XmlRpcValue negative = sphere;
+  negative["radius"] = -0.1;
+  XmlRpc::XmlRpcValue unknown = sphere;
+  unknown["colour"] = "red";
+  const XmlRpcParameterSource source(
+      params({{"list", array({sphere})},
+              {"text", XmlRpc::XmlRpcValue("[{type: plane, point: [0, 0, 0], normal: [0, 0, 1], friction: 0.3}]")},
+              {"negative", array({negative})},
+              {"unknown", array({unknown})},
+              {"not_a_list", XmlRpc::XmlRpcValue(3)}}));
+  const auto list = source.getColliderList("list");
+  ASSERT_TRUE(list && list->size() == 1u);
+  EXPECT_EQ((*list)[0].type, ColliderType::Sphere);
+  EXPECT_TRUE((*list)[0].center.isApprox(Eigen::Vector3d(0.0, 1.0, -0.5)));
+  const auto text = source.getColliderList("text");
+  ASSERT_TRUE(text && text->size() == 1u);
+  EXPECT_DOUBLE_EQ((*text)[0].friction, 0.3);
+  EXPECT_FALSE(source.getColliderList("absent"));
+  EXPECT_NE(thrown([&] { source.getColliderList("negative"); }).find("'negative[0].radius'"), std::string::npos);
+  EXPECT_NE(thrown([&] { source.getColliderList("unknown"); }).find("'unknown[0].colour'"), std::string::npos);
+  EXPECT_NE(thrown([&] { source.getColliderList("not_a_list"); }).find("'not_a_list'"), std::string::npos);
+}
+
 // Particles held by a frame follow its motion applied to their offsets at the first lookup; the
 // velocity is the derivative of the interpolated path; a missing frame holds them and says so.
 TEST(HandleFrames, ParticlesFollowTheirFrame)
@@ -778,8 +807,8 @@ TEST(NodeParams, EveryShippedNodeConfigLoads)
     loaded.push_back(entry.path().filename().string());
   }
   std::sort(loaded.begin(), loaded.end());
-  EXPECT_EQ(loaded, (std::vector<std::string>{"cloth.yaml", "cloth_large.yaml", "held_cloth.yaml", "paper_2d.yaml",
-                                              "paper_3d.yaml"}));
+  EXPECT_EQ(loaded, (std::vector<std::string>{"cloth.yaml", "cloth_drag.yaml", "cloth_large.yaml", "cloth_table.yaml",
+                                              "held_cloth.yaml", "paper_2d.yaml", "paper_3d.yaml"}));
 }
 
 }  // namespace

@@ -1,0 +1,148 @@
+// Contact between the grid's particles and rigid colliders (plane, box, sphere, capsule) with
+// Coulomb friction, as a correction of each step's end state.
+//
+// After the integrator's step, every free particle closer to a collider than the contact thickness
+// is corrected twice, with a Coulomb cone each time:
+//   positions: pushed out along the normal to the thickness (the normal "impulse" is the push); the
+//     tangential slip over the step (relative to the collider's surface) is undone where mu times the
+//     push covers it (static friction), else shortened by mu times the push;
+//   velocities: the approaching normal velocity is removed (normal impulse jn), and the tangential
+//     velocity is cancelled where mu jn covers it, else reduced by mu jn.
+// For `full` each particle is corrected on its own (exact: a particle's dofs are its own
+// coordinates). For the modal methods the impulses act through the basis: a particle's impulse p
+// changes the modal velocity by Phi_p^T p (Phi is mass-orthonormal), so the touching particles'
+// impulses are solved together by projected Gauss-Seidel in reduced coordinates, a few sweeps, each
+// constraint (normal, then the tangential cone) against its own diagonal |Phi_p^T e|^2.
+// Not modelled: self-collision, collider-collider contact, rolling or torsional friction, and the
+// cloth pushing the colliders (they move only as they are told).
+#pragma once
+
+#include "modal_mass_spring/grid.h"
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+
+#include <map>
+#include <string>
+#include <vector>
+
+namespace modal_mass_spring
+{
+
+enum class ColliderType
+{
+  Plane,
+  Box,
+  Sphere,
+  Capsule
+};
+
+std::string toString(ColliderType type);
+// Throws std::invalid_argument for an unknown name (naming `name`, the parameter).
+ColliderType parseColliderType(const std::string& text, const std::string& name);
+
+// One rigid collider, in its own frame (which its pose places in the grid's coordinates).
+struct Collider
+{
+  ColliderType type = ColliderType::Plane;
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();   // plane: a point on it
+  Eigen::Vector3d normal = Eigen::Vector3d::UnitZ(); // plane: the side the cloth stays on (any length > 0)
+  Eigen::Vector3d center = Eigen::Vector3d::Zero();  // box, sphere
+  Eigen::Vector3d half_extents = Eigen::Vector3d::Constant(0.5);  // box, axis-aligned in its frame
+  double radius = 0.1;                               // sphere, capsule
+  Eigen::Vector3d a = Eigen::Vector3d::Zero(), b = Eigen::Vector3d::UnitX();  // capsule's segment
+  double friction = 0.5;                             // Coulomb coefficient mu >= 0
+  std::string frame;                                 // a TF frame it follows (the node); empty: fixed
+};
+
+// The default contact thickness, as a fraction of the grid's spacing.
+constexpr double kDefaultThicknessFraction = 0.1;
+
+// Throws std::invalid_argument (rejectParameter) naming `name` (e.g. "colliders[1].radius") for a
+// non-finite value, a zero plane normal, a size <= 0 (radius, half_extents), a capsule with a = b, a
+// negative friction.
+void validateCollider(const Collider& collider, const std::string& name);
+// One element of the parameter `colliders` as a source read it: text values (type, frame) and
+// numeric ones (a scalar is a list of one), so that the node's and the tools' sources share one
+// reading. Keys: type (required); plane: point, normal; box: center, half_extents; sphere: center,
+// radius; capsule: a, b, radius; friction (default 0.5), frame (the node). Throws
+// std::invalid_argument naming `name.key` for an unknown key, a key of another shape, a missing one,
+// and then whatever validateCollider refuses.
+struct ColliderFields
+{
+  std::map<std::string, std::string> text;
+  std::map<std::string, std::vector<double>> numbers;
+};
+Collider colliderFromFields(const ColliderFields& fields, const std::string& name);
+
+// contact_thickness: finite and >= 0 (0: kDefaultThicknessFraction of the spacing).
+void validateContactThickness(double thickness);
+
+// Signed distance from x (grid coordinates, 3D) to the collider's surface, at the collider's pose,
+// and the outward unit normal there.
+double signedDistance(const Collider& collider, const Eigen::Isometry3d& pose, const Eigen::Vector3d& x,
+                      Eigen::Vector3d& normal);
+
+// What the last step's contact did.
+struct ContactReport
+{
+  // Per collider: the force the cloth puts on it over the step (N, grid coordinates, the velocity
+  // impulses divided by the time step), and the particles touching it.
+  std::vector<Eigen::Vector3d> force;
+  std::vector<int> touching;
+  // The deepest a free particle was below a surface before and after the correction (m, >= 0).
+  double penetration_before = 0.0;
+  double penetration_after = 0.0;
+};
+
+// The colliders of a simulation, their poses, and the correction of a step's end state.
+class Contact
+{
+public:
+  // Colliders validated by the caller; thickness > 0 (resolved).
+  Contact(const Grid& grid, std::vector<Collider> colliders, double thickness);
+
+  const std::vector<Collider>& colliders() const { return colliders_; }
+  double thickness() const { return thickness_; }
+  // The pose of collider i at the end of the next step (the collider frame in the grid's
+  // coordinates); its motion over the step moves the surface the particles touch.
+  void setPose(int i, const Eigen::Isometry3d& pose);
+  const Eigen::Isometry3d& pose(int i) const { return poses_[i]; }
+  // True once a collider moved since the last reset(): it can then do work on the grid.
+  bool moved() const { return moved_; }
+  // The step was taken: the poses it went to are now the current ones.
+  void commit();
+  void reset() { moved_ = false; }
+  const ContactReport& report() const { return report_; }
+
+  // `full`: corrects the free dofs' end positions x (absolute) and velocities v, given the start
+  // positions x_start, the free dofs' masses and the step dt. Returns the largest correction.
+  void correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v,
+                        const Eigen::VectorXd& mass, double dt);
+  // The modal methods: positions x, start positions x_start and velocities v of the free dofs
+  // (absolute, from the basis); corrects the modal coordinates q and velocities qv through the
+  // free-dof basis phi (mass-orthonormal) by projected Gauss-Seidel.
+  void correctModal(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x, const Eigen::VectorXd& v,
+                    const Eigen::VectorXd& mass, const Eigen::MatrixXd& phi, Eigen::VectorXd& q, Eigen::VectorXd& qv, double dt);
+
+  // Projected Gauss-Seidel sweeps of the modal correction.
+  static constexpr int kSweeps = 20;
+  // A touch's compliance in the modal correction, times 1 / (particle mass).
+  static constexpr double kCompliance = 0.05;
+
+private:
+  struct Touch;  // one particle against one collider
+  // The touches of the free particles at positions x (free dofs), with the collider's surface
+  // velocity; fills penetration_before.
+  std::vector<Touch> detect(const Eigen::VectorXd& x, double dt);
+  Eigen::Vector3d point(const Eigen::VectorXd& x, int particle) const;
+
+  const Grid& grid_;
+  std::vector<Collider> colliders_;
+  double thickness_;
+  std::vector<Eigen::Isometry3d> poses_, start_poses_;  // the end of the next step, its start
+  bool moved_ = false;
+  ContactReport report_;
+};
+
+}  // namespace modal_mass_spring

@@ -1,0 +1,428 @@
+// Colliders, their signed distances, and the Coulomb correction of a step's end state (contact.h).
+#include "modal_mass_spring/contact.h"
+
+#include "modal_mass_spring/validation.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+namespace modal_mass_spring
+{
+namespace
+{
+
+std::string text(const Eigen::Vector3d& v)
+{
+  std::ostringstream s;
+  s << "[" << v.x() << ", " << v.y() << ", " << v.z() << "]";
+  return s.str();
+}
+
+void requireFinite(const std::string& name, const Eigen::Vector3d& v)
+{
+  if (!v.allFinite())
+    rejectParameter(name, text(v), "must be three finite numbers (m)");
+}
+
+void requirePositive(const std::string& name, double value)
+{
+  if (!std::isfinite(value) || value <= 0.0)
+    rejectParameter(name, value, "must be a finite number > 0 (m)");
+}
+
+// The correction that Coulomb friction with the bound `limit` makes to a tangential quantity t:
+// cancel it where the bound covers it (stick), else shorten it by the bound (slip).
+Eigen::Vector3d coulomb(const Eigen::Vector3d& t, double limit)
+{
+  const double size = t.norm();
+  if (size <= limit)
+    return -t;
+  return -limit / size * t;
+}
+
+// Two unit vectors completing n to an orthonormal basis.
+void tangents(const Eigen::Vector3d& n, Eigen::Vector3d& t1, Eigen::Vector3d& t2)
+{
+  t1 = (std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY()).cross(n).normalized();
+  t2 = n.cross(t1);
+}
+
+}  // namespace
+
+std::string toString(ColliderType type)
+{
+  switch (type)
+  {
+    case ColliderType::Plane: return "plane";
+    case ColliderType::Box: return "box";
+    case ColliderType::Sphere: return "sphere";
+    case ColliderType::Capsule: return "capsule";
+  }
+  return "?";
+}
+
+ColliderType parseColliderType(const std::string& text, const std::string& name)
+{
+  for (ColliderType t : {ColliderType::Plane, ColliderType::Box, ColliderType::Sphere, ColliderType::Capsule})
+    if (text == toString(t))
+      return t;
+  rejectParameter(name, "'" + text + "'", "must be one of plane, box, sphere, capsule");
+}
+
+void validateCollider(const Collider& c, const std::string& name)
+{
+  if (!std::isfinite(c.friction) || c.friction < 0.0)
+    rejectParameter(name + ".friction", c.friction, "must be a finite Coulomb coefficient >= 0");
+  switch (c.type)
+  {
+    case ColliderType::Plane:
+      requireFinite(name + ".point", c.point);
+      requireFinite(name + ".normal", c.normal);
+      if (!(c.normal.norm() > 1e-12))
+        rejectParameter(name + ".normal", text(c.normal), "must be a non-zero vector (the side the cloth stays on)");
+      break;
+    case ColliderType::Box:
+      requireFinite(name + ".center", c.center);
+      requireFinite(name + ".half_extents", c.half_extents);
+      if (!(c.half_extents.minCoeff() > 0.0))
+        rejectParameter(name + ".half_extents", text(c.half_extents), "must be three numbers > 0 (m)");
+      break;
+    case ColliderType::Sphere:
+      requireFinite(name + ".center", c.center);
+      requirePositive(name + ".radius", c.radius);
+      break;
+    case ColliderType::Capsule:
+      requireFinite(name + ".a", c.a);
+      requireFinite(name + ".b", c.b);
+      requirePositive(name + ".radius", c.radius);
+      if (!((c.b - c.a).norm() > 0.0))
+        rejectParameter(name + ".b", text(c.b), "must differ from a (a capsule's segment; use a sphere for a point)");
+      break;
+  }
+}
+
+Collider colliderFromFields(const ColliderFields& f, const std::string& name)
+{
+  const auto type_text = f.text.find("type");
+  if (type_text == f.text.end())
+    rejectParameter(name + ".type", "(absent)", "every collider needs a type: plane, box, sphere or capsule");
+  Collider c;
+  c.type = parseColliderType(type_text->second, name + ".type");
+  std::vector<std::string> vectors, scalars{"friction"};
+  switch (c.type)
+  {
+    case ColliderType::Plane: vectors = {"point", "normal"}; break;
+    case ColliderType::Box: vectors = {"center", "half_extents"}; break;
+    case ColliderType::Sphere: vectors = {"center"}; scalars.push_back("radius"); break;
+    case ColliderType::Capsule: vectors = {"a", "b"}; scalars.push_back("radius"); break;
+  }
+  std::string allowed = "type, frame, friction";
+  for (const std::string& key : vectors)
+    allowed += ", " + key;
+  for (size_t k = 1; k < scalars.size(); ++k)
+    allowed += ", " + scalars[k];
+  auto known = [](const std::vector<std::string>& keys, const std::string& key) {
+    return std::find(keys.begin(), keys.end(), key) != keys.end();
+  };
+  for (const auto& [key, value] : f.text)
+    if (key != "type" && key != "frame")
+      rejectParameter(name + "." + key, "'" + value + "'",
+                      known(vectors, key) || known(scalars, key) ? "must be a number or a list of numbers"
+                                                                 : "is not a key of a " + toString(c.type) + " (its keys: " + allowed + ")");
+  for (const auto& [key, value] : f.numbers)
+  {
+    const std::string field = name + "." + key;
+    if (key == "type" || key == "frame")
+      rejectParameter(field, value.empty() ? 0.0 : value[0], "must be a string");
+    if (known(vectors, key))
+    {
+      if (value.size() != 3)
+        rejectParameter(field, std::to_string(value.size()) + " numbers", "must be a list of three numbers [x, y, z]");
+      continue;
+    }
+    if (!known(scalars, key))
+      rejectParameter(field, "(given)", "is not a key of a " + toString(c.type) + " (its keys: " + allowed + ")");
+    if (value.size() != 1)
+      rejectParameter(field, std::to_string(value.size()) + " numbers", "must be one number");
+  }
+  for (const std::string& key : vectors)
+    if (!f.numbers.count(key))
+      rejectParameter(name + "." + key, "(absent)", "a " + toString(c.type) + " needs it (its keys: " + allowed + ")");
+  if (known(scalars, "radius") && !f.numbers.count("radius"))
+    rejectParameter(name + ".radius", "(absent)", "a " + toString(c.type) + " needs a radius");
+  auto vector = [&](const std::string& key) {
+    const std::vector<double>& v = f.numbers.at(key);
+    return Eigen::Vector3d(v[0], v[1], v[2]);
+  };
+  switch (c.type)
+  {
+    case ColliderType::Plane: c.point = vector("point"); c.normal = vector("normal"); break;
+    case ColliderType::Box: c.center = vector("center"); c.half_extents = vector("half_extents"); break;
+    case ColliderType::Sphere: c.center = vector("center"); break;
+    case ColliderType::Capsule: c.a = vector("a"); c.b = vector("b"); break;
+  }
+  if (f.numbers.count("radius"))
+    c.radius = f.numbers.at("radius")[0];
+  if (f.numbers.count("friction"))
+    c.friction = f.numbers.at("friction")[0];
+  if (f.text.count("frame"))
+    c.frame = f.text.at("frame");
+  validateCollider(c, name);
+  return c;
+}
+
+void validateContactThickness(double thickness)
+{
+  if (!std::isfinite(thickness) || thickness < 0.0)
+    rejectParameter("contact_thickness", thickness,
+                    "must be a finite number of metres >= 0 (0: a tenth of the spacing)");
+}
+
+double signedDistance(const Collider& c, const Eigen::Isometry3d& pose, const Eigen::Vector3d& x,
+                      Eigen::Vector3d& normal)
+{
+  const Eigen::Vector3d p = pose.inverse() * x;  // in the collider's frame
+  Eigen::Vector3d n = Eigen::Vector3d::UnitZ();
+  double d = 0.0;
+  auto round = [&](const Eigen::Vector3d& closest, double radius) {
+    const Eigen::Vector3d r = p - closest;
+    const double length = r.norm();
+    n = length > 0.0 ? Eigen::Vector3d(r / length) : Eigen::Vector3d::UnitZ();
+    d = length - radius;
+  };
+  switch (c.type)
+  {
+    case ColliderType::Plane:
+      n = c.normal.normalized();
+      d = n.dot(p - c.point);
+      break;
+    case ColliderType::Sphere:
+      round(c.center, c.radius);
+      break;
+    case ColliderType::Capsule:
+    {
+      const Eigen::Vector3d axis = c.b - c.a;
+      const double s = std::clamp(axis.dot(p - c.a) / axis.squaredNorm(), 0.0, 1.0);
+      round(c.a + s * axis, c.radius);
+      break;
+    }
+    case ColliderType::Box:
+    {
+      const Eigen::Vector3d q = p - c.center;
+      const Eigen::Vector3d excess = q.cwiseAbs() - c.half_extents;
+      const Eigen::Vector3d sign = q.unaryExpr([](double v) { return v < 0.0 ? -1.0 : 1.0; });
+      if (excess.maxCoeff() > 0.0)
+      {
+        const Eigen::Vector3d out = excess.cwiseMax(0.0).cwiseProduct(sign);
+        d = out.norm();
+        n = out / d;
+      }
+      else
+      {
+        int axis = 0;
+        d = excess.maxCoeff(&axis);  // the nearest face, from inside
+        n = Eigen::Vector3d::Zero();
+        n[axis] = sign[axis];
+      }
+      break;
+    }
+  }
+  normal = pose.linear() * n;
+  return d;
+}
+
+struct Contact::Touch
+{
+  int particle;  // free particle: free dofs [dim particle, dim particle + dim)
+  int collider;
+  double distance;
+  Eigen::Vector3d normal;
+  Eigen::Vector3d surface_step;  // how far the collider's surface at the particle moved over the step
+};
+
+Contact::Contact(const Grid& grid, std::vector<Collider> colliders, double thickness)
+  : grid_(grid), colliders_(std::move(colliders)), thickness_(thickness),
+    poses_(colliders_.size(), Eigen::Isometry3d::Identity()), start_poses_(poses_)
+{
+  report_.force.assign(colliders_.size(), Eigen::Vector3d::Zero());
+  report_.touching.assign(colliders_.size(), 0);
+}
+
+void Contact::setPose(int i, const Eigen::Isometry3d& pose)
+{
+  if (!pose.isApprox(poses_[i], 0.0))
+    moved_ = true;
+  poses_[i] = pose;
+}
+
+void Contact::commit() { start_poses_ = poses_; }
+
+Eigen::Vector3d Contact::point(const Eigen::VectorXd& x, int particle) const
+{
+  if (grid_.dimension() == 3)
+    return x.segment<3>(3 * particle);
+  return Eigen::Vector3d(x[2 * particle], 0.0, x[2 * particle + 1]);
+}
+
+std::vector<Contact::Touch> Contact::detect(const Eigen::VectorXd& x, double /*dt*/)
+{
+  std::vector<Touch> touches;
+  report_ = ContactReport{};
+  report_.force.assign(colliders_.size(), Eigen::Vector3d::Zero());
+  report_.touching.assign(colliders_.size(), 0);
+  const int particles = static_cast<int>(x.size()) / grid_.dimension();
+  for (int c = 0; c < static_cast<int>(colliders_.size()); ++c)
+  {
+    const Eigen::Isometry3d step = poses_[c] * start_poses_[c].inverse();
+    const bool still = step.isApprox(Eigen::Isometry3d::Identity(), 0.0);
+    for (int p = 0; p < particles; ++p)
+    {
+      const Eigen::Vector3d at = point(x, p);
+      Eigen::Vector3d n;
+      const double d = signedDistance(colliders_[c], poses_[c], at, n);
+      if (d >= thickness_)
+        continue;
+      report_.penetration_before = std::max(report_.penetration_before, -d);
+      ++report_.touching[c];
+      // The surface point under the particle at the step's start went to `at` (rigid motion).
+      const Eigen::Vector3d moved = still ? Eigen::Vector3d::Zero() : Eigen::Vector3d(at - step.inverse() * at);
+      touches.push_back(Touch{p, c, d, n, moved});
+    }
+  }
+  return touches;
+}
+
+void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v,
+                               const Eigen::VectorXd& mass, double dt)
+{
+  const int dim = grid_.dimension();
+  const std::vector<Touch> touches = detect(x, dt);
+  auto add = [&](Eigen::VectorXd& target, int p, const Eigen::Vector3d& delta) {
+    if (dim == 3)
+      target.segment<3>(3 * p) += delta;
+    else
+    {
+      target[2 * p] += delta.x();
+      target[2 * p + 1] += delta.z();
+    }
+  };
+  for (const Touch& t : touches)
+  {
+    const Collider& c = colliders_[t.collider];
+    Eigen::Vector3d n;
+    const double d = signedDistance(c, poses_[t.collider], point(x, t.particle), n);  // after earlier touches
+    if (d >= thickness_)
+      continue;
+    // Positions: push out, and Coulomb on the slip over the step with the push as the normal bound.
+    const double push = thickness_ - d;
+    const Eigen::Vector3d slip = point(x, t.particle) - point(x_start, t.particle) - t.surface_step;
+    add(x, t.particle, push * n + coulomb(slip - slip.dot(n) * n, c.friction * push));
+    // Velocities: remove the approach, Coulomb on the tangential velocity relative to the surface.
+    const Eigen::Vector3d relative = point(v, t.particle) - t.surface_step / dt;
+    const double approach = -relative.dot(n);
+    if (approach <= 0.0)
+      continue;
+    const Eigen::Vector3d tangential = relative + approach * n;
+    const Eigen::Vector3d dv = approach * n + coulomb(tangential, c.friction * approach);
+    add(v, t.particle, dv);
+    report_.force[t.collider] -= mass[dim * t.particle] * dv / dt;
+  }
+  for (const Touch& t : touches)
+  {
+    Eigen::Vector3d n;
+    const double d = signedDistance(colliders_[t.collider], poses_[t.collider], point(x, t.particle), n);
+    report_.penetration_after = std::max(report_.penetration_after, -d);
+  }
+}
+
+void Contact::correctModal(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x, const Eigen::VectorXd& v,
+                           const Eigen::VectorXd& mass, const Eigen::MatrixXd& phi, Eigen::VectorXd& q, Eigen::VectorXd& qv, double dt)
+{
+  const int dim = grid_.dimension();
+  const std::vector<Touch> touches = detect(x, dt);
+  if (touches.empty())
+    return;
+  const int r = static_cast<int>(phi.cols());
+  const int count = static_cast<int>(touches.size());
+  // Per touch: Phi_p^T e for e = n, t1, t2 (what an impulse along e does to the modal coordinates),
+  // and the starting normal gap, slip and relative velocity.
+  struct Row
+  {
+    Eigen::Vector3d e[3];
+    Eigen::VectorXd g[3];
+    double inverse[3];  // 1 / |g|^2, 0 where the basis cannot move the particle that way
+    double gap;
+    Eigen::Vector3d slip, velocity;
+    double mu;
+  };
+  std::vector<Row> rows(count);
+  for (int k = 0; k < count; ++k)
+  {
+    const Touch& t = touches[k];
+    Row& row = rows[k];
+    row.e[0] = t.normal;
+    tangents(t.normal, row.e[1], row.e[2]);
+    for (int j = 0; j < 3; ++j)
+    {
+      row.g[j] = Eigen::VectorXd::Zero(r);
+      for (int a = 0; a < dim; ++a)
+      {
+        const double component = dim == 3 ? row.e[j][a] : row.e[j][a == 0 ? 0 : 2];
+        row.g[j] += component * phi.row(dim * t.particle + a).transpose();
+      }
+      // |g|^2 <= 1 / m (the basis moves a particle at most as freely as its own dofs would): where
+      // it is far smaller, the particle barely moves in the basis and a full correction would throw
+      // the whole grid; the compliance kCompliance / m bounds the modal step a touch can ask for.
+      const double size = row.g[j].squaredNorm() + kCompliance / mass[dim * t.particle];
+      row.inverse[j] = 1.0 / size;
+    }
+    row.gap = t.distance - thickness_;
+    row.slip = point(x, t.particle) - point(x_start, t.particle) - t.surface_step;
+    row.velocity = point(v, t.particle) - t.surface_step / dt;
+    row.mu = colliders_[t.collider].friction;
+  }
+  // One projected Gauss-Seidel solve: the normal part of (start + Phi_p delta) kept >= bound (gap:
+  // -gap; velocity: 0), the tangential part cancelled within mu times the normal multiplier.
+  auto solve = [&](bool positions) {
+    Eigen::VectorXd delta = Eigen::VectorXd::Zero(r);
+    std::vector<Eigen::Vector3d> lambda(count, Eigen::Vector3d::Zero());
+    for (int sweep = 0; sweep < kSweeps; ++sweep)
+    {
+      for (int k = 0; k < count; ++k)
+      {
+        Row& row = rows[k];
+        Eigen::Vector3d& l = lambda[k];
+        const Eigen::Vector3d& start = positions ? row.slip : row.velocity;
+        const double violation = positions ? row.gap + row.g[0].dot(delta) : row.e[0].dot(start) + row.g[0].dot(delta);
+        const double normal = std::max(0.0, l[0] - violation * row.inverse[0]);
+        delta += (normal - l[0]) * row.g[0];
+        l[0] = normal;
+        Eigen::Vector2d tangential(l[1], l[2]);
+        for (int j = 1; j < 3; ++j)
+          tangential[j - 1] -= (row.e[j].dot(start) + row.g[j].dot(delta)) * row.inverse[j];
+        const double limit = row.mu * l[0];
+        if (tangential.norm() > limit)
+          tangential *= limit / tangential.norm();
+        delta += (tangential[0] - l[1]) * row.g[1] + (tangential[1] - l[2]) * row.g[2];
+        l[1] = tangential[0];
+        l[2] = tangential[1];
+      }
+    }
+    if (!positions)
+      for (int k = 0; k < count; ++k)
+        report_.force[touches[k].collider] -=
+            (lambda[k][0] * rows[k].e[0] + lambda[k][1] * rows[k].e[1] + lambda[k][2] * rows[k].e[2]) / dt;
+    return delta;
+  };
+  const Eigen::VectorXd dq = solve(true);
+  q += dq;
+  qv += solve(false);
+  for (int k = 0; k < count; ++k)
+  {
+    const Row& row = rows[k];
+    report_.penetration_after = std::max(report_.penetration_after, -(row.gap + thickness_ + row.g[0].dot(dq)));
+  }
+}
+
+}  // namespace modal_mass_spring

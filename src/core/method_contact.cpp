@@ -1,0 +1,32 @@
+// How each method hands its step's end state to the contact correction (contact.h): `full` its
+// particles' dofs, the modal methods their coordinates through the basis.
+#include "modal_mass_spring/method_model.h"
+
+namespace modal_mass_spring
+{
+
+const Eigen::VectorXd& MethodModel::freeReference()
+{
+  if (free_reference_.size() == 0)
+    free_reference_ = lin_.grid.gatherFree(lin_.x_ref);
+  return free_reference_;
+}
+
+void FullMethod::correctContacts(Contact& contact)
+{
+  State& next = mutableNext();
+  const Eigen::VectorXd& reference = freeReference();
+  Eigen::VectorXd x = reference + next.q;
+  contact.correctParticles(reference + state().q, x, next.v, lin_.mass, settings_.time_step);
+  next.q = x - reference;
+}
+
+void ModalMethod::correctContacts(Contact& contact)
+{
+  State& next = mutableNext();
+  const Eigen::VectorXd& reference = freeReference();
+  contact.correctModal(reference + displacement(state()), reference + displacement(next), velocity(next),
+                       lin_.mass, lin_.basis.phi, next.q, next.v, settings_.time_step);
+}
+
+}  // namespace modal_mass_spring

@@ -1,0 +1,377 @@
+// Contact: colliders' signed distances, the Coulomb correction of a particle (rest, slope below and
+// above the friction angle against the closed form), a sheet dropped on each collider type under
+// both integrators, a sheet resting on a table, the reduced methods against `full`, the force on a
+// handle, and bad colliders refused by name.
+#include "modal_mass_spring/contact.h"
+#include "modal_mass_spring/simulation.h"
+
+#include "test_support.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+using namespace modal_mass_spring;
+
+namespace
+{
+
+// A 10 x 10 sheet lying flat at z = 0 (rows along +y), 0.45 m wide, its row 0 fixed.
+GridParams flatSheet(int size = 10)
+{
+  GridParams g;
+  g.rows = g.cols = size;
+  g.dimension = 3;
+  g.spacing = 0.45 / (size - 1);
+  g.mass = 0.5 / (size * size);
+  g.structural_stiffness = 50.0;
+  g.shear_stiffness = 20.0;
+  g.bending = true;
+  g.bending_stiffness = 5.0;
+  g.rotation_deg = 90.0;
+  return g;
+}
+
+SimulationParams withColliders(Method method, IntegratorKind integrator, double dt, std::vector<Collider> colliders)
+{
+  SimulationParams s;
+  s.method = method;
+  s.integrator = integrator;
+  s.time_step = dt;
+  s.alpha = 0.5;
+  s.num_modes = 20;
+  // A flat sheet has no out-of-plane stiffness: the modes are taken where it hangs.
+  s.linearization = Linearization::Equilibrium;
+  s.colliders = std::move(colliders);
+  return s;
+}
+
+Collider plane(double height, const Eigen::Vector3d& normal = Eigen::Vector3d::UnitZ(), double friction = 0.5)
+{
+  Collider c;
+  c.type = ColliderType::Plane;
+  c.point = Eigen::Vector3d(0.0, 0.0, height);
+  c.normal = normal;
+  c.friction = friction;
+  return c;
+}
+
+// The deepest any free particle of `sim` is below the surface of any of `colliders` (m, >= 0).
+double penetration(const Simulation& sim, const std::vector<Collider>& colliders)
+{
+  const Eigen::Matrix3Xd points = sim.points();
+  double deepest = 0.0;
+  for (int p = 0; p < points.cols(); ++p)
+  {
+    if (sim.grid().isFixed(p) || sim.grid().isHandle(p))
+      continue;
+    for (const Collider& c : colliders)
+    {
+      Eigen::Vector3d n;
+      deepest = std::max(deepest, -signedDistance(c, Eigen::Isometry3d::Identity(), points.col(p), n));
+    }
+  }
+  return deepest;
+}
+
+// Runs `seconds` and returns the deepest penetration over the run into `colliders` (the
+// simulation's own unless given).
+double deepestOverRun(Simulation& sim, double seconds, const std::vector<Collider>* colliders = nullptr)
+{
+  if (!colliders)
+    colliders = &sim.contact()->colliders();
+  double deepest = 0.0;
+  const int steps = static_cast<int>(std::lround(seconds / sim.params().time_step));
+  for (int k = 0; k < steps; ++k)
+  {
+    const StepResult r = sim.step();
+    EXPECT_FALSE(r.diverged) << r.message;
+    if (r.diverged) std::cout << r.message << "\n";
+    if (r.diverged)
+      break;
+    deepest = std::max(deepest, penetration(sim, *colliders));
+  }
+  return deepest;
+}
+
+double largestMove(const Eigen::Matrix3Xd& a, const Eigen::Matrix3Xd& b) { return (a - b).colwise().norm().maxCoeff(); }
+
+}  // namespace
+
+TEST(Collider, SignedDistancesOfEachShape)
+{
+  Eigen::Vector3d n;
+  const Eigen::Isometry3d at_origin = Eigen::Isometry3d::Identity();
+  Collider c = plane(1.0, Eigen::Vector3d(0.0, 0.0, 2.0));
+  EXPECT_NEAR(signedDistance(c, at_origin, Eigen::Vector3d(3.0, 4.0, 0.5), n), -0.5, 1e-15);
+  EXPECT_TRUE(n.isApprox(Eigen::Vector3d::UnitZ()));
+  c.type = ColliderType::Sphere;
+  c.center = Eigen::Vector3d(1.0, 0.0, 0.0);
+  c.radius = 0.5;
+  EXPECT_NEAR(signedDistance(c, at_origin, Eigen::Vector3d(1.0, 2.0, 0.0), n), 1.5, 1e-15);
+  EXPECT_TRUE(n.isApprox(Eigen::Vector3d::UnitY()));
+  c.type = ColliderType::Capsule;
+  c.a = Eigen::Vector3d(0.0, 0.0, 0.0);
+  c.b = Eigen::Vector3d(2.0, 0.0, 0.0);
+  EXPECT_NEAR(signedDistance(c, at_origin, Eigen::Vector3d(1.0, 0.0, -0.2), n), -0.3, 1e-15);
+  EXPECT_NEAR(signedDistance(c, at_origin, Eigen::Vector3d(3.0, 0.0, 0.0), n), 0.5, 1e-15);  // past the end cap
+  c.type = ColliderType::Box;
+  c.center = Eigen::Vector3d::Zero();
+  c.half_extents = Eigen::Vector3d(1.0, 2.0, 0.5);
+  EXPECT_NEAR(signedDistance(c, at_origin, Eigen::Vector3d(0.0, 0.0, 0.4), n), -0.1, 1e-15);  // inside, top face
+  EXPECT_TRUE(n.isApprox(Eigen::Vector3d::UnitZ()));
+  EXPECT_NEAR(signedDistance(c, at_origin, Eigen::Vector3d(4.0, 6.0, 0.0), n), 5.0, 1e-12);  // off the edge
+  // A pose moves the shape: the box's centre 1 m up.
+  const Eigen::Isometry3d up(Eigen::Translation3d(0.0, 0.0, 1.0));
+  EXPECT_NEAR(signedDistance(c, up, Eigen::Vector3d(0.0, 0.0, 2.0), n), 0.5, 1e-15);
+}
+
+// One particle on a plane tilted by theta about y, stepped by symplectic Euler under gravity and
+// corrected: it stays below arctan(mu) and slides with g (sin - mu cos) above.
+namespace
+{
+double slideOnSlope(double theta_deg, double mu, double seconds, double dt)
+{
+  GridParams g = flatSheet();
+  const Grid grid(g);
+  const double theta = theta_deg * M_PI / 180.0;
+  Collider slope = plane(0.0, Eigen::Vector3d(-std::sin(theta), 0.0, std::cos(theta)), mu);
+  Contact contact(grid, {slope}, 0.001);
+  Eigen::VectorXd x = 0.001 * slope.normal, v = Eigen::Vector3d::Zero();  // at the thickness
+  const Eigen::VectorXd mass = Eigen::Vector3d::Constant(0.01);
+  const Eigen::Vector3d gravity(0.0, 0.0, -9.81);
+  const Eigen::VectorXd start = x;
+  for (int k = 0; k < std::lround(seconds / dt); ++k)
+  {
+    const Eigen::VectorXd x_start = x;
+    v += dt * gravity;
+    x += dt * v;
+    contact.correctParticles(x_start, x, v, mass, dt);
+    EXPECT_NEAR(contact.report().force[0].dot(slope.normal), -0.01 * 9.81 * std::cos(theta), 1e-9);
+  }
+  return (x - start).norm();
+}
+}  // namespace
+
+TEST(Contact, StaticFrictionHoldsBelowTheFrictionAngleAndSlidesAboveIt)
+{
+  const double mu = 0.5;  // friction angle 26.57 degrees
+  EXPECT_LT(slideOnSlope(25.0, mu, 5.0, 1e-3), 1e-9);
+  EXPECT_LT(slideOnSlope(0.0, mu, 5.0, 1e-3), 1e-9);
+  for (double theta_deg : {28.0, 40.0})
+  {
+    const double theta = theta_deg * M_PI / 180.0;
+    const double expected = 0.5 * 9.81 * (std::sin(theta) - mu * std::cos(theta));  // in 1 s
+    EXPECT_NEAR(slideOnSlope(theta_deg, mu, 1.0, 1e-3), expected, 0.01 * expected) << theta_deg << " degrees";
+  }
+}
+
+// A sheet released flat with its row 0 pinned falls onto each collider type under each integrator.
+TEST(Contact, FullDropsOnEveryColliderWithoutPenetratingAMillimetre)
+{
+  std::vector<Collider> colliders;
+  colliders.push_back(plane(-0.1));
+  Collider box;
+  box.type = ColliderType::Box;
+  box.center = Eigen::Vector3d(0.225, 0.3, -0.1);
+  box.half_extents = Eigen::Vector3d(0.4, 0.15, 0.05);
+  colliders.push_back(box);
+  Collider sphere;
+  sphere.type = ColliderType::Sphere;
+  sphere.center = Eigen::Vector3d(0.2, 0.3, -0.2);
+  sphere.radius = 0.12;
+  colliders.push_back(sphere);
+  Collider capsule;
+  capsule.type = ColliderType::Capsule;
+  capsule.a = Eigen::Vector3d(-0.1, 0.25, -0.12);
+  capsule.b = Eigen::Vector3d(0.6, 0.25, -0.12);
+  capsule.radius = 0.04;
+  colliders.push_back(capsule);
+  for (const Collider& c : colliders)
+    for (auto [integrator, dt] : {std::pair{IntegratorKind::Explicit, 1e-3}, std::pair{IntegratorKind::Implicit, 5e-3}})
+    {
+      Simulation sim(flatSheet(), withColliders(Method::Full, integrator, dt, {c}));
+      const double deepest = deepestOverRun(sim, 1.5);
+      EXPECT_LT(deepest, 1e-3) << toString(c.type);
+      // It did land: some particle touches, and the contact carried weight.
+      EXPECT_GT(sim.contact()->report().touching[0], 0) << toString(c.type);
+      EXPECT_LT(sim.contact()->report().force[0].z(), 0.0) << toString(c.type);
+      // Without the collider the sheet would have fallen through it.
+      Simulation free_fall(flatSheet(), withColliders(Method::Full, integrator, dt, {}));
+      const std::vector<Collider> probe{c};
+      EXPECT_GT(deepestOverRun(free_fall, 1.5, &probe), 0.01) << toString(c.type) << ": the drop would not reach it";
+    }
+}
+
+// A sheet lying on a table stays put: no sinking, no jitter, no creep, under both integrators.
+TEST(Contact, SheetRestsOnATableWithinAMillimetreForFiveSeconds)
+{
+  for (auto [integrator, dt] : {std::pair{IntegratorKind::Explicit, 1e-3}, std::pair{IntegratorKind::Implicit, 1e-3},
+                                std::pair{IntegratorKind::Implicit, 5e-3}})
+  {
+    const GridParams g = flatSheet();
+    const double thickness = kDefaultThicknessFraction * g.spacing;
+    Simulation sim(g, withColliders(Method::Full, integrator, dt, {plane(-thickness)}));
+    const Eigen::Matrix3Xd start = sim.points();
+    const double deepest = deepestOverRun(sim, 5.0);
+    EXPECT_LT(largestMove(sim.points(), start), 1e-3) << "dt " << dt;
+    EXPECT_LT(deepest, 1e-3);
+    // The table carries the free particles' weight.
+    const double free_weight = 9.81 * g.mass * (g.rows - 1) * g.cols;
+    EXPECT_NEAR(-sim.contact()->report().force[0].z(), free_weight, 0.02 * free_weight) << "dt " << dt;
+  }
+}
+
+// A finger (a sphere) pushed through a hanging sheet, for every method: the modal methods correct
+// through their basis, measured against `full`.
+namespace
+{
+struct Push
+{
+  double deepest = 0.0;
+  Eigen::Matrix3Xd end;
+};
+Push pushHangingSheet(Method method)
+{
+  GridParams g = flatSheet();
+  g.rotation_deg = 0.0;  // hanging in the x-z plane from row 0
+  SimulationParams s = withColliders(method, IntegratorKind::Implicit, 5e-3, {});
+  s.initial_state = InitialState::Equilibrium;
+  Collider finger;
+  finger.type = ColliderType::Sphere;
+  finger.center = Eigen::Vector3d(0.225, 0.1, -0.3);
+  finger.radius = 0.05;
+  s.colliders = {finger};
+  Simulation sim(g, s);
+  Push result;
+  const int steps = 200;  // 1 s: the finger moves 0.2 m along -y, through the sheet's plane
+  for (int k = 1; k <= steps; ++k)
+  {
+    sim.setColliderPose(0, Eigen::Isometry3d(Eigen::Translation3d(0.0, -0.2 * k / steps, 0.0)));
+    const StepResult r = sim.step();
+    EXPECT_FALSE(r.diverged) << r.message;
+    Eigen::Vector3d n;
+    const Eigen::Matrix3Xd points = sim.points();
+    for (int p = g.cols; p < points.cols(); ++p)
+      result.deepest = std::max(result.deepest, -signedDistance(finger, sim.contact()->pose(0), points.col(p), n));
+  }
+  EXPECT_GT(sim.contact()->report().touching[0], 0) << toString(method);
+  result.end = sim.points();
+  return result;
+}
+}  // namespace
+
+TEST(Contact, FingerPushesAHangingSheetInEveryMethod)
+{
+  const Push full = pushHangingSheet(Method::Full);
+  EXPECT_LT(full.deepest, 1e-3);
+  // The sheet was pushed along -y by the finger, 0.05 m past the sheet's plane at its end.
+  EXPECT_LT(full.end.row(1).minCoeff(), -0.05);
+  for (Method m : {Method::Physical, Method::Cubature})
+  {
+    const Push reduced = pushHangingSheet(m);
+    const double distance = largestMove(reduced.end, full.end);
+    std::cout << toString(m) << ": deepest " << reduced.deepest * 1e3 << " mm, largest distance to full "
+              << distance * 1e3 << " mm, full pushed " << -full.end.row(1).minCoeff() * 1e3 << " mm\n";
+    EXPECT_LT(reduced.deepest, 1e-3) << toString(m);
+    // Pushed as well, though a few modes bend the whole sheet where full dents it around the finger.
+    EXPECT_LT(reduced.end.row(1).minCoeff(), -0.05) << toString(m);
+    RecordProperty(toString(m) + "_distance_to_full_mm", std::to_string(distance * 1e3));
+  }
+}
+
+// The handles carry what the cloth pulls: hanging at rest, its whole weight.
+TEST(Contact, HandleForceOfAHangingClothIsItsWeight)
+{
+  GridParams g = flatSheet();
+  g.rotation_deg = 0.0;  // hanging
+  g.fixed = {};
+  g.handles = {{0, 1, 2, 3, 4}, {5, 6, 7, 8, 9}};
+  SimulationParams s;
+  s.method = Method::Full;
+  s.linearization = Linearization::Equilibrium;
+  s.initial_state = InitialState::Equilibrium;
+  Simulation sim(g, s);
+  const std::vector<Eigen::Vector3d> forces = sim.handleForces();
+  ASSERT_EQ(forces.size(), 2u);
+  const Eigen::Vector3d total = forces[0] + forces[1];
+  const double weight = 9.81 * g.mass * g.rows * g.cols;
+  EXPECT_NEAR(total.z(), -weight, 1e-6 * weight);
+  EXPECT_NEAR(total.x(), 0.0, 1e-6 * weight);
+  // Symmetric grips share it.
+  EXPECT_NEAR(forces[0].z(), forces[1].z(), 1e-6 * weight);
+}
+
+TEST(Contact, BadCollidersAreRefusedByName)
+{
+  const GridParams g = flatSheet();
+  auto refused = [&](Collider c) {
+    return refusal([&] { Simulation sim(g, withColliders(Method::Full, IntegratorKind::Explicit, 1e-3, {plane(-1.0), c})); });
+  };
+  Collider c = plane(0.0, Eigen::Vector3d::Zero());
+  EXPECT_TRUE(contains(refused(c), "colliders[1].normal")) << refused(c);
+  c = plane(0.0);
+  c.point.x() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_TRUE(contains(refused(c), "colliders[1].point")) << refused(c);
+  c = plane(0.0);
+  c.friction = -0.1;
+  EXPECT_TRUE(contains(refused(c), "colliders[1].friction")) << refused(c);
+  c.type = ColliderType::Sphere;
+  c.friction = 0.5;
+  c.radius = -0.1;
+  EXPECT_TRUE(contains(refused(c), "colliders[1].radius")) << refused(c);
+  c.type = ColliderType::Box;
+  c.half_extents = Eigen::Vector3d(0.1, 0.0, 0.1);
+  EXPECT_TRUE(contains(refused(c), "colliders[1].half_extents")) << refused(c);
+  c.type = ColliderType::Capsule;
+  c.radius = 0.1;
+  c.a = c.b;
+  EXPECT_TRUE(contains(refused(c), "colliders[1].b")) << refused(c);
+  EXPECT_TRUE(contains(refusal([] { parseColliderType("cylinder", "colliders[0].type"); }), "colliders[0].type"));
+  SimulationParams s = withColliders(Method::Full, IntegratorKind::Explicit, 1e-3, {plane(-1.0)});
+  s.contact_thickness = -1.0;
+  EXPECT_TRUE(contains(refusal([&] { Simulation sim(g, s); }), "contact_thickness"));
+  s.contact_thickness = 0.0;
+  GridParams held = g;
+  held.fixed = {};
+  held.handles = {{0, 1}};
+  s.handles_one_body = true;
+  s.handle_formulation = HandleFormulation::MovingFrame;
+  EXPECT_TRUE(contains(refusal([&] { Simulation sim(held, s); }), "handle_formulation"));
+}
+
+TEST(Contact, CollidersReadFromFieldsRefuseUnknownAndMissingKeysByName)
+{
+  ColliderFields f;
+  f.text["type"] = "capsule";
+  f.numbers["a"] = {0.0, 0.0, 0.0};
+  f.numbers["b"] = {1.0, 0.0, 0.0};
+  f.numbers["radius"] = {0.05};
+  f.numbers["friction"] = {0.8};
+  f.text["frame"] = "finger";
+  const Collider c = colliderFromFields(f, "colliders[0]");
+  EXPECT_EQ(c.type, ColliderType::Capsule);
+  EXPECT_DOUBLE_EQ(c.radius, 0.05);
+  EXPECT_DOUBLE_EQ(c.friction, 0.8);
+  EXPECT_EQ(c.frame, "finger");
+  EXPECT_TRUE(c.b.isApprox(Eigen::Vector3d::UnitX()));
+  ColliderFields bad = f;
+  bad.numbers["center"] = {0.0, 0.0, 0.0};  // a sphere's key
+  EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].center"));
+  bad = f;
+  bad.numbers.erase("radius");
+  EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].radius"));
+  bad = f;
+  bad.numbers["a"] = {0.0, 0.0};
+  EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].a"));
+  bad = f;
+  bad.text["type"] = "cylinder";
+  EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].type"));
+  bad = f;
+  bad.numbers["radius"] = {std::numeric_limits<double>::quiet_NaN()};
+  EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].radius"));
+  bad = f;
+  bad.text.erase("type");
+  EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].type"));
+}
