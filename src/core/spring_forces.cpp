@@ -54,7 +54,6 @@ template <int Dim>
 SparseMatrix tangentStiffnessDim(const Grid& grid, const Eigen::VectorXd& x, CompressedSprings compressed,
                                  int* num_dropped)
 {
-  using Vec = Eigen::Matrix<double, Dim, 1>;
   using Mat = Eigen::Matrix<double, Dim, Dim>;
   std::vector<Eigen::Triplet<double>> triplets;
   triplets.reserve(grid.springs().size() * 4 * Dim * Dim);
