@@ -201,7 +201,9 @@ TEST(TangentSolver, ANonConvergingStepIsStillSplitOrRefused)
     // One iteration fewer than the whole step needs: it is taken in parts, or refused; never whole.
     ImplicitNewmark fewer(massDamping(grid, 0.5), 0.05, needed - 1, -0.1, 1e-9, kind);
     if (fewer.step(model, state, next))
+    {
       EXPECT_GT(fewer.lastSubsteps(), 1) << name(kind);
+    }
     // One iteration converges nothing, even in 1/16 of the step: refused.
     ImplicitNewmark refused(massDamping(grid, 0.5), 0.05, 1, -0.1, 1e-9, kind);
     EXPECT_FALSE(refused.step(model, state, next)) << name(kind);
