@@ -7,7 +7,10 @@
 #include <Eigen/CholmodSupport>
 #include <Eigen/SparseCholesky>
 
+#include <dlfcn.h>
+
 #include <algorithm>
+#include <mutex>
 
 namespace modal_mass_spring
 {
@@ -58,11 +61,26 @@ private:
   SparsityPattern pattern_;
 };
 
+// CHOLMOD's supernodes run on the BLAS, and OpenBLAS starts a spinning worker thread per core: on the
+// node, whose rebuild runs beside the timer that publishes, those threads took both cores and the
+// markers fell from 30 to 9 Hz during a rebuild. One BLAS thread (as every figure in the docs was
+// measured with); looked up at run time, so that any other BLAS is left as it is.
+void useOneBlasThread()
+{
+  static std::once_flag once;
+  std::call_once(once, [] {
+    using SetThreads = void (*)(int);
+    if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads")))
+      set(1);
+  });
+}
+
 class CholmodFactor : public TangentSolver::Factor
 {
 public:
   CholmodFactor()
   {
+    useOneBlasThread();
     // A J that is not positive definite is an answer here (the caller adds inertia), not an error to
     // print.
     llt_.cholmod().print = 0;
