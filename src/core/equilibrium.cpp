@@ -4,6 +4,8 @@
 #include "modal_mass_spring/spring_forces.h"
 #include "modal_mass_spring/tangent_solver.h"
 
+#include <Eigen/SparseCholesky>
+
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -45,9 +47,10 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
   Equilibrium result;
   result.positions = start;
   Eigen::VectorXd r = unbalanced(grid, start);
-  // K's pattern never changes: assembled in place, CHOLMOD's analysis done once.
+  // K's pattern never changes: assembled in place, analysed once. Eigen's simplicial LDL^T, whose
+  // pivots tell an indefinite K: with CHOLMOD's LLT Newton stalled near 1e-8 N on config/cloth.yaml.
   const TangentAssembler assembler(grid);
-  TangentSolver solver(TangentSolverKind::Cholmod);
+  Eigen::SimplicialLDLT<SparseMatrix> ldlt;
   SparseMatrix k;
   for (result.iterations = 0; result.iterations < max_iterations; ++result.iterations)
   {
@@ -67,9 +70,14 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
       const double regularisation = 1e-8 * k.diagonal().cwiseAbs().maxCoeff();
       for (int i = 0; i < k.rows(); ++i)
         k.coeffRef(i, i) += regularisation;
-      if (solver.solve(k, r, direction, 0.0))
+      if (result.iterations == 0)
+        ldlt.analyzePattern(k);
+      ldlt.factorize(k);
+      if (ldlt.info() == Eigen::Success && ldlt.vectorD().minCoeff() > 0.0)
+      {
+        direction = ldlt.solve(r);
         break;
-      direction.resize(0);
+      }
     }
     if (direction.size() == 0 || !direction.allFinite())
       break;
