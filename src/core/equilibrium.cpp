@@ -2,7 +2,6 @@
 #include "modal_mass_spring/equilibrium.h"
 
 #include "modal_mass_spring/spring_forces.h"
-#include "modal_mass_spring/tangent_solver.h"
 
 #include <Eigen/SparseCholesky>
 

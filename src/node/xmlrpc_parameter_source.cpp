@@ -246,15 +246,13 @@ std::optional<std::vector<std::string>> XmlRpcParameterSource::getStringList(con
                              });
 }
 
-std::optional<std::vector<HandleParam>> XmlRpcParameterSource::getHandleList(const std::string& key) const
+namespace
 {
-  const XmlRpcValue* found = find(key);
-  if (!found)
-    return std::nullopt;
-  const std::string example = "[{frame: gripper, particles: [0, 4]}]";
-  const std::string expected = "a list of maps {frame: <tf frame>, particles: [indices]}, e.g. " + example +
-                               " (on the rosrun command line: _" + key + ":='" + example + "')";
-  XmlRpcValue value = *found;
+// A list parameter, given as a list or as its YAML text (on the rosrun command line); anything else
+// is refused naming `key` and what was expected.
+XmlRpcValue asList(const std::string& key, const XmlRpcValue& found, const std::string& expected)
+{
+  XmlRpcValue value = found;
   if (value.getType() == XmlRpcValue::TypeString)
   {
     const auto parsed = fromYamlText(asString(value));
@@ -264,6 +262,19 @@ std::optional<std::vector<HandleParam>> XmlRpcParameterSource::getHandleList(con
   }
   if (value.getType() != XmlRpcValue::TypeArray)
     throwWrongType(key, expected, value);
+  return value;
+}
+}  // namespace
+
+std::optional<std::vector<HandleParam>> XmlRpcParameterSource::getHandleList(const std::string& key) const
+{
+  const XmlRpcValue* found = find(key);
+  if (!found)
+    return std::nullopt;
+  const std::string example = "[{frame: gripper, particles: [0, 4]}]";
+  const std::string expected = "a list of maps {frame: <tf frame>, particles: [indices]}, e.g. " + example +
+                               " (on the rosrun command line: _" + key + ":='" + example + "')";
+  XmlRpcValue value = asList(key, *found, expected);
   std::vector<HandleParam> handles;
   for (int h = 0; h < value.size(); ++h)
   {
@@ -305,16 +316,7 @@ std::optional<std::vector<Collider>> XmlRpcParameterSource::getColliderList(cons
     return std::nullopt;
   const std::string example = "[{type: plane, point: [0, 0, 0], normal: [0, 0, 1]}]";
   const std::string expected = "a list of collider maps, e.g. " + example;
-  XmlRpcValue value = *found;
-  if (value.getType() == XmlRpcValue::TypeString)
-  {
-    const auto parsed = fromYamlText(asString(value));
-    if (!parsed || parsed->getType() != XmlRpcValue::TypeArray)
-      throwWrongType(key, expected, value);
-    value = *parsed;
-  }
-  if (value.getType() != XmlRpcValue::TypeArray)
-    throwWrongType(key, expected, value);
+  XmlRpcValue value = asList(key, *found, expected);
   std::vector<Collider> colliders;
   for (int i = 0; i < value.size(); ++i)
   {
