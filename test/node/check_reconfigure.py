@@ -119,12 +119,16 @@ class BackgroundRebuild(unittest.TestCase):
         self.assertTrue(rebuilding, "no REBUILDING status: the cloth's basis takes long enough to see one")
         self.assertEqual(got[-1][1].state, Status.RUNNING, "the rebuilt model was swapped in")
         began, ended = rebuilding[0][0], rebuilding[-1][0]
-        # The old model ran on meanwhile: steps taken, and markers at the configured rate.
+        # The old model ran on meanwhile: steps taken, and markers all through the rebuild. A rebuild
+        # that blocked the timer would leave one gap as long as the rebuild; the rate itself is not
+        # asserted (a shared machine's load sets it).
         self.assertGreater(rebuilding[-1][1].step_count, rebuilding[0][1].step_count)
-        if ended - began > 0.5:
-            count = len([t for t, _ in markers.get() if began <= t <= ended])
-            self.assertGreaterEqual(count / (ended - began), 0.5 * rate,
-                                    "%d markers in %.2f s of rebuilding" % (count, ended - began))
+        if ended - began > 2.0:
+            times = [began] + [t for t, _ in markers.get() if began <= t <= ended] + [ended]
+            gap = max(b - a for a, b in zip(times, times[1:]))
+            self.assertLess(gap, 0.25 * (ended - began),
+                            "%d markers in %.2f s of rebuilding (publish_rate %g), the longest gap %.2f s"
+                            % (len(times) - 2, ended - began, rate, gap))
         # Swapped with the motion carried over: the step count goes on.
         counts = [s.step_count for _, s in got]
         self.assertEqual(counts, sorted(counts), "the step count never goes back across the swap")
