@@ -60,6 +60,9 @@ public:
   // Whether handle h's frame was ever looked up.
   bool everFound(size_t h) const { return handles_[h].found; }
   size_t particles(size_t h) const { return static_cast<size_t>(handles_[h].start.cols()); }
+  // Where handle h's frame is now (the fixed frame; the pose its particles follow, held while the frame
+  // is missing); meaningful once everFound(h).
+  const FramePose& current(size_t h) const { return handles_[h].current; }
 
 private:
   struct Handle
