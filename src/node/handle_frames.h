@@ -15,8 +15,8 @@
 namespace modal_mass_spring
 {
 
-// A handle frame whose latest pose is older than this (s, ROS time) is stale: its broadcaster has
-// stopped, and its particles hold where they are until it comes back.
+// A handle's (or a collider's) frame whose latest pose is older than this (s, ROS time) is stale: its
+// broadcaster has stopped, and its particles (its collider) hold where they are until it comes back.
 constexpr double kStaleHandleFrameSeconds = 1.0;
 
 class HandleFrames

@@ -64,8 +64,8 @@ private:
 // The largest ~step request: more would hold the services for minutes on a large grid.
 constexpr uint32_t kMaxStepRequest = 10000;
 
-// How long a handle's or collider's frame never seen is waited for before its warning: a broadcaster launched beside
-// the node needs a moment to come up.
+// How long a handle's or a collider's frame never seen is waited for before its warning: a
+// broadcaster launched beside the node needs a moment to come up.
 constexpr double kFrameGraceSeconds = 5.0;
 
 // How often falling behind real time is logged: once a user knows, the diagnostics keep the count.
@@ -436,7 +436,7 @@ void SimulationNode::updateColliderTargets()
     const std::string& frame = collider_frames_->frame(k);
     poses[k] = lookupFrame(frame, collider_frames_->everFound(k), problems[k]);
     if (!poses[k] && !problems[k].empty())
-      missing += (missing.empty() ? "" : "; ") + std::string("collider ") + std::to_string(collider_frames_->collider(k)) +
+      missing += (missing.empty() ? "collider " : "; collider ") + std::to_string(collider_frames_->collider(k)) +
                  " frame '" + frame + "' " + problems[k] +
                  (collider_frames_->everFound(k) ? ": it keeps its last pose" : ": it is inactive until its frame is found");
   }
