@@ -378,7 +378,7 @@ TEST(Contact, CollidersReadFromFieldsRefuseUnknownAndMissingKeysByName)
   {
     bad = f;
     bad.text["frame"] = frame;
-    EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].frame = '" + frame + "'"))
+    EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].frame' = '" + frame + "'"))
         << refusal([&] { colliderFromFields(bad, "colliders[0]"); });
   }
   bad = f;
@@ -388,7 +388,7 @@ TEST(Contact, CollidersReadFromFieldsRefuseUnknownAndMissingKeysByName)
 }
 
 // A collider on a TF frame (the node looks it up) touches nothing until its first pose, which places
-// it without a sweep from the identity pose: a finger appearing 11 mm into a hanging sheet pushes the
+// it without a sweep from the identity pose: a finger appearing 10 mm into a hanging sheet pushes the
 // particles out of it but does not throw them (a sweep over one 5 ms step would give them ~6 m/s).
 TEST(Contact, FrameColliderWaitsForItsFirstPoseAndAppearsWithoutSweeping)
 {
@@ -411,13 +411,15 @@ TEST(Contact, FrameColliderWaitsForItsFirstPoseAndAppearsWithoutSweeping)
   EXPECT_LT(largestMove(sim.points(), start), 1e-6);
   EXPECT_FALSE(sim.contact()->moved());
 
-  sim.setColliderPose(0, Eigen::Isometry3d(Eigen::Translation3d(0.0, 0.03, 0.0)));
+  // The sphere's centre 40 mm off a middle particle (row 6, column 4): 10 mm into the sheet.
+  const Eigen::Vector3d particle = start.col(6 * g.cols + 4);
+  sim.setColliderPose(0, Eigen::Isometry3d(Eigen::Translation3d(particle + Eigen::Vector3d(0.0, 0.04, 0.0) - finger.center)));
   const StepResult r = sim.step();
   ASSERT_FALSE(r.diverged) << r.message;
   EXPECT_TRUE(sim.contact()->active(0));
   EXPECT_TRUE(sim.contact()->moved());
   EXPECT_GT(sim.contact()->report().touching[0], 0);
-  EXPECT_GT(sim.contact()->report().penetration_before, 0.01);
+  EXPECT_GT(sim.contact()->report().penetration_before, 0.009);
   EXPECT_LT(sim.contact()->report().penetration_after, 1e-3);
   EXPECT_LT(sim.velocity().cwiseAbs().maxCoeff(), 0.05);
 }
