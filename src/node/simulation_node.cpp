@@ -449,6 +449,13 @@ void SimulationNode::updateColliderTargets()
   for (std::string& problem : problems)
     problem = problem.substr(0, problem.find(" ("));
   collider_frames_->setTargets(poses, problems);
+  // A collider not placed yet on a track (its frame just found, or the track built anew by a rebuild
+  // while paused) appears now, where its frame is, even if no step follows.
+  for (size_t k = 0; k < collider_frames_->size(); ++k)
+    if (const std::optional<Eigen::Isometry3d> pose = collider_frames_->pose(k, 0.0))
+      for (Track& track : tracks_)
+        if (const Contact* contact = track.simulation->contact(); contact && !contact->active(collider_frames_->collider(k)))
+          track.simulation->setColliderPose(collider_frames_->collider(k), *pose);
 }
 
 void SimulationNode::setColliderPoses(double s)
