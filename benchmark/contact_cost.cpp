@@ -4,7 +4,9 @@
 // particle distance to `full` at the end, and the step's cost with the table against without it.
 // The modal methods are linearized where the sheet hangs (a flat sheet has no out-of-plane
 // stiffness) and switched to at the start, so that the flat sheet stays as their offset.
-// Usage: contact_cost drop|rest N seconds [methods...] (rest: the sheet starts on the table top).
+// Usage: contact_cost drop|rest N seconds [--explicit DT] [methods...] (rest: the sheet starts on the
+// table top; --explicit: the explicit scheme at time step DT instead of implicit 5 ms steps, and for
+// `full` alone linearized at rest, which skips the equilibrium solves a large grid waits minutes for).
 #include "modal_mass_spring/simulation.h"
 
 #include <chrono>
@@ -33,6 +35,9 @@ GridParams sheet(int n)
 }
 
 bool resting = false;
+bool explicit_scheme = false;
+double explicit_step = 0.0;
+bool full_only = true;
 
 Collider table(int n)
 {
@@ -54,11 +59,12 @@ Run run(int n, Method method, bool with_table, double seconds)
 {
   SimulationParams s;
   s.method = Method::Full;
-  s.integrator = IntegratorKind::Implicit;
-  s.time_step = 5e-3;
+  s.integrator = explicit_scheme ? IntegratorKind::Explicit : IntegratorKind::Implicit;
+  s.time_step = explicit_scheme ? explicit_step : 5e-3;
   s.alpha = 0.5;
   s.num_modes = 30;
-  s.linearization = Linearization::Equilibrium;
+  // `full` alone needs no modes: at rest it starts at once (the equilibrium is for the modal methods).
+  s.linearization = explicit_scheme && full_only ? Linearization::Rest : Linearization::Equilibrium;
   if (with_table)
     s.colliders = {table(n)};
   Simulation sim(sheet(n), s);
@@ -105,9 +111,26 @@ int main(int argc, char** argv)
   const double seconds = std::atof(argv[3]);
   std::vector<Method> methods{Method::Full};
   for (int a = 4; a < argc; ++a)
+  {
+    if (std::string(argv[a]) == "--explicit" && a + 1 < argc)
+    {
+      explicit_scheme = true;
+      explicit_step = std::atof(argv[++a]);
+      if (!(explicit_step > 0.0))
+      {
+        std::fprintf(stderr, "--explicit needs a time step > 0 (s)\n");
+        return 2;
+      }
+      continue;
+    }
     methods.push_back(parseMethod(argv[a]));
+    full_only = false;
+  }
   Eigen::Matrix3Xd full_with, full_without;
-  std::printf("%s, %d x %d, %.2f s, implicit 5 ms steps\n", argv[1], n, n, seconds);
+  if (explicit_scheme)
+    std::printf("%s, %d x %d, %.2f s, explicit %g ms steps\n", argv[1], n, n, seconds, 1e3 * explicit_step);
+  else
+    std::printf("%s, %d x %d, %.2f s, implicit 5 ms steps\n", argv[1], n, n, seconds);
   std::printf("method     deepest(mm)  to_full(mm)  to_full_no_table(mm)  ms/step  contact(ms/step)  contact_share  ms/step(no table)\n");
   for (Method m : methods)
   {

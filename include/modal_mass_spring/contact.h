@@ -52,7 +52,7 @@ struct Collider
   double radius = 0.1;                               // sphere, capsule
   Eigen::Vector3d a = Eigen::Vector3d::Zero(), b = Eigen::Vector3d::UnitX();  // capsule's segment
   double friction = 0.5;                             // Coulomb coefficient mu >= 0
-  std::string frame;                                 // a TF frame it follows (the node); empty: fixed
+  std::string frame;  // a TF frame it follows (the node; its geometry is given in that frame); empty: fixed
 };
 
 // The default contact thickness, as a fraction of the grid's spacing.
@@ -65,7 +65,8 @@ void validateCollider(const Collider& collider, const std::string& name);
 // One element of the parameter `colliders` as a source read it: text values (type, frame) and
 // numeric ones (a scalar is a list of one), so that the node's and the tools' sources share one
 // reading. Keys: type (required); plane: point, normal; box: center, half_extents; sphere: center,
-// radius; capsule: a, b, radius; friction (default 0.5), frame (the node). Throws
+// radius; capsule: a, b, radius; friction (default 0.5), frame (the node; a non-empty TF frame id
+// without a leading '/' or spaces). Throws
 // std::invalid_argument naming `name.key` for an unknown key, a key of another shape, a missing one,
 // and then whatever validateCollider refuses.
 struct ColliderFields
@@ -105,9 +106,13 @@ public:
   const std::vector<Collider>& colliders() const { return colliders_; }
   double thickness() const { return thickness_; }
   // The pose of collider i at the end of the next step (the collider frame in the grid's
-  // coordinates); its motion over the step moves the surface the particles touch.
+  // coordinates); its motion over the step moves the surface the particles touch, and carries the
+  // particles touching it (their slip and velocity are measured relative to the moving surface).
+  // A collider with a `frame` is inactive (touches nothing) until its first pose, which places it
+  // there without a motion over the step (it appears; nothing is swept from the identity pose).
   void setPose(int i, const Eigen::Isometry3d& pose);
   const Eigen::Isometry3d& pose(int i) const { return poses_[i]; }
+  bool active(int i) const { return active_[i]; }
   // True once a collider moved since the last reset(): it can then do work on the grid.
   bool moved() const { return moved_; }
   // The step was taken: the poses it went to are now the current ones.
@@ -141,6 +146,7 @@ private:
   std::vector<Collider> colliders_;
   double thickness_;
   std::vector<Eigen::Isometry3d> poses_, start_poses_;  // the end of the next step, its start
+  std::vector<bool> active_;                             // false: a frame's collider before its first pose
   bool moved_ = false;
   ContactReport report_;
 };

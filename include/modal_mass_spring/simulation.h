@@ -246,7 +246,8 @@ public:
   // The colliders' contact (null without colliders): their poses, and what the last step did.
   const Contact* contact() const { return contact_.get(); }
   // Places collider i (its frame in the grid's coordinates) for the end of the next step; a moved
-  // collider can do work on the grid, so the energy check is then off until the next reset().
+  // collider can do work on the grid, so the energy check is then off until the next reset(). A
+  // collider with a `frame` touches nothing until its first pose, which places it (Contact::setPose).
   // Throws std::invalid_argument for an index out of range or a non-finite pose.
   void setColliderPose(int i, const Eigen::Isometry3d& pose);
   // The time the last step's contact correction took (s; 0 without colliders).

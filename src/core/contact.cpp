@@ -167,7 +167,12 @@ Collider colliderFromFields(const ColliderFields& f, const std::string& name)
   if (f.numbers.count("friction"))
     c.friction = f.numbers.at("friction")[0];
   if (f.text.count("frame"))
+  {
     c.frame = f.text.at("frame");
+    if (c.frame.empty() || c.frame.front() == '/' || c.frame.find_first_of(" \t\n\r") != std::string::npos)
+      rejectParameter(name + ".frame", "'" + c.frame + "'",
+                      "must be a non-empty TF frame id without a leading '/' or spaces (the frame the collider follows)");
+  }
   validateCollider(c, name);
   return c;
 }
@@ -243,14 +248,25 @@ struct Contact::Touch
 
 Contact::Contact(const Grid& grid, std::vector<Collider> colliders, double thickness)
   : grid_(grid), colliders_(std::move(colliders)), thickness_(thickness),
-    poses_(colliders_.size(), Eigen::Isometry3d::Identity()), start_poses_(poses_)
+    poses_(colliders_.size(), Eigen::Isometry3d::Identity()), start_poses_(poses_), active_(colliders_.size(), true)
 {
+  for (size_t i = 0; i < colliders_.size(); ++i)
+    active_[i] = colliders_[i].frame.empty();
   report_.force.assign(colliders_.size(), Eigen::Vector3d::Zero());
   report_.touching.assign(colliders_.size(), 0);
 }
 
 void Contact::setPose(int i, const Eigen::Isometry3d& pose)
 {
+  if (!active_[i])
+  {
+    // It appears where its frame is: no sweep from the identity. Appearing on the cloth pushes it out
+    // (work done on the grid), so it counts as a move.
+    poses_[i] = start_poses_[i] = pose;
+    active_[i] = true;
+    moved_ = true;
+    return;
+  }
   if (!pose.isApprox(poses_[i], 0.0))
     moved_ = true;
   poses_[i] = pose;
@@ -274,6 +290,8 @@ std::vector<Contact::Touch> Contact::detect(const Eigen::VectorXd& x, double /*d
   const int particles = static_cast<int>(x.size()) / grid_.dimension();
   for (int c = 0; c < static_cast<int>(colliders_.size()); ++c)
   {
+    if (!active_[c])
+      continue;
     const Eigen::Isometry3d step = poses_[c] * start_poses_[c].inverse();
     const bool still = step.isApprox(Eigen::Isometry3d::Identity(), 0.0);
     for (int p = 0; p < particles; ++p)

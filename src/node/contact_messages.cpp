@@ -37,7 +37,8 @@ visualization_msgs::MarkerArray colliderMarkers(const Contact& contact, const st
     m.header.frame_id = frame_id;
     m.header.stamp = stamp;
     m.ns = ns;
-    m.action = visualization_msgs::Marker::ADD;
+    // A collider on a TF frame not yet found touches nothing: its marker is taken away until it is.
+    m.action = contact.active(static_cast<int>(i)) ? visualization_msgs::Marker::ADD : visualization_msgs::Marker::DELETE;
     m.color.r = m.color.g = m.color.b = 0.6f;
     m.color.a = 0.8f;
     auto add = [&](int type, const Eigen::Isometry3d& local, const Eigen::Vector3d& scale) {

@@ -13,7 +13,8 @@ namespace modal_mass_spring
 {
 
 // One marker per collider (a capsule: a cylinder and two spheres; a plane: a thin 4 m square), in
-// namespace `ns`, at its pose in grid coordinates shifted by `offset`, in `frame_id`.
+// namespace `ns`, at its pose in grid coordinates shifted by `offset`, in `frame_id`; a collider not
+// active (a frame's, before the frame is found) as DELETE.
 visualization_msgs::MarkerArray colliderMarkers(const Contact& contact, const std::string& frame_id,
                                                 const Eigen::Vector3d& offset, const std::string& ns,
                                                 const ros::Time& stamp);

@@ -15,8 +15,8 @@
 namespace modal_mass_spring
 {
 
-// A handle frame whose latest pose is older than this (s, ROS time) is stale: its broadcaster has
-// stopped, and its particles hold where they are until it comes back.
+// A handle's (or a collider's) frame whose latest pose is older than this (s, ROS time) is stale: its
+// broadcaster has stopped, and its particles (its collider) hold where they are until it comes back.
 constexpr double kStaleHandleFrameSeconds = 1.0;
 
 class HandleFrames
@@ -60,6 +60,9 @@ public:
   // Whether handle h's frame was ever looked up.
   bool everFound(size_t h) const { return handles_[h].found; }
   size_t particles(size_t h) const { return static_cast<size_t>(handles_[h].start.cols()); }
+  // Where handle h's frame is now (the fixed frame; the pose its particles follow, held while the frame
+  // is missing); meaningful once everFound(h).
+  const FramePose& current(size_t h) const { return handles_[h].current; }
 
 private:
   struct Handle

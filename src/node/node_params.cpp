@@ -246,11 +246,7 @@ NodeConfiguration loadNodeConfiguration(const NodeParameterSource& source, const
   c.grid = loadGridParams(recording);
   c.simulation = loadSimulationParams(recording);
   c.simulation.colliders = recording.getColliderList("colliders").value_or(std::vector<Collider>{});
-  for (size_t i = 0; i < c.simulation.colliders.size(); ++i)
-    if (!c.simulation.colliders[i].frame.empty())
-      rejectParameter("colliders[" + std::to_string(i) + "].frame", "'" + c.simulation.colliders[i].frame + "'",
-                      "the node does not yet move colliders with TF frames: leave frame out (the collider stays "
-                      "where its pose in grid_frame puts it)");
+  // A collider's `frame` (checked by colliderFromFields) is followed by the node (collider_frames.h).
   // The handles' particle groups are the core's to check (range, one handle each, not fixed).
   const std::vector<HandleParam> handles = loadHandles(recording);
   for (const auto& handle : handles)

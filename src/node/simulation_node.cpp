@@ -64,9 +64,9 @@ private:
 // The largest ~step request: more would hold the services for minutes on a large grid.
 constexpr uint32_t kMaxStepRequest = 10000;
 
-// How long a handle frame never seen is waited for before its warning: a broadcaster launched beside
-// the node needs a moment to come up.
-constexpr double kHandleFrameGraceSeconds = 5.0;
+// How long a handle's or a collider's frame never seen is waited for before its warning: a
+// broadcaster launched beside the node needs a moment to come up.
+constexpr double kFrameGraceSeconds = 5.0;
 
 // How often falling behind real time is logged: once a user knows, the diagnostics keep the count.
 constexpr double kBehindWarningPeriod = 10.0;
@@ -200,6 +200,10 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
   tf_listener_ = std::make_unique<tf2_ros::TransformListener>(tf_buffer_);
   handle_frames_ = std::make_unique<HandleFrames>(params.handles, primary().simulation->grid(),
                                                   primary().simulation->linearizationPositions(), params.offset);
+  collider_frames_ = std::make_unique<ColliderFrames>(config_.simulation.colliders, params.offset);
+  for (size_t k = 0; k < collider_frames_->size(); ++k)
+    ROS_INFO("collider %d follows the TF frame '%s' relative to '%s' (inactive until the frame is found)",
+             collider_frames_->collider(k), collider_frames_->frame(k).c_str(), params.fixed_frame.c_str());
   if (!params.handles.empty())
   {
     std::string frames;
@@ -353,51 +357,57 @@ const SimulationNode::Track* SimulationNode::reference() const
   return nullptr;
 }
 
+std::optional<FramePose> SimulationNode::lookupFrame(const std::string& frame, bool ever_found, std::string& problem)
+{
+  problem.clear();
+  // A broadcaster started beside the node (a launch file's gripper) may come up after it: a frame
+  // never seen yet is waited for quietly at first, then warned about.
+  const ros::WallTime wall_now = ros::WallTime::now();
+  if (frames_first_lookup_.isZero())
+    frames_first_lookup_ = wall_now;
+  const bool waiting = (wall_now - frames_first_lookup_).toSec() < kFrameGraceSeconds;
+  if (waiting && !ever_found && !tf_buffer_.canTransform(config_.node.fixed_frame, frame, ros::Time(0)))
+    return std::nullopt;
+  try
+  {
+    const auto stamped = tf_buffer_.lookupTransform(config_.node.fixed_frame, frame, ros::Time(0));
+    const auto& t = stamped.transform;
+    FramePose pose;
+    pose.translation = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);
+    pose.rotation = Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z).normalized();
+    // tf2 keeps a frame's last pose after its broadcaster stops: an old one is not followed. A
+    // static frame's pose has no stamp.
+    const ros::Time now = ros::Time::now();  // the stamps' clock, for a frame's age
+    const double age = stamped.header.stamp.isZero() ? 0.0 : (now - stamped.header.stamp).toSec();
+    if (!pose.translation.allFinite() || !pose.rotation.coeffs().allFinite())
+      problem = "has a non-finite pose";
+    else if (age > kStaleHandleFrameSeconds)
+    {
+      char text[120];
+      std::snprintf(text, sizeof text, "stale (its last pose is %.1f s old, above %.1f s)", age,
+                    kStaleHandleFrameSeconds);
+      problem = text;
+    }
+    else
+      return pose;
+  }
+  catch (const tf2::TransformException& error)
+  {
+    problem = std::string("not available (") + error.what() + ")";
+  }
+  return std::nullopt;
+}
+
 void SimulationNode::updateHandleTargets()
 {
   std::vector<std::optional<FramePose>> poses(handle_frames_->size());
   std::vector<std::string> problems(poses.size());
   std::string missing;  // every frame not available, so one throttled warning names them all
-  // A broadcaster started beside the node (a launch file's gripper) may come up after it: a frame
-  // never seen yet is waited for quietly at first, then warned about.
-  const ros::WallTime wall_now = ros::WallTime::now();
-  if (handles_first_lookup_.isZero())
-    handles_first_lookup_ = wall_now;
-  const bool waiting = (wall_now - handles_first_lookup_).toSec() < kHandleFrameGraceSeconds;
-  const ros::Time now = ros::Time::now();  // the stamps' clock, for a frame's age
   for (size_t h = 0; h < poses.size(); ++h)
   {
-    if (waiting && !handle_frames_->everFound(h) && !tf_buffer_.canTransform(config_.node.fixed_frame,
-                                                                               handle_frames_->frame(h), ros::Time(0)))
-      continue;
     const std::string& frame = handle_frames_->frame(h);
-    try
-    {
-      const auto stamped = tf_buffer_.lookupTransform(config_.node.fixed_frame, frame, ros::Time(0));
-      const auto& t = stamped.transform;
-      FramePose pose;
-      pose.translation = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);
-      pose.rotation = Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z).normalized();
-      // tf2 keeps a frame's last pose after its broadcaster stops: an old one is not followed. A
-      // static frame's pose has no stamp.
-      const double age = stamped.header.stamp.isZero() ? 0.0 : (now - stamped.header.stamp).toSec();
-      if (!pose.translation.allFinite() || !pose.rotation.coeffs().allFinite())
-        problems[h] = "has a non-finite pose";
-      else if (age > kStaleHandleFrameSeconds)
-      {
-        char text[120];
-        std::snprintf(text, sizeof text, "stale (its last pose is %.1f s old, above %.1f s)", age,
-                      kStaleHandleFrameSeconds);
-        problems[h] = text;
-      }
-      else
-        poses[h] = pose;
-    }
-    catch (const tf2::TransformException& error)
-    {
-      problems[h] = std::string("not available (") + error.what() + ")";
-    }
-    if (!poses[h])
+    poses[h] = lookupFrame(frame, handle_frames_->everFound(h), problems[h]);
+    if (!poses[h] && !problems[h].empty())
       missing += (missing.empty() ? "'" : "; '") + frame + "' " + problems[h];
   }
   if (!missing.empty())
@@ -414,6 +424,48 @@ void SimulationNode::updateHandleTargets()
   handle_frames_->setTargets(poses, problems);
   for (const std::string& refusal : handle_frames_->refusals())
     ROS_WARN_THROTTLE(5.0, "%s", refusal.c_str());
+}
+
+void SimulationNode::updateColliderTargets()
+{
+  std::vector<std::optional<FramePose>> poses(collider_frames_->size());
+  std::vector<std::string> problems(poses.size());
+  std::string missing;
+  for (size_t k = 0; k < poses.size(); ++k)
+  {
+    const std::string& frame = collider_frames_->frame(k);
+    poses[k] = lookupFrame(frame, collider_frames_->everFound(k), problems[k]);
+    if (!poses[k] && !problems[k].empty())
+      missing += (missing.empty() ? "collider " : "; collider ") + std::to_string(collider_frames_->collider(k)) +
+                 " frame '" + frame + "' " + problems[k] +
+                 (collider_frames_->everFound(k) ? ": it keeps its last pose" : ": it is inactive until its frame is found");
+  }
+  if (!missing.empty())
+    ROS_WARN_THROTTLE(5.0, "%s", missing.c_str());
+  for (size_t k = 0; k < poses.size(); ++k)
+    if (poses[k] && !collider_frames_->following(k))
+      ROS_INFO("collider %d frame '%s' found: the collider follows it", collider_frames_->collider(k),
+               collider_frames_->frame(k).c_str());
+  for (std::string& problem : problems)
+    problem = problem.substr(0, problem.find(" ("));
+  collider_frames_->setTargets(poses, problems);
+  // A collider not placed yet on a track (its frame just found, or the track built anew by a rebuild
+  // while paused) appears now, where its frame is, even if no step follows.
+  for (size_t k = 0; k < collider_frames_->size(); ++k)
+    if (const std::optional<Eigen::Isometry3d> pose = collider_frames_->pose(k, 0.0))
+      for (Track& track : tracks_)
+        if (const Contact* contact = track.simulation->contact(); contact && !contact->active(collider_frames_->collider(k)))
+          track.simulation->setColliderPose(collider_frames_->collider(k), *pose);
+}
+
+void SimulationNode::setColliderPoses(double s)
+{
+  // Every step, on every track: a track built anew (a rebuild, ~set_method) gets them at its first step.
+  for (size_t k = 0; k < collider_frames_->size(); ++k)
+    if (const std::optional<Eigen::Isometry3d> pose = collider_frames_->pose(k, s))
+      for (Track& track : tracks_)
+        if (!track.simulation->diverged())
+          track.simulation->setColliderPose(collider_frames_->collider(k), *pose);
 }
 
 void SimulationNode::setHandleMotion(double duration, double s)
@@ -511,6 +563,7 @@ void SimulationNode::onTick()
     swapRebuilt();
     updateExternalForces();
     updateHandleTargets();
+    updateColliderTargets();
     const NodeParams& params = config_.node;
     const double dt = config_.simulation.time_step;
     period = 1.0 / params.publish_rate;
@@ -560,13 +613,17 @@ void SimulationNode::onTick()
           break;
         }
         setHandleMotion(steps * dt, static_cast<double>(k + 1) / steps);
+        setColliderPoses(static_cast<double>(k + 1) / steps);
         stepped = k + 1;
         if (!stepAll())
           break;
       }
       tick_step_seconds_ += secondsSince(start);
       if (steps > 0)
+      {
         handle_frames_->finishTick(static_cast<double>(stepped) / steps);
+        collider_frames_->finishTick(static_cast<double>(stepped) / steps);
+      }
     }
     for (Track& track : tracks_)
     {
@@ -685,8 +742,18 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     {
       const std::vector<Eigen::Vector3d> forces = simulation.handleForces();
       for (size_t h = 0; h < track.handle_force_pubs.size() && h < forces.size(); ++h)
-        if (forces[h].allFinite())
+      {
+        if (!forces[h].allFinite())
+          continue;
+        // In the handle's own frame once it was found (what a force-torque sensor at the gripper
+        // reads; tf2 turns it into any other frame), in fixed_frame axes before.
+        if (handle_frames_->everFound(h))
+          grid.wrenches.emplace_back(track.handle_force_pubs[h],
+                                     forceWrench(handle_frames_->current(h).rotation.conjugate() * forces[h],
+                                                 handle_frames_->frame(h), stamp));
+        else
           grid.wrenches.emplace_back(track.handle_force_pubs[h], forceWrench(forces[h], options.frame_id, stamp));
+      }
     }
     if (measured && ref->shadow)
     {
@@ -845,6 +912,8 @@ void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& statu
   if (!handle_frames_->status().empty())  // whatever else is said
     status.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
                         "handles " + handle_frames_->status() + " (their particles hold where they are)");
+  if (!collider_frames_->status().empty())
+    status.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, collider_frames_->status());
   status.add("state", stateName(first));
   status.add("method", lockstep() ? "lockstep" : toString(simulation.method()));
   status.add("step count", steps(first));

@@ -4,6 +4,7 @@
 
 #include "applied_forces.h"
 #include "drag_and_poke.h"
+#include "collider_frames.h"
 #include "handle_frames.h"
 #include "warning_throttle.h"
 #include "modal_mass_spring/ApplyForce.h"
@@ -133,6 +134,14 @@ private:
   WarningThrottle dropped_warnings_;
   // Handles: looks every handle frame up (the latest pose in tf_buffer_), warns for the missing ones.
   void updateHandleTargets();   // with mutex_ held
+  // The latest pose of `frame` in fixed_frame (tf_buffer_), or nothing and why (`problem`): not
+  // available (tf2's reason in brackets), stale, non-finite; a frame never seen yet is waited for
+  // quietly (nothing, `problem` empty) during its first seconds. Handles and colliders alike.
+  std::optional<FramePose> lookupFrame(const std::string& frame, bool ever_found, std::string& problem);
+  // Colliders on TF frames: looks their frames up, warns for the missing ones (throttled).
+  void updateColliderTargets();  // with mutex_ held
+  // Places the frame colliders at the fraction s of the tick on every track.
+  void setColliderPoses(double s);  // with mutex_ held
   // Prescribes the handles' motion at the fraction s of a tick of `duration` s on every track.
   void setHandleMotion(double duration, double s);  // with mutex_ held
 
@@ -190,7 +199,8 @@ private:
   tf2_ros::Buffer tf_buffer_;
   std::unique_ptr<tf2_ros::TransformListener> tf_listener_;
   std::unique_ptr<HandleFrames> handle_frames_;     // with mutex_
-  ros::WallTime handles_first_lookup_;              // when the handle frames were first looked up
+  std::unique_ptr<ColliderFrames> collider_frames_; // with mutex_
+  ros::WallTime frames_first_lookup_;               // when the handle and collider frames were first looked up
   std::unique_ptr<HandForces> hand_forces_;         // with mutex_
   std::unique_ptr<interactive_markers::InteractiveMarkerServer> drag_server_;
   ros::Subscriber clicked_point_sub_;

@@ -339,6 +339,9 @@ std::optional<std::vector<Collider>> XmlRpcParameterSource::getColliderList(cons
         fields.text[it->first] = asString(field);
         continue;
       }
+      if (named)
+        throwWrongType(name + "." + it->first,
+                       it->first == "type" ? "a string: plane, box, sphere or capsule" : "a string (a TF frame id)", field);
       if (field.getType() != XmlRpcValue::TypeArray)
         throwWrongType(name + "." + it->first, "a number, a string or a list of numbers", field);
       std::vector<double> numbers;

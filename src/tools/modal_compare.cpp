@@ -451,7 +451,14 @@ std::vector<ExperimentSetup> buildSetups(const Options& o, std::vector<HandleSce
       setup.grid = loadGridParams(source);
       setup.sim = loadSimulationParams(source);
       if (const YAML::Node node = source.getNode("colliders"); node.IsDefined())
+      {
         setup.sim.colliders = parseColliders(node, "colliders");
+        // The node looks a collider's frame up in TF; the tool has no TF to follow.
+        for (size_t i = 0; i < setup.sim.colliders.size(); ++i)
+          if (!setup.sim.colliders[i].frame.empty())
+            rejectParameter("colliders[" + std::to_string(i) + "].frame", "'" + setup.sim.colliders[i].frame + "'",
+                            "modal_compare has no TF frames to follow: leave frame out (the node follows it)");
+      }
       if (const YAML::Node node = source.getNode("handle_scenarios"); node.IsDefined())
         scenarios = parseHandleScenarios(node, "handle_scenarios");
     }

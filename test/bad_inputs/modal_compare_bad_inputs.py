@@ -263,6 +263,8 @@ def cases(configs):
                "colliders[0].radius"),
         config("colliders_nan_center", "colliders:\n  - {type: box, center: [.nan, 0, 0], half_extents: [1, 1, 1]}\n",
                "colliders[0].center"),
+        config("colliders_frame", "colliders:\n  - {type: sphere, center: [0, 0, 0], radius: 0.1, frame: finger}\n",
+               "colliders[0].frame"),
         config("contact_thickness_negative", "contact_thickness: -0.01\n", "contact_thickness"),
     ]
     return table

@@ -374,4 +374,52 @@ TEST(Contact, CollidersReadFromFieldsRefuseUnknownAndMissingKeysByName)
   bad = f;
   bad.text.erase("type");
   EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].type"));
+  for (const std::string frame : {"", "/finger", "my finger"})
+  {
+    bad = f;
+    bad.text["frame"] = frame;
+    EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "colliders[0].frame' = '" + frame + "'"))
+        << refusal([&] { colliderFromFields(bad, "colliders[0]"); });
+  }
+  bad = f;
+  bad.text.erase("frame");
+  bad.numbers["frame"] = {3.0};
+  EXPECT_TRUE(contains(refusal([&] { colliderFromFields(bad, "colliders[0]"); }), "must be a string"));
+}
+
+// A collider on a TF frame (the node looks it up) touches nothing until its first pose, which places
+// it without a sweep from the identity pose: a finger appearing 10 mm into a hanging sheet pushes the
+// particles out of it but does not throw them (a sweep over one 5 ms step would give them ~6 m/s).
+TEST(Contact, FrameColliderWaitsForItsFirstPoseAndAppearsWithoutSweeping)
+{
+  GridParams g = flatSheet();
+  g.rotation_deg = 0.0;  // hanging in the x-z plane from row 0
+  SimulationParams s = withColliders(Method::Full, IntegratorKind::Implicit, 5e-3, {});
+  s.initial_state = InitialState::Equilibrium;
+  Collider finger;
+  finger.type = ColliderType::Sphere;
+  finger.center = Eigen::Vector3d(0.225, 0.0, -0.3);  // in its frame: at the identity, through the sheet
+  finger.radius = 0.05;
+  finger.frame = "finger";
+  s.colliders = {finger};
+  Simulation sim(g, s);
+  const Eigen::Matrix3Xd start = sim.points();
+  for (int k = 0; k < 20; ++k)
+    ASSERT_FALSE(sim.step().diverged);
+  EXPECT_FALSE(sim.contact()->active(0));
+  EXPECT_EQ(sim.contact()->report().touching[0], 0);
+  EXPECT_LT(largestMove(sim.points(), start), 1e-6);
+  EXPECT_FALSE(sim.contact()->moved());
+
+  // The sphere's centre 40 mm off a middle particle (row 6, column 4): 10 mm into the sheet.
+  const Eigen::Vector3d particle = start.col(6 * g.cols + 4);
+  sim.setColliderPose(0, Eigen::Isometry3d(Eigen::Translation3d(particle + Eigen::Vector3d(0.0, 0.04, 0.0) - finger.center)));
+  const StepResult r = sim.step();
+  ASSERT_FALSE(r.diverged) << r.message;
+  EXPECT_TRUE(sim.contact()->active(0));
+  EXPECT_TRUE(sim.contact()->moved());
+  EXPECT_GT(sim.contact()->report().touching[0], 0);
+  EXPECT_GT(sim.contact()->report().penetration_before, 0.009);
+  EXPECT_LT(sim.contact()->report().penetration_after, 1e-3);
+  EXPECT_LT(sim.velocity().cwiseAbs().maxCoeff(), 0.05);
 }

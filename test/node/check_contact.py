@@ -46,6 +46,10 @@ class RecordsCollidersAndWrenches(unittest.TestCase):
                 self.assertGreater(len(forces), 10)
                 for f in forces:
                     self.assertTrue(all(math.isfinite(v) for v in (f.x, f.y, f.z)))
+                # In the gripper's frame once it is found (its axes are world's: the weight is still along -z).
+                frames = {msg.header.frame_id for _, msg, _ in bag.read_messages(topics=[handle])}
+                self.assertIn("gripper", frames)
+                self.assertTrue(frames <= {"gripper", "world"}, frames)
                 # Held still at the start (a hanging cloth at rest, lightly damped): its weight, downwards.
                 self.assertAlmostEqual(forces[0].z, -weight, delta=0.1 * weight)
                 for _, msg, _ in bag.read_messages(topics=[table]):

@@ -1,6 +1,7 @@
 // The node's parameters without a ROS master: every range check of loadNodeParams, the order of the
 // checks (all of them before anything is built), the unknown-key report, and the conversions of
 // the XmlRpc source (numbers and lists given as text).
+#include "collider_frames.h"
 #include "handle_frames.h"
 #include "node_params.h"
 #include "parameter_values.h"
@@ -551,8 +552,15 @@ TEST(XmlRpcParameterSource, CollidersAsListsOfMapsOrTheirText)
   negative["radius"] = -0.1;
   XmlRpc::XmlRpcValue unknown = sphere;
   unknown["colour"] = "red";
+  XmlRpc::XmlRpcValue on_frame = sphere, numeric_frame = sphere, empty_frame = sphere;
+  on_frame["frame"] = "finger";
+  numeric_frame["frame"] = 3;
+  empty_frame["frame"] = "";
   const XmlRpcParameterSource source(
       params({{"list", array({sphere})},
+              {"on_frame", array({on_frame})},
+              {"numeric_frame", array({numeric_frame})},
+              {"empty_frame", array({empty_frame})},
               {"text", XmlRpc::XmlRpcValue("[{type: plane, point: [0, 0, 0], normal: [0, 0, 1], friction: 0.3}]")},
               {"negative", array({negative})},
               {"unknown", array({unknown})},
@@ -568,6 +576,56 @@ TEST(XmlRpcParameterSource, CollidersAsListsOfMapsOrTheirText)
   EXPECT_NE(thrown([&] { source.getColliderList("negative"); }).find("'negative[0].radius'"), std::string::npos);
   EXPECT_NE(thrown([&] { source.getColliderList("unknown"); }).find("'unknown[0].colour'"), std::string::npos);
   EXPECT_NE(thrown([&] { source.getColliderList("not_a_list"); }).find("'not_a_list'"), std::string::npos);
+  // A collider on a TF frame: the frame a string, non-empty.
+  const auto framed = source.getColliderList("on_frame");
+  ASSERT_TRUE(framed && framed->size() == 1u);
+  EXPECT_EQ((*framed)[0].frame, "finger");
+  EXPECT_NE(thrown([&] { source.getColliderList("numeric_frame"); })
+                .find("invalid parameter 'numeric_frame[0].frame': wrong type, must be a string (a TF frame id)"),
+            std::string::npos);
+  EXPECT_NE(thrown([&] { source.getColliderList("empty_frame"); }).find("invalid parameter 'empty_frame[0].frame' = ''"),
+            std::string::npos);
+}
+
+// Colliders on TF frames: none before the frame's first pose, placed there for that tick (it
+// appears), then interpolated over a tick towards the next pose, held where they are while missing.
+TEST(ColliderFrames, CollidersFollowTheirFrames)
+{
+  Collider fixed, finger;
+  finger.type = ColliderType::Sphere;
+  finger.frame = "finger";
+  const Eigen::Vector3d offset(1.0, 0.0, 0.5);
+  ColliderFrames frames({fixed, finger}, offset);
+  ASSERT_EQ(frames.size(), 1u);
+  EXPECT_EQ(frames.collider(0), 1);
+  EXPECT_EQ(frames.frame(0), "finger");
+  frames.setTargets({std::nullopt}, {"not available"});
+  EXPECT_FALSE(frames.pose(0, 1.0));
+  EXPECT_NE(frames.status().find("collider 1 frame 'finger' not available (inactive until found)"), std::string::npos);
+
+  FramePose first;
+  first.translation = Eigen::Vector3d(1.0, 2.0, 3.0);
+  frames.setTargets({first}, {""});
+  EXPECT_TRUE(frames.following(0));
+  EXPECT_TRUE(frames.status().empty());
+  for (double s : {0.0, 0.5, 1.0})
+    EXPECT_TRUE(frames.pose(0, s)->translation().isApprox(first.translation - offset)) << s;
+  frames.finishTick(1.0);
+
+  FramePose second;
+  second.translation = Eigen::Vector3d(1.0, 2.2, 3.0);
+  second.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(0.4, Eigen::Vector3d::UnitZ()));
+  frames.setTargets({second}, {""});
+  const Eigen::Isometry3d half = *frames.pose(0, 0.5);
+  EXPECT_TRUE(half.translation().isApprox(Eigen::Vector3d(0.0, 2.1, 2.5)));
+  EXPECT_NEAR(Eigen::AngleAxisd(half.linear()).angle(), 0.2, 1e-12);
+  frames.finishTick(0.5);  // the tick stopped half-way: the collider is there
+
+  frames.setTargets({std::nullopt}, {"stale"});
+  EXPECT_FALSE(frames.following(0));
+  for (double s : {0.0, 1.0})
+    EXPECT_TRUE(frames.pose(0, s)->isApprox(half)) << s;
+  EXPECT_NE(frames.status().find("stale (kept at its last pose)"), std::string::npos);
 }
 
 // Particles held by a frame follow its motion applied to their offsets at the first lookup; the
