@@ -2,6 +2,7 @@
 #pragma once
 
 #include "modal_mass_spring/grid.h"
+#include "modal_mass_spring/simulation.h"
 
 #include <functional>
 #include <stdexcept>
@@ -31,4 +32,32 @@ inline modal_mass_spring::GridParams paper3D()
   g.dimension = 3;
   g.rotation_deg = 45.0;
   return g;
+}
+
+// The paper's 3D sheet at the 2D grid's size: 5 x 5, top row fixed, turned 45 degrees about x.
+inline modal_mass_spring::GridParams turnedSheet()
+{
+  modal_mass_spring::GridParams g;
+  g.dimension = 3;
+  g.rotation_deg = 45.0;
+  return g;
+}
+
+// A method with r modes at a time step (s) under an integrator; the other parameters their defaults.
+inline modal_mass_spring::SimulationParams methodParams(
+    modal_mass_spring::Method method, int r, double dt,
+    modal_mass_spring::IntegratorKind integrator = modal_mass_spring::IntegratorKind::Explicit)
+{
+  modal_mass_spring::SimulationParams s;
+  s.method = method;
+  s.num_modes = r;
+  s.time_step = dt;
+  s.integrator = integrator;
+  return s;
+}
+
+// The largest distance (m) of a particle from where `positions` (a flat vector, as positions()) put it.
+inline double largestParticleDistance(const modal_mass_spring::Simulation& sim, const Eigen::VectorXd& positions)
+{
+  return (sim.grid().toPoints(sim.positions()) - sim.grid().toPoints(positions)).colwise().norm().maxCoeff();
 }
