@@ -10,6 +10,7 @@
 #include "modal_mass_spring/modal_derivatives.h"
 #include "modal_mass_spring/options.h"
 #include "modal_mass_spring/skinning.h"
+#include "modal_mass_spring/validation.h"  // validateParameters, estimateMemoryBytes
 
 #include <memory>
 #include <optional>
@@ -84,21 +85,6 @@ HandleFormulation resolveHandleFormulation(const GridParams& grid, const Simulat
 
 // The cubature training parameters of a simulation's.
 CubatureParams cubatureParams(const SimulationParams& params);
-
-// Throws std::invalid_argument (rejectParameter) for the first invalid parameter of either set,
-// naming it, its value and what is allowed: the grid's (validateGridParams), then the simulation's,
-// num_modes against the grid's free degrees of freedom, the scales the physics derives from them
-// (frequencies, forces, energies must stay far from overflow and underflow) and the memory the
-// build would need against memory_limit_gb. Builds nothing: cheap on any grid size.
-void validateParameters(const GridParams& grid, const SimulationParams& params);
-
-// Peak memory (bytes) a Simulation with these (valid) parameters needs: the stiffness matrix, its
-// sparse factorisations (basis, equilibrium, implicit full), the basis with the eigensolver's
-// vectors and the force models' copies, and the per-dof vectors. An estimate, within a factor of
-// about 1.5 of what was measured.
-double estimateMemoryBytes(const GridParams& grid, const SimulationParams& params);
-// The part of it the cubature training takes, with its training set grown to the most.
-double cubatureTrainingBytes(const GridParams& grid, const SimulationParams& params);
 
 // What building the linearization point found.
 struct LinearizationInfo

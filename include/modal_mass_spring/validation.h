@@ -1,4 +1,5 @@
-// The one form of a refused parameter, shared by the core, the node and the tools.
+// The one form of a refused parameter, shared by the core, the node and the tools, and the checks of
+// a simulation's parameters with the memory estimate they hold against memory_limit_gb.
 #pragma once
 
 #include <sstream>
@@ -19,18 +20,24 @@ template <typename T>
 }
 
 // Refuses a particle index outside [0, num_particles - 1] or listed twice.
-inline void checkParticleIndices(const std::string& name, const std::vector<int>& indices, int num_particles)
-{
-  std::vector<bool> seen(num_particles > 0 ? num_particles : 0, false);
-  for (int index : indices)
-  {
-    if (index < 0 || index >= num_particles)
-      rejectParameter(name, index,
-                      "particle indices must be in [0, " + std::to_string(num_particles - 1) + "] (row * cols + col)");
-    if (seen[index])
-      rejectParameter(name, index, "each particle index must be listed once");
-    seen[index] = true;
-  }
-}
+void checkParticleIndices(const std::string& name, const std::vector<int>& indices, int num_particles);
+
+struct GridParams;
+struct SimulationParams;
+
+// Throws std::invalid_argument (rejectParameter) for the first invalid parameter of either set,
+// naming it, its value and what is allowed: the grid's (validateGridParams), then the simulation's,
+// num_modes against the grid's free degrees of freedom, the scales the physics derives from them
+// (frequencies, forces, energies must stay far from overflow and underflow) and the memory the
+// build would need against memory_limit_gb. Builds nothing: cheap on any grid size.
+void validateParameters(const GridParams& grid, const SimulationParams& params);
+
+// Peak memory (bytes) a Simulation with these (valid) parameters needs: the stiffness matrix, its
+// sparse factorisations (basis, equilibrium, implicit full), the basis with the eigensolver's
+// vectors and the force models' copies, and the per-dof vectors. An estimate, within a factor of
+// about 1.5 of what was measured.
+double estimateMemoryBytes(const GridParams& grid, const SimulationParams& params);
+// The part of it the cubature training takes, with its training set grown to the most.
+double cubatureTrainingBytes(const GridParams& grid, const SimulationParams& params);
 
 }  // namespace modal_mass_spring

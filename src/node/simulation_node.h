@@ -10,6 +10,7 @@
 #include "modal_mass_spring/ApplyForce.h"
 #include "modal_mass_spring/SetMethod.h"
 #include "modal_mass_spring/SimulationConfig.h"
+#include "modal_mass_spring/Status.h"
 #include "modal_mass_spring/Step.h"
 #include "modal_mass_spring/simulation.h"
 #include "node_params.h"
@@ -18,9 +19,12 @@
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <dynamic_reconfigure/server.h>
 #include <geometry_msgs/PointStamped.h>
+#include <geometry_msgs/TransformStamped.h>
+#include <geometry_msgs/WrenchStamped.h>
 #include <interactive_markers/interactive_marker_server.h>
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
+#include <sensor_msgs/PointCloud2.h>
 #include <std_srvs/SetBool.h>
 #include <std_srvs/Trigger.h>
 #include <tf2_ros/buffer.h>
@@ -90,6 +94,7 @@ private:
   // diverged, or every method of the comparison).
   bool stepAll();
   void onTick();
+  // What a tick publishes, and the state and diagnostics (status.cpp).
   Output snapshot(const ros::Time& stamp);  // with mutex_ held
   void send(const Output& output);
   ros::Time stamp() const;  // with mutex_ held: the simulated clock under use_sim_time, else now
@@ -114,13 +119,14 @@ private:
   void swapRebuilt();  // with mutex_ held, at a tick boundary
   bool rebuilding() const { return rebuilding_ || !rebuilt_.empty(); }
 
+  // The services (services.cpp).
   bool setMethod(SetMethod::Request& request, SetMethod::Response& response);
   bool reset(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   bool pause(std_srvs::SetBool::Request& request, std_srvs::SetBool::Response& response);
   bool step(Step::Request& request, Step::Response& response);
 
-  // External forces: ~apply_force messages (checked, turned into the fixed frame with tf2, summed)
-  // and ~clear_forces; every track gets the same total.
+  // External forces (services.cpp): ~apply_force messages (checked, turned into the fixed frame with
+  // tf2, summed) and ~clear_forces; every track gets the same total.
   void applyForce(const ApplyForce::ConstPtr& message);
   bool clearForces(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   void updateExternalForces();  // with mutex_ held: drops the forces whose time is up, sets the rest
@@ -222,6 +228,38 @@ private:
 
   ros::Timer timer_;
   ros::WallTimer wall_timer_;  // under use_sim_time: the node makes the clock, so it cannot wait on it
+};
+
+// Defined here for the node's files that take the lock (services.cpp) or build and send what a tick
+// publishes (status.cpp).
+class SimulationNode::ServiceLock
+{
+public:
+  explicit ServiceLock(SimulationNode& node) : node_(node)
+  {
+    ++node_.services_waiting_;  // the step loop sees this and lets go between two steps
+    lock_ = std::unique_lock<std::mutex>(node_.mutex_);
+    --node_.services_waiting_;
+  }
+
+private:
+  SimulationNode& node_;
+  std::unique_lock<std::mutex> lock_;
+};
+
+struct SimulationNode::Output
+{
+  struct Grid
+  {
+    ros::Publisher markers_pub, status_pub, points_pub;
+    visualization_msgs::MarkerArray markers;
+    Status status;
+    sensor_msgs::PointCloud2 points;
+    std::vector<std::pair<ros::Publisher, geometry_msgs::WrenchStamped>> wrenches;
+  };
+  std::vector<Grid> grids;
+  std::vector<geometry_msgs::TransformStamped> frames;  // empty: no TF this time
+  ros::Time stamp;
 };
 
 }  // namespace modal_mass_spring

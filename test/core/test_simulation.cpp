@@ -3,11 +3,18 @@
 
 #include "modal_mass_spring/spring_forces.h"
 
+#include "test_support.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <type_traits>
 
 using namespace modal_mass_spring;
+
+// The force models and integrators refer to the Simulation's members: it must stay where it was built.
+static_assert(!std::is_copy_constructible_v<Simulation> && !std::is_copy_assignable_v<Simulation>);
+static_assert(!std::is_move_constructible_v<Simulation> && !std::is_move_assignable_v<Simulation>);
 
 namespace
 {
@@ -229,4 +236,22 @@ TEST(Simulation, SmallerTimeStepRecoversAfterSetTimeStep)
   sim.reset();
   EXPECT_FALSE(sim.step(1000).diverged);
   EXPECT_THROW(sim.setTimeStep(-1.0), std::invalid_argument);
+}
+
+TEST(Simulation, SetTimeStepKeepsTheStateAndTheNewStepIsUsed)
+{
+  Simulation sim(GridParams{}, withMethod(Method::Physical, 4, 1e-3));
+  sim.step(300);
+  const Eigen::VectorXd x = sim.positions(), v = sim.velocity();
+  sim.setTimeStep(2e-3);
+  EXPECT_EQ(sim.positions(), x);
+  EXPECT_EQ(sim.velocity(), v);
+  EXPECT_EQ(sim.params().time_step, 2e-3);
+  // Two steps of 2 ms land close to four of 1 ms, far from where two of 1 ms would.
+  Simulation reference(GridParams{}, withMethod(Method::Physical, 4, 1e-3));
+  reference.step(304);
+  sim.step(2);
+  EXPECT_LT((sim.positions() - reference.positions()).cwiseAbs().maxCoeff(), 1e-4);
+  EXPECT_TRUE(contains(refusal([&] { sim.setTimeStep(0.0); }), "'time_step' = 0"));
+  EXPECT_EQ(sim.params().time_step, 2e-3);
 }

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Rostest checker: records the node's markers and its gripper and table wrenches with rosbag, reads
 the bag back and checks the colliders are drawn, the wrenches are finite geometry_msgs/WrenchStamped,
-and the gripper holding the hanging cloth still (the first seconds of scripts/drag_gripper.py) carries
+and the gripper holding the hanging cloth still (the first seconds of scripts/gripper.py, motion drag) carries
 its weight."""
 import math
 import os

@@ -3,7 +3,7 @@
 from the node's TF frames of tf_particles (float64, unlike the float32 ~points), so the held particles
 are checked on the frame's recorded motion to 1e-9 m.
 
-~suite "follow": the particles of the handle whose frame moves (move_handle.py) are where the frame's
+~suite "follow": the particles of the handle whose frame moves (scripts/gripper.py) are where the frame's
 motion takes their start offsets, a free particle below responds, and the handle whose frame is never
 broadcast holds its particle with a warning on /rosout and a note in ~status; ~status names the
 formulation the node chose. Parameters ~moving, ~missing (particle lists) and ~formulation
