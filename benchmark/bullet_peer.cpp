@@ -13,9 +13,9 @@
 // Where the two models differ (docs/benchmarks.md, "Against Bullet's deformable world"):
 // - Bullet's mass-spring force has one stiffness for every link but the bending ones: its shear links
 //   get the structural 200 N/m, not 80.
-// - Bullet has no mass-proportional damping; the soft body's drag scales every velocity by (1 - drag)
-//   once a step, so drag = alpha dt stands in for alpha M. Its spring damping (--bullet-damping, along
-//   the links) is 0, as the package's beta.
+// - Bullet has no mass-proportional damping, and its implicit mode drops the soft body's drag: the
+//   package's alpha M is added as a force of this benchmark's (MassDampingForce). Bullet's spring
+//   damping (--bullet-damping, along the links) is 0, as the package's beta.
 // - Bullet's Newton takes one iteration a step (its default, printed as read from its solver: it
 //   linearises backward Euler once, a step is not converged); the package's Newton converges to 1e-9
 //   of the forces.
@@ -206,6 +206,47 @@ public:
   long tangent_products = 0;
 };
 
+// The package's mass damping -alpha M v as a Bullet force, taken implicitly like Bullet's other
+// damping (its differential -alpha M joins the system's matrix): Bullet has no mass-proportional
+// damping of its own, and the soft body's drag is dropped in its implicit mode.
+class MassDampingForce : public btDeformableLagrangianForce
+{
+public:
+  explicit MassDampingForce(btScalar alpha) : alpha_(alpha) {}
+  void addScaledForces(btScalar scale, TVStack& force) override { addScaledDampingForce(scale, force); }
+  void addScaledExplicitForce(btScalar, TVStack&) override {}
+  void addScaledElasticForceDifferential(btScalar, const TVStack&, TVStack&) override {}
+  void addScaledDampingForce(btScalar scale, TVStack& force) override
+  {
+    forEachFreeNode([&](const btSoftBody::Node& node) { force[node.index] -= scale * alpha_ / node.m_im * node.m_v; });
+  }
+  void addScaledDampingForceDifferential(btScalar scale, const TVStack& dv, TVStack& df) override
+  {
+    forEachFreeNode([&](const btSoftBody::Node& node) { df[node.index] -= scale * alpha_ / node.m_im * dv[node.index]; });
+  }
+  void buildDampingForceDifferentialDiagonal(btScalar scale, TVStack& diagA) override
+  {
+    forEachFreeNode([&](const btSoftBody::Node& node) {
+      diagA[node.index] -= btVector3(1, 1, 1) * (scale * alpha_ / node.m_im);
+    });
+  }
+  // A type of its own: the world merges a force into one of the same type already added (a second
+  // mass-spring type would count the springs twice). 7 is none of Bullet's (1 to 6) and within the
+  // enumeration's range.
+  btDeformableLagrangianForceType getForceType() override { return static_cast<btDeformableLagrangianForceType>(7); }
+
+private:
+  template <typename F>
+  void forEachFreeNode(F f)
+  {
+    for (int b = 0; b < m_softBodies.size(); ++b)
+      for (int n = 0; n < m_softBodies[b]->m_nodes.size(); ++n)
+        if (m_softBodies[b]->m_nodes[n].m_im > 0)
+          f(m_softBodies[b]->m_nodes[n]);
+  }
+  btScalar alpha_;
+};
+
 // Bullet's deformable solver, with its Newton and Krylov settings readable (they are protected).
 class ReadableSolver : public btDeformableBodySolver
 {
@@ -277,13 +318,20 @@ struct BulletCloth
       if (s >= bending_from)
         body->m_links[body->m_links.size() - 1].m_bbending = 1;
     }
-    body->m_cfg.drag = kAlpha * kTimeStep;  // alpha M: v <- (1 - alpha dt) v once a step
+    // Semi-implicit, the soft body's drag v <- (1 - drag) v once a step stands in for alpha M.
+    if (o.semi_implicit)
+      body->m_cfg.drag = kAlpha * kTimeStep;
     world->addSoftBody(body);
     springs = new CountingMassSpring(grid.params().structural_stiffness, o.bullet_damping,
                                      grid.params().bending_stiffness);
     world->addForce(body, springs);
     gravity_force = new btDeformableGravityForce(gravity);
     world->addForce(body, gravity_force);
+    if (!o.semi_implicit)
+    {
+      mass_damping = new MassDampingForce(kAlpha);
+      world->addForce(body, mass_damping);
+    }
   }
   ~BulletCloth()
   {
@@ -292,6 +340,7 @@ struct BulletCloth
     world.reset();
     delete springs;
     delete gravity_force;
+    delete mass_damping;
     delete solver;
   }
   BulletCloth(const BulletCloth&) = delete;
@@ -317,6 +366,7 @@ struct BulletCloth
   btSoftBody* body = nullptr;
   CountingMassSpring* springs = nullptr;
   btDeformableGravityForce* gravity_force = nullptr;
+  MassDampingForce* mass_damping = nullptr;
 };
 
 double cpuSeconds()
@@ -429,11 +479,12 @@ void run(int size, const Options& o)
   // Read after the run: the world sets the solver's mode and preconditioner at every step.
   std::printf("Bullet:  %d-bit btScalar, btDeformableMultiBodyDynamicsWorld %s, Newton at most %d iterations, stops at |residual| < %g "
               "N s; %s, at most %d iterations, tolerance %g; preconditioner %s; links %g N/m (bending %g), "
-              "damping %g N s/m, drag %g\n",
+              "damping %g N s/m along the links; mass damping %s\n",
               static_cast<int>(8 * sizeof(btScalar)), o.semi_implicit ? "semi-implicit (springs explicit, damping implicit: one Krylov solve)" : "implicit",
               bullet.solver->newtonIterations(), bullet.solver->newtonTolerance(), bullet.solver->krylovName(),
               bullet.solver->krylovIterations(), bullet.solver->krylovTolerance(), bullet.solver->preconditionerName(),
-              g.structural_stiffness, g.bending_stiffness, o.bullet_damping, bullet.body->m_cfg.drag);
+              g.structural_stiffness, g.bending_stiffness, o.bullet_damping,
+              o.semi_implicit ? "by the soft body's drag alpha dt" : "alpha M, implicit (a force of this benchmark's)");
 
   const double package_steps = static_cast<double>(package_time.cpu.size());
   const double bullet_steps = static_cast<double>(bullet_time.cpu.size());
