@@ -519,6 +519,7 @@ void run(int size, const Options& o)
 int main(int argc, char** argv)
 {
   const Options o = parse(argc, argv);
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);  // each table as it is measured, also into a file
   std::printf("bullet_peer: load average %s at the start\n", loadAverage().c_str());
   try
   {
