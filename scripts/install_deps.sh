@@ -23,6 +23,11 @@ packages=(
 if [ "${MODAL_VIEWER:-0}" = "1" ]; then
   packages+=(rviz xvfb xauth x11-utils imagemagick)
 fi
+# Bullet, only for the optional peer benchmark benchmark/bullet_peer (docs/benchmarks.md): the build
+# and the tests do not need it.
+if [ "${MODAL_BULLET:-0}" = "1" ]; then
+  packages+=(libbullet-dev pkg-config)
+fi
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
