@@ -238,6 +238,26 @@ TEST(Skinning, TwoCornerGripsWithNothingFixedHangAndFollowTheirHandles)
   EXPECT_LT((corner - expected).norm(), 1e-12);
 }
 
+TEST(Skinning, GripsAlongOneRowTranslatedTogetherTranslateTheCloth)
+{
+  // Two grips on the top row: their particles lie on a line, which fixes only part of an affine map.
+  // Taken about the grips' own centroid, the rest of the fit is zero, and moving both grips by one
+  // vector moves every free particle by it (not a shear about a point below the row).
+  const int n = 6;
+  GridParams g = heldCloth({{0, 1, 2}, {3, 4, 5}}, n);
+  SimulationParams s = heldParams(Method::Physical, BasisKind::Skinning, 4);
+  s.num_modes = 4;
+  s.linearization = Linearization::Rest;
+  s.initial_state = InitialState::Initial;
+  Simulation sim(g, s);
+  const Grid& grid = sim.grid();
+  const Eigen::Vector3d shift(0.1, -0.2, 0.3);
+  const Eigen::VectorXd dx_b = shift.replicate(grid.numHandleDofs() / 3, 1);
+  const Eigen::VectorXd moved = sim.skinningConstraintModes() * dx_b;
+  const Eigen::VectorXd expected = shift.replicate(grid.numFreeDofs() / 3, 1);
+  EXPECT_LT((moved - expected).cwiseAbs().maxCoeff(), 1e-10);
+}
+
 TEST(Skinning, PhysicalConservesEnergyWithoutDamping)
 {
   // The paper's 3D sheet turned 45 degrees, its top row fixed, released under gravity.
