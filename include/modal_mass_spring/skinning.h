@@ -53,8 +53,11 @@ struct SkinningBasis
   // Phi = B_i N (N the null space of B_c) rotated by Rayleigh-Ritz: Phi^T M Phi = I and
   // Phi^T K Phi = diag(eigenvalues), zero for the motions that stretch no spring.
   ModalBasis basis;
-  // Psi = B_i G (interior x handle dofs), G the least-squares solution of B_c z = (0, dx_b), made
-  // M-orthogonal to Phi: the interior's part carried by the handles, in the span. Empty without handles.
+  // Psi (interior x handle dofs), the interior's part carried by the handles, in the span: the part of
+  // dx_b that is an affine map of the handle particles (a rigid motion of the handles, a turn of any
+  // angle included) moves the free particles by the same map, so a turned clamp turns the reference
+  // x_ref + Psi dx_b and X carries only the deformation; the rest of dx_b moves them by B_i G, G the
+  // least-squares solution of B_c z = (0, dx_b), made M-orthogonal to Phi. Empty without handles.
   Eigen::MatrixXd constraint_modes;
   SkinningInfo info;
 };

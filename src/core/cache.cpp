@@ -332,6 +332,10 @@ std::string basisKey(const GridParams& g, const SimulationParams& p)
       << "\nnum_modes=" << p.num_modes << "\nbasis=" << toString(p.basis)
       << "\nnum_derivative_modes=" << p.num_derivative_modes << "\nnum_skinning_weights=" << p.num_skinning_weights
       << '\n';
+  // The handles' part of the skinning span moves the whole cloth by their affine motion (entries
+  // stored before it was, with the least-squares interior alone, must not be read for it).
+  if (p.basis == BasisKind::Skinning)
+    key << "skinning_handle_extension=affine\n";
   return key.str();
 }
 

@@ -8,6 +8,7 @@
 #include <Eigen/Geometry>
 
 #include <Eigen/Eigenvalues>
+#include <Eigen/QR>
 #include <Eigen/SVD>
 
 #include <chrono>
@@ -134,6 +135,45 @@ double shortestSpringRatio(const Grid& grid, const Eigen::VectorXd& x_ref, const
     shortest = std::min(shortest, after / before);
   }
   return shortest;
+}
+
+// Psi = E H^+ + Psi_0 (I - H H^+): H (handle dofs x affine coordinates) moves the handle particles
+// by an affine map, E the free particles by the same map, H^+ is the least-squares fit of one to a
+// handle motion dx_b. The part of dx_b that is such a map (every rigid motion of the handles taken
+// together, a turn of any angle included) moves the whole cloth by it, the rest is carried by
+// Psi_0. Either way Psi dx_b is in the span with the handles met, so the subspace and `physical` are
+// unchanged, but a turned clamp now turns the reference x_ref + Psi dx_b with it: the reduced
+// coordinates keep only the deformation, which the cubature, trained about x_ref, fits.
+// The map is taken about the handle particles' centroid: what the handles leave undetermined (the
+// columns of A along which they do not spread: all but the translation for one particle, the axis
+// across a row) is then zero in the least-squares fit, so that a translation of the handles, say,
+// translates the cloth rather than shearing it about a point away from them.
+Eigen::MatrixXd affineHandleExtension(const Grid& grid, const Eigen::VectorXd& x_ref, const Eigen::MatrixXd& minimal)
+{
+  const int dim = grid.dimension();
+  const std::vector<int>& handle_dofs = grid.handleDofs();
+  Eigen::VectorXd centre = Eigen::VectorXd::Zero(dim);
+  for (size_t k = 0; k < handle_dofs.size(); ++k)
+    centre[handle_dofs[k] % dim] += x_ref[handle_dofs[k]];
+  centre *= static_cast<double>(dim) / static_cast<double>(handle_dofs.size());
+  // Row (i, a): dof a of particle i moved by A (x_i - centre) + t, columns A(a, 0..dim-1) and t(a).
+  Eigen::MatrixXd affine = Eigen::MatrixXd::Zero(grid.numDofs(), dim * (dim + 1));
+  for (int i = 0; i < grid.numParticles(); ++i)
+    for (int a = 0; a < dim; ++a)
+    {
+      for (int c = 0; c < dim; ++c)
+        affine(dim * i + a, a * (dim + 1) + c) = x_ref[dim * i + c] - centre[c];
+      affine(dim * i + a, a * (dim + 1) + dim) = 1.0;
+    }
+  const Eigen::MatrixXd h = affine(handle_dofs, Eigen::all);
+  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> fit;
+  fit.setThreshold(kRankTolerance);  // handles in a plane or on a line fix the map only there
+  fit.compute(h);
+  const Eigen::MatrixXd h_plus = fit.pseudoInverse();
+  Eigen::MatrixXd psi = affine(grid.freeDofs(), Eigen::all) * h_plus;
+  psi += minimal;
+  psi.noalias() -= (minimal * h) * h_plus;
+  return psi;
 }
 
 }  // namespace
@@ -266,6 +306,7 @@ SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref,
   {
     out.constraint_modes = b_i * particular;
     out.constraint_modes -= basis.phi * (basis.phi.transpose() * mass.asDiagonal() * out.constraint_modes);
+    out.constraint_modes = affineHandleExtension(grid, x_ref, out.constraint_modes);
   }
   out.info.weights = num_weights;
   out.info.coordinates = static_cast<int>(p);
