@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
 
 namespace modal_mass_spring
@@ -187,9 +188,10 @@ void validateContactThickness(double thickness)
 namespace
 {
 
-// The shape's signed distance at p (the collider's frame) and its outward unit normal there (that
-// frame); unit_normal: the plane's normal, normalized.
-double localDistance(const Collider& c, const Eigen::Vector3d& unit_normal, const Eigen::Vector3d& p,
+// The shape's signed distance at p (the collider's frame) and, where it is below `limit`, its outward
+// unit normal there (that frame): the particles a pass rejects, and the depth checks, skip the
+// normal's divisions. unit_normal: the plane's normal, normalized.
+double localDistance(const Collider& c, const Eigen::Vector3d& unit_normal, const Eigen::Vector3d& p, double limit,
                      Eigen::Vector3d& n)
 {
   n = Eigen::Vector3d::UnitZ();
@@ -197,8 +199,9 @@ double localDistance(const Collider& c, const Eigen::Vector3d& unit_normal, cons
   auto round = [&](const Eigen::Vector3d& closest, double radius) {
     const Eigen::Vector3d r = p - closest;
     const double length = r.norm();
-    n = length > 0.0 ? Eigen::Vector3d(r / length) : Eigen::Vector3d::UnitZ();
     d = length - radius;
+    if (d < limit)
+      n = length > 0.0 ? Eigen::Vector3d(r / length) : Eigen::Vector3d::UnitZ();
   };
   switch (c.type)
   {
@@ -225,7 +228,8 @@ double localDistance(const Collider& c, const Eigen::Vector3d& unit_normal, cons
       {
         const Eigen::Vector3d out = excess.cwiseMax(0.0).cwiseProduct(sign);
         d = out.norm();
-        n = out / d;
+        if (d < limit)
+          n = out / d;
       }
       else
       {
@@ -294,11 +298,11 @@ struct Placed
     reach = Eigen::AlignedBox3d((low.array() - grow).matrix(), (high.array() + grow).matrix());
   }
 
-  // Signed distance at x (grid coordinates) and the outward normal in the collider's frame (turned
-  // into grid coordinates by normal(), for a touching particle only).
-  double distance(const Eigen::Vector3d& x, Eigen::Vector3d& local_normal) const
+  // Signed distance at x (grid coordinates) and, where it is below `limit`, the outward normal in the
+  // collider's frame (turned into grid coordinates by normal(), for a touching particle only).
+  double distance(const Eigen::Vector3d& x, double limit, Eigen::Vector3d& local_normal) const
   {
-    return localDistance(*collider, unit_normal, to_local * x, local_normal);
+    return localDistance(*collider, unit_normal, to_local * x, limit, local_normal);
   }
   Eigen::Vector3d normal(const Eigen::Vector3d& local_normal) const { return pose.linear() * local_normal; }
 };
@@ -309,7 +313,8 @@ double signedDistance(const Collider& c, const Eigen::Isometry3d& pose, const Ei
                       Eigen::Vector3d& normal)
 {
   Eigen::Vector3d n;
-  const double d = localDistance(c, c.normal.normalized(), pose.inverse() * x, n);
+  const double d = localDistance(c, c.normal.normalized(), pose.inverse() * x,
+                                 std::numeric_limits<double>::infinity(), n);
   normal = pose.linear() * n;
   return d;
 }
@@ -376,7 +381,7 @@ std::vector<Contact::Touch> Contact::detect(const Eigen::VectorXd& x, double /*d
       if (placed.bounded && !placed.reach.contains(at))
         continue;
       Eigen::Vector3d local_n;
-      const double d = placed.distance(at, local_n);
+      const double d = placed.distance(at, thickness_, local_n);
       if (d >= thickness_)
         continue;
       report_.penetration_before = std::max(report_.penetration_before, -d);
@@ -431,7 +436,7 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
       if (placed_k.bounded && !placed_k.reach.contains(at))
         continue;
       Eigen::Vector3d local_n;
-      double d = placed_k.distance(at, local_n);
+      double d = placed_k.distance(at, thickness_, local_n);
       if (d >= thickness_)
         continue;
       Eigen::Vector3d n = placed_k.normal(local_n);
@@ -444,7 +449,7 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
           placed_k.still ? Eigen::Vector3d::Zero() : Eigen::Vector3d(at - placed_k.step_back * at);
       if (corrected)
       {
-        d = placed_k.distance(point(x, p), local_n);  // after the earlier collider's correction
+        d = placed_k.distance(point(x, p), thickness_, local_n);  // after the earlier collider's correction
         if (d >= thickness_)
           continue;
         n = placed_k.normal(local_n);
@@ -468,8 +473,9 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
     // Its depth below each surface it touched, once all of them corrected it.
     for (int j = 0; j < touching; ++j)
     {
-      Eigen::Vector3d n;
-      report_.penetration_after = std::max(report_.penetration_after, -placed[touched[j]].distance(point(x, p), n));
+      Eigen::Vector3d unused;
+      const double d = placed[touched[j]].distance(point(x, p), -std::numeric_limits<double>::infinity(), unused);
+      report_.penetration_after = std::max(report_.penetration_after, -d);
     }
   }
 }
