@@ -257,6 +257,11 @@ struct Placed
   // particle outside it is rejected with six comparisons; a plane is unbounded (no reach).
   bool bounded = false;
   Eigen::AlignedBox3d reach;
+  // The size of the numbers its distance is computed from (m), for the round-off bound below.
+  double scale = 0.0;
+  // A sphere's or capsule's distance at or below this is at its centre or axis, where the normal is
+  // a fixed direction rather than the distance's gradient.
+  double centre_distance = -std::numeric_limits<double>::infinity();
 
   Placed(const Collider& c, const Eigen::Isometry3d& at, const Eigen::Isometry3d& start, double thickness)
     : collider(&c), pose(at), to_local(at.inverse()), unit_normal(c.normal.normalized())
@@ -264,6 +269,17 @@ struct Placed
     const Eigen::Isometry3d step = at * start.inverse();
     still = step.isApprox(Eigen::Isometry3d::Identity(), 0.0);
     step_back = step.inverse();
+    auto size = [](const Eigen::Vector3d& v) { return v.cwiseAbs().maxCoeff(); };
+    scale = 1.0 + size(at.translation());
+    switch (c.type)
+    {
+      case ColliderType::Plane: scale += size(c.point); break;
+      case ColliderType::Box: scale += size(c.center) + size(c.half_extents); break;
+      case ColliderType::Sphere: scale += size(c.center) + c.radius; break;
+      case ColliderType::Capsule: scale += std::max(size(c.a), size(c.b)) + c.radius; break;
+    }
+    if (c.type == ColliderType::Sphere || c.type == ColliderType::Capsule)
+      centre_distance = -c.radius;
     Eigen::Vector3d low = Eigen::Vector3d::Zero(), high = Eigen::Vector3d::Zero();
     double grow = thickness;
     switch (c.type)
@@ -430,6 +446,7 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
     const Eigen::Vector3d at = point(x, p);  // touches are found where the step left the particle
     int touching = 0;
     bool corrected = false;  // an earlier collider's correction moved the particle
+    double first_distance = 0.0;
     for (int k = 0; k < count; ++k)
     {
       const Placed& placed_k = placed[k];
@@ -444,6 +461,8 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
       report_.penetration_before = std::max(report_.penetration_before, -d);
       ++report_.touching[c];
       touched[touching++] = k;
+      if (touching == 1)
+        first_distance = d;
       // The surface point under the particle at the step's start went to `at` (rigid motion).
       const Eigen::Vector3d surface_step =
           placed_k.still ? Eigen::Vector3d::Zero() : Eigen::Vector3d(at - placed_k.step_back * at);
@@ -470,7 +489,17 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
       add(v, p, dv);
       report_.force[c] -= mass[dim * p] * dv / dt;
     }
-    // Its depth below each surface it touched, once all of them corrected it.
+    // Its depth below each surface it touched, once all of them corrected it. A particle that one
+    // collider alone touched and corrected, in 3D, ends at least the thickness out, so it cannot
+    // deepen the report and is not measured: every shape is convex, so its signed distance is a
+    // convex function whose gradient (a subgradient inside a box) is the normal n the correction
+    // used, and the correction moved the particle by the push along n plus a part normal to n:
+    // d(after) >= d + n . move = d + push = the thickness. This holds to round-off (far below the
+    // thickness, which the test asks) except at a round shape's centre or axis, where n is a fixed
+    // direction, and in 2D, where the move loses its out-of-plane part.
+    if (dim == 3 && touching == 1 && corrected && first_distance > placed[touched[0]].centre_distance &&
+        thickness_ > 1e-6 * (placed[touched[0]].scale + point(x, p).cwiseAbs().maxCoeff()))
+      continue;
     for (int j = 0; j < touching; ++j)
     {
       Eigen::Vector3d unused;
