@@ -7,24 +7,15 @@
 #include "modal_mass_spring/validation.h"
 
 #include <chrono>
+#include <time.h>
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
-
-#include <time.h>
 
 namespace modal_mass_spring
 {
 namespace
 {
-
-// The process's CPU time (s).
-double processCpuSeconds()
-{
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 void requireNonNegative(const std::string& name, double value)
 {
@@ -777,6 +768,19 @@ std::string Simulation::divergence(bool integrator_ok, const State& next)
   }
   return "";
 }
+
+namespace
+{
+
+// The process's CPU time (s).
+double processCpuSeconds()
+{
+  timespec t{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+}  // namespace
 
 StepResult Simulation::step(int steps)
 {
