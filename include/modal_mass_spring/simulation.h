@@ -236,7 +236,7 @@ public:
   // collider with a `frame` touches nothing until its first pose, which places it (Contact::setPose).
   // Throws std::invalid_argument for an index out of range or a non-finite pose.
   void setColliderPose(int i, const Eigen::Isometry3d& pose);
-  // The time the last step's contact correction took (s; 0 without colliders).
+  // The CPU time the last step's contact correction took (s, the process's; 0 without colliders).
   double lastContactSeconds() const { return contact_seconds_; }
   // The force the grid puts on each handle (N, grid coordinates), what holding it takes reversed:
   // the springs' pull on its particles plus their weight and external force minus their mass times
