@@ -103,7 +103,7 @@ class ImplicitNewmark : public Integrator
 {
 public:
   ImplicitNewmark(MassDamping system, double dt, int max_iterations = 50, double hht_alpha = 0.0,
-                  double tolerance = 1e-9, TangentSolverKind linear_solver = TangentSolverKind::JacobiCg);
+                  double tolerance = 1e-9, TangentSolverKind linear_solver = TangentSolverKind::BlockJacobiCg);
   // The symmetric tangents' solver, for its counters.
   const TangentSolver& linearSolver() const { return linear_solver_; }
   bool step(ForceModel& model, const State& state, State& next) override;

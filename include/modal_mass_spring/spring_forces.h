@@ -79,8 +79,10 @@ private:
   void multiplyAddDim(const Eigen::VectorXd& p, double scale, Eigen::VectorXd& y) const;
 
   const Grid& grid_;
-  std::vector<int> ends_;         // per spring, the free dofs of its ends i and j where they start; -1 fixed
-  std::vector<double> hessians_;  // per spring, k_s (Dim^2 values)
+  std::vector<int> order_;        // the grid's springs, those with both ends free first
+  int num_interior_ = 0;          // how many have both ends free
+  std::vector<int> ends_;         // per spring in that order, the free dofs where its ends i and j start; -1 fixed
+  std::vector<double> hessians_;  // per spring in that order, k_s (Dim^2 values)
 };
 
 // dK/dx[direction]: the directional derivative of the exact tangent K(x) (CompressedSprings::Keep)

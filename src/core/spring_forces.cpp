@@ -244,13 +244,23 @@ void TangentAssembler::assemble(const Eigen::VectorXd& x, SparseMatrix& k, Compr
 SpringTangent::SpringTangent(const Grid& grid) : grid_(grid)
 {
   const int dim = grid.dimension();
-  ends_.reserve(2 * grid.springs().size());
-  for (const Spring& s : grid.springs())
-  {
-    ends_.push_back(grid.freeIndex(dim * s.i));
-    ends_.push_back(grid.freeIndex(dim * s.j));
-  }
-  hessians_.resize(grid.springs().size() * dim * dim);
+  // The springs with both ends free first: the product runs over them without a test.
+  const std::vector<Spring>& springs = grid.springs();
+  for (int pass = 0; pass < 2; ++pass)
+    for (size_t s = 0; s < springs.size(); ++s)
+    {
+      const int i = grid.freeIndex(dim * springs[s].i), j = grid.freeIndex(dim * springs[s].j);
+      if ((i >= 0 && j >= 0) != (pass == 0))
+        continue;
+      order_.push_back(static_cast<int>(s));
+      ends_.push_back(i);
+      ends_.push_back(j);
+    }
+  num_interior_ = 0;
+  while (num_interior_ < static_cast<int>(order_.size()) && ends_[2 * num_interior_] >= 0 &&
+         ends_[2 * num_interior_ + 1] >= 0)
+    ++num_interior_;
+  hessians_.resize(springs.size() * dim * dim);
 }
 
 void SpringTangent::update(const Eigen::VectorXd& x)
@@ -258,8 +268,9 @@ void SpringTangent::update(const Eigen::VectorXd& x)
   const int dim = grid_.dimension();
   int dropped = 0;
   double* out = hessians_.data();
-  for (const Spring& s : grid_.springs())
+  for (const int spring : order_)
   {
+    const Spring& s = grid_.springs()[spring];
     if (dim == 2)
       Eigen::Map<Eigen::Matrix2d>{out} = springHessian<2>(s, x, CompressedSprings::Keep, dropped);
     else
@@ -274,7 +285,15 @@ void SpringTangent::multiplyAddDim(const Eigen::VectorXd& p, double scale, Eigen
   using Vec = Eigen::Matrix<double, Dim, 1>;
   using Mat = Eigen::Matrix<double, Dim, Dim>;
   const int num_springs = static_cast<int>(ends_.size() / 2);
-  for (int s = 0; s < num_springs; ++s)
+  const double* k = hessians_.data();
+  for (int s = 0; s < num_interior_; ++s, k += Dim * Dim)
+  {
+    const int i = ends_[2 * s], j = ends_[2 * s + 1];
+    const Vec t = scale * (Eigen::Map<const Mat>(k) * (p.segment<Dim>(i) - p.segment<Dim>(j)));
+    y.segment<Dim>(i) += t;
+    y.segment<Dim>(j) -= t;
+  }
+  for (int s = num_interior_; s < num_springs; ++s)
   {
     const int i = ends_[2 * s], j = ends_[2 * s + 1];
     Vec d = Vec::Zero();
