@@ -195,8 +195,8 @@ TEST(TangentSolver, ANonConvergingStepIsStillSplitOrRefused)
   const Grid grid(cloth(10));
   const Eigen::VectorXd q0 = deformation(grid, 1.0, 0.3);
   // (BlockJacobiCg is not among them: on this squeezed, noisy grid at 50 ms its Newton needs the step
-  // split in 3 where the others take it whole. Its conjugate gradients converge before they meet J's
-  // negative curvature, so no inertia is added and the directions head for saddles; the parts still
+  // split in 3 where the others take it whole, presumably because its conjugate gradients converge
+  // before they meet J's negative curvature, so no inertia is added (not yet checked); the parts still
   // converge.)
   for (TangentSolverKind kind : {TangentSolverKind::SimplicialLdlt, TangentSolverKind::CholmodCg, TangentSolverKind::JacobiCg})
   {
