@@ -326,6 +326,9 @@ void BM_ImplicitFullSolver(benchmark::State& state)
   const int size = static_cast<int>(state.range(0));
   const auto solver = static_cast<TangentSolverKind>(state.range(1));
   auto cloth = std::make_unique<SwingingCloth>(size, solver);
+  if (state.range(2) != 0)
+    cloth->integrator.setNewtonStart(NewtonStart::ConstantAcceleration);
+  cloth->integrator.setMaxForcing(std::pow(10.0, -static_cast<double>(state.range(3))));
   long newton = 0, substeps = 0, steps = 0;
   State next;
   for (auto _ : state)
@@ -348,11 +351,13 @@ void BM_ImplicitFullSolver(benchmark::State& state)
   state.counters["free_dofs"] = cloth->grid.numFreeDofs();
 }
 // range(1): TangentSolverKind (0 simplicial LDL^T, 1 CHOLMOD, 2 this package's supernodal, 3 Jacobi CG,
-// 4 CG preconditioned by an earlier CHOLMOD factor). 200 steps (1 s) on 50 x 50, 100 (0.5 s) on
-// 100 x 100, 20 (0.1 s) on 200 x 200.
-BENCHMARK(BM_ImplicitFullSolver)->ArgsProduct({{50}, {0, 1, 2, 3, 4}})->Iterations(200)->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_ImplicitFullSolver)->ArgsProduct({{100}, {0, 1, 2, 3, 4}})->Iterations(100)->Unit(benchmark::kMillisecond);
-BENCHMARK(BM_ImplicitFullSolver)->ArgsProduct({{200}, {0, 1, 2, 3, 4}})->Iterations(20)->Unit(benchmark::kMillisecond);
+// 4 CG preconditioned by an earlier CHOLMOD factor, 5 CG preconditioned by J's 3 x 3 particle blocks);
+// range(2): Newton's start (0 constant velocity, 1 constant acceleration); range(3): the inexact
+// Newton's largest forcing term, 10^-range(3). 200 steps (1 s) on 50 x 50, 100 (0.5 s) on 100 x 100,
+// 20 (0.1 s) on 200 x 200.
+BENCHMARK(BM_ImplicitFullSolver)->ArgsProduct({{50}, {0, 1, 2, 3, 4, 5}, {0, 1}, {1, 2, 3}})->Iterations(200)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_ImplicitFullSolver)->ArgsProduct({{100}, {0, 1, 2, 3, 4, 5}, {0, 1}, {1, 2, 3}})->Iterations(100)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_ImplicitFullSolver)->ArgsProduct({{200}, {0, 1, 2, 3, 4, 5}, {0, 1}, {1, 2, 3}})->Iterations(20)->Unit(benchmark::kMillisecond);
 
 // The hanging equilibrium of a 100 x 100 cloth (0.99 m, top row fixed, bending springs of a tenth of
 // the structural stiffness, shear 0.4 of it) of range(0) grams in all with range(1) N/m structural springs,

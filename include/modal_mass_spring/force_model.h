@@ -34,6 +34,12 @@ public:
   // The round-off of one evaluation of F (its norm, N in these coordinates): an iteration cannot
   // bring a residual below it. Where forces balance (an equilibrium) it is the only scale there is.
   double roundoff() const { return roundoff_; }
+  // The coordinates come in groups of this many consecutive ones that couple strongly (a particle's):
+  // the blocks of a block-diagonal preconditioner.
+  virtual int blockSize() const { return 1; }
+  // K(q) as the springs' blocks, for products J p without assembling K (the full model); nullptr for a
+  // model without springs of its own coordinates.
+  virtual const SpringTangent* springTangent(const Eigen::VectorXd&) { return nullptr; }
 
 protected:
   double roundoff_ = 0.0;
@@ -77,6 +83,8 @@ public:
   void force(const Eigen::VectorXd& u, Eigen::VectorXd& f) override;
   void tangentStiffness(const Eigen::VectorXd& u, SparseMatrix& k) override;
   double energy(const Eigen::VectorXd& u) override;
+  int blockSize() const override { return grid_.dimension(); }
+  const SpringTangent* springTangent(const Eigen::VectorXd& u) override;
 
 private:
   void setPositions(const Eigen::VectorXd& u);  // x_ = x_ref + u
@@ -85,6 +93,7 @@ private:
   Eigen::VectorXd x_ref_, x_, f_all_;
   EnergyCache cache_;
   std::unique_ptr<TangentAssembler> assembler_;  // built at the first tangent (explicit steps need none)
+  std::unique_ptr<SpringTangent> spring_tangent_;  // built at the first use
 };
 
 // A force model in modal coordinates: X = 0 stands for a reference configuration that a method

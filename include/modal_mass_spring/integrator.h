@@ -81,6 +81,13 @@ private:
   Eigen::VectorXd force_, rhs_, gyroscopic_force_, velocity_;
 };
 
+// Where Newton starts an implicit step.
+enum class NewtonStart
+{
+  ConstantVelocity,      // q' = q + h v
+  ConstantAcceleration,  // q' = q + h v + h^2 / 2 a: the start's acceleration kept over the step
+};
+
 // Implicit Newmark with the Hilber-Hughes-Taylor alpha: each step solves
 //   R(q') = M a' + (1 + alpha) (C v' - F(q')) - alpha (C v - F(q)) = 0,
 // beta = (1 - alpha)^2 / 4, gamma = 1/2 - alpha, by Newton with the tangent
@@ -96,16 +103,18 @@ class ImplicitNewmark : public Integrator
 {
 public:
   ImplicitNewmark(MassDamping system, double dt, int max_iterations = 50, double hht_alpha = 0.0,
-                  double tolerance = 1e-9, TangentSolverKind linear_solver = TangentSolverKind::JacobiCg);
+                  double tolerance = 1e-9, TangentSolverKind linear_solver = TangentSolverKind::BlockJacobiCg);
   // The symmetric tangents' solver, for its counters.
   const TangentSolver& linearSolver() const { return linear_solver_; }
   bool step(ForceModel& model, const State& state, State& next) override;
   int lastIterations() const override { return last_iterations_; }
   int lastSubsteps() const override { return substeps_; }
+  void setNewtonStart(NewtonStart start) { start_ = start; }
+  // The largest relative linear residual |R + J delta| / |R| of an inexact Newton direction.
+  void setMaxForcing(double forcing) { max_forcing_ = forcing; }
 
 private:
   static constexpr int kMaxHalvings = 4;
-  static constexpr double kForcing = 1e-3;  // an inexact Newton direction's relative linear residual
   void setStepSize(double h);
   bool advance(ForceModel& model, const State& s, State& next, double h, int depth);
   // One Newton solve of a step of size h_.
@@ -116,6 +125,8 @@ private:
   void gyroscopicChanged() override;
   // jacobian_ <- inertia_factor inertia_ + tangent_factor tangent_
   void assembleJacobian(double inertia_factor, double tangent_factor);
+  // blocks <- the inertia's diagonal blocks of block_size dofs (block_size^2 values each, column-major).
+  void inertiaBlocks(int block_size, Eigen::VectorXd& blocks) const;
   // a' and v' that the Newmark relations give for a trial q'.
   void kinematics(const State& s, State& next) const;
   // Sets next.v, next.a from next.q, stores R(q') in residual_ and returns its norm.
@@ -126,6 +137,8 @@ private:
   const double alpha_, beta_, gamma_;  // HHT alpha and the Newmark parameters it implies
   int max_iterations_;
   double tolerance_;
+  NewtonStart start_ = NewtonStart::ConstantVelocity;
+  double max_forcing_ = 1e-3;
   int last_iterations_ = 0;
   int substeps_ = 0;
   double h_ = 0.0;             // the step size being solved
@@ -140,6 +153,8 @@ private:
   // so that J is assembled without a sparse sum; for the tangent pattern recorded.
   SparsityPattern tangent_pattern_;
   Eigen::VectorXd inertia_on_tangent_;
+  Eigen::VectorXd inertia_diagonal_;  // the inertia's diagonal when it has nothing else (else empty)
+  Eigen::VectorXd jacobian_blocks_;   // J's diagonal blocks for a product without J
   bool inertia_mapped_ = false, inertia_fits_ = false;
   Eigen::VectorXd force_, residual_;
   Eigen::VectorXd old_terms_;  // alpha (C v - F(q)): the HHT part of R from the start of the step

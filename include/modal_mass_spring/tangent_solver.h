@@ -7,6 +7,7 @@
 
 #include <Eigen/Core>
 
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -31,6 +32,7 @@ enum class TangentSolverKind
   Supernodal,         // this package's supernodal Cholesky (SupernodalCholesky), built for every J
   JacobiCg,           // conjugate gradients preconditioned by J's diagonal
   CholmodCg,          // conjugate gradients preconditioned by the CHOLMOD factor of an earlier J
+  BlockJacobiCg,      // conjugate gradients preconditioned by J's diagonal blocks (a particle's dofs)
 };
 
 // One J after another. A direct kind solves exactly; a conjugate gradient kind stops once the
@@ -48,9 +50,19 @@ public:
   // x <- J^-1 b, |b - J x| <= tolerance (direct kinds: exact to round-off). False, x undefined, when J
   // is not positive definite (or not finite).
   bool solve(const SparseMatrix& j, const Eigen::VectorXd& b, Eigen::VectorXd& x, double tolerance);
+  // The same by conjugate gradients preconditioned by J's diagonal blocks (block size as set) with J
+  // given only as its product jp <- J p and those blocks (block_size^2 values a block, column-major),
+  // never assembled. False where a block or J is not positive definite or CG does not converge in
+  // its iterations: the caller then assembles J for solve(), which can factorise it.
+  bool solveMatrixFree(const std::function<void(const Eigen::VectorXd&, Eigen::VectorXd&)>& multiply,
+                       const Eigen::VectorXd& diagonal_blocks, const Eigen::VectorXd& b, Eigen::VectorXd& x,
+                       double tolerance);
   // The next J is far from the earlier ones (another step size): factorise it rather than iterate.
   void forgetFactor() { factor_current_ = false; }
   TangentSolverKind kind() const { return kind_; }
+  // The dofs come in groups of this many consecutive ones (a particle's coordinates): the blocks that
+  // BlockJacobiCg inverts. 1 (scalar Jacobi) unless set, or where it does not divide J's size.
+  void setBlockSize(int block_size) { block_size_ = block_size; }
   // Counters since construction: factorisations, conjugate gradient iterations.
   long factorisations() const { return factorisations_; }
   long cgIterations() const { return cg_iterations_; }
@@ -60,15 +72,31 @@ public:
 private:
   // Conjugate gradients from x = 0, preconditioned by `precondition` (z <- P^-1 r); false when they
   // meet a direction of non-positive curvature or stop after max_iterations.
-  template <typename Precondition>
-  bool conjugateGradients(const SparseMatrix& j, const Eigen::VectorXd& b, Eigen::VectorXd& x, double tolerance,
+  // jp <- J p by `multiply`.
+  template <typename Multiply, typename Precondition>
+  bool conjugateGradients(Multiply multiply, const Eigen::VectorXd& b, Eigen::VectorXd& x, double tolerance,
                           int max_iterations, Precondition precondition);
+  int blockSize(Eigen::Index size) const;
+
+  // inverse_blocks_ <- J's diagonal blocks, block_size^2 values a block (column-major).
+  template <int Size>
+  void diagonalBlocks(const SparseMatrix& j);
+  // inverse_blocks_ <- the inverses of the blocks it holds; false where one of them is not positive
+  // definite.
+  template <int Size>
+  bool invertBlocks();
+  // CG preconditioned by inverse_blocks_ once it holds J's blocks.
+  template <typename Multiply>
+  bool blockJacobi(Multiply multiply, int block_size, const Eigen::VectorXd& b, Eigen::VectorXd& x, double tolerance);
+  template <int Size>
+  void applyInverseBlocks(Eigen::VectorXd& v) const;
 
   TangentSolverKind kind_;
   std::unique_ptr<Factor> factor_;
   bool factor_current_ = false;  // the factor is of a J still usable as a preconditioner
   long factorisations_ = 0, cg_iterations_ = 0;
-  Eigen::VectorXd r_, z_, p_, jp_, inverse_diagonal_;
+  int block_size_ = 1;
+  Eigen::VectorXd r_, z_, p_, jp_, inverse_diagonal_, inverse_blocks_;
 };
 
 }  // namespace modal_mass_spring

@@ -47,6 +47,15 @@ void FullForceModel::tangentStiffness(const Eigen::VectorXd& u, SparseMatrix& k)
   assembler_->assemble(x_, k);
 }
 
+const SpringTangent* FullForceModel::springTangent(const Eigen::VectorXd& u)
+{
+  setPositions(u);
+  if (!spring_tangent_)
+    spring_tangent_ = std::make_unique<SpringTangent>(grid_);
+  spring_tangent_->update(x_);
+  return spring_tangent_.get();
+}
+
 double FullForceModel::energy(const Eigen::VectorXd& u)
 {
   double cached = 0.0;

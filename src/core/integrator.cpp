@@ -138,6 +138,9 @@ void ImplicitNewmark::setStepSize(double h)
   inertia_mapped_ = false;
   linear_solver_.forgetFactor();
   inertia_ = (1.0 / (beta_ * h * h)) * mass_matrix_ + ((1.0 + alpha_) * gamma_ / (beta_ * h)) * damping_;
+  inertia_diagonal_.resize(0);
+  if (isDiagonal(inertia_))
+    inertia_diagonal_ = inertia_.diagonal();
 }
 
 bool ImplicitNewmark::step(ForceModel& model, const State& s, State& next)
@@ -177,9 +180,11 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
     model.force(s.q, force_);
     old_terms_ = alpha_ * (damping_ * s.v - force_);
   }
-  // Predictor: constant velocity. The explicit extrapolation, with a step far past the explicit
-  // bound, lands too far away.
+  // Predictor: constant velocity, or the start's acceleration kept over the step (the converged
+  // acceleration of the previous implicit step is smooth in time: one Newton iteration or so closer).
   next.q = s.q + h_ * s.v;
+  if (start_ == NewtonStart::ConstantAcceleration)
+    next.q += (0.5 * h_ * h_) * s.a;
   // R(q') is the gradient of the incremental potential
   //   G(q') = |q' - y|_M^2 / (2 beta h^2) + (1 + alpha) gamma / (2 beta h) |q' - y|_C^2
   //           + (1 + alpha) (E(q') + (C (v + h (1 - gamma) a)) . q') - alpha (C v - F(q)) . q',
@@ -194,6 +199,7 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
   };
 
   const bool symmetric = !gyroscopic_ && model.isSymmetric();
+  linear_solver_.setBlockSize(model.blockSize());
   for (last_iterations_ = 1; last_iterations_ <= max_iterations_; ++last_iterations_)
   {
     const double residual_norm = residual(model, s, next);
@@ -208,7 +214,7 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
     // relative size keeps Newton's quadratic convergence, and one below a tenth of the target is as
     // good as exact.
     const double relative = residual_norm / (force_.norm() + inertial_norm_);
-    const double slack = std::max(std::min(kForcing, relative) * residual_norm, 0.1 * target);
+    const double slack = std::max(std::min(max_forcing_, relative) * residual_norm, 0.1 * target);
     Eigen::VectorXd delta = direction(model, next, symmetric, slack);
     if (delta.size() == 0)
       return false;
@@ -255,6 +261,25 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
 Eigen::VectorXd ImplicitNewmark::direction(ForceModel& model, const State& next, bool symmetric, double slack)
 {
   Eigen::VectorXd delta;
+  if (symmetric && linear_solver_.kind() == TangentSolverKind::BlockJacobiCg)
+    if (const SpringTangent* k = model.springTangent(next.q))
+    {
+      // J p = inertia p + (1 + alpha) K p from the springs, J never assembled; where CG does not
+      // get there, J is assembled below and solved as before (more inertia, a factorisation).
+      const int block_size = model.blockSize();
+      inertiaBlocks(block_size, jacobian_blocks_);
+      k->addDiagonalBlocks(1.0 + alpha_, jacobian_blocks_);
+      auto multiply = [&](const Eigen::VectorXd& p, Eigen::VectorXd& jp) {
+        if (inertia_diagonal_.size() == p.size())
+          jp.noalias() = inertia_diagonal_.cwiseProduct(p);
+        else
+          jp.noalias() = inertia_ * p;
+        k->multiplyAdd(p, 1.0 + alpha_, jp);
+      };
+      if (linear_solver_.solveMatrixFree(multiply, jacobian_blocks_, residual_, delta, slack) &&
+          residual_.dot(delta) > 0.0)
+        return -delta;
+    }
   model.tangentStiffness(next.q, tangent_);
   if (!symmetric)
   {
@@ -284,6 +309,16 @@ Eigen::VectorXd ImplicitNewmark::direction(ForceModel& model, const State& next,
   if (delta.size() > 0 && (!delta.allFinite() || residual_.dot(delta) >= 0.0))
     delta.resize(0);
   return delta;
+}
+
+void ImplicitNewmark::inertiaBlocks(int block_size, Eigen::VectorXd& blocks) const
+{
+  blocks.setZero(inertia_.rows() * block_size);
+  for (int col = 0; col < inertia_.outerSize(); ++col)
+    for (SparseMatrix::InnerIterator it(inertia_, col); it; ++it)
+      if (it.row() / block_size == col / block_size)
+        blocks[(col / block_size) * block_size * block_size + (col % block_size) * block_size + it.row() % block_size] +=
+            it.value();
 }
 
 void ImplicitNewmark::assembleJacobian(double inertia_factor, double tangent_factor)

@@ -241,6 +241,100 @@ void TangentAssembler::assemble(const Eigen::VectorXd& x, SparseMatrix& k, Compr
     *num_dropped = dropped;
 }
 
+SpringTangent::SpringTangent(const Grid& grid) : grid_(grid)
+{
+  const int dim = grid.dimension();
+  // The springs with both ends free first: the product runs over them without a test.
+  const std::vector<Spring>& springs = grid.springs();
+  for (int pass = 0; pass < 2; ++pass)
+    for (size_t s = 0; s < springs.size(); ++s)
+    {
+      const int i = grid.freeIndex(dim * springs[s].i), j = grid.freeIndex(dim * springs[s].j);
+      if ((i >= 0 && j >= 0) != (pass == 0))
+        continue;
+      order_.push_back(static_cast<int>(s));
+      ends_.push_back(i);
+      ends_.push_back(j);
+    }
+  num_interior_ = 0;
+  while (num_interior_ < static_cast<int>(order_.size()) && ends_[2 * num_interior_] >= 0 &&
+         ends_[2 * num_interior_ + 1] >= 0)
+    ++num_interior_;
+  hessians_.resize(springs.size() * dim * dim);
+}
+
+void SpringTangent::update(const Eigen::VectorXd& x)
+{
+  const int dim = grid_.dimension();
+  int dropped = 0;
+  double* out = hessians_.data();
+  for (const int spring : order_)
+  {
+    const Spring& s = grid_.springs()[spring];
+    if (dim == 2)
+      Eigen::Map<Eigen::Matrix2d>{out} = springHessian<2>(s, x, CompressedSprings::Keep, dropped);
+    else
+      Eigen::Map<Eigen::Matrix3d>{out} = springHessian<3>(s, x, CompressedSprings::Keep, dropped);
+    out += dim * dim;
+  }
+}
+
+template <int Dim>
+void SpringTangent::multiplyAddDim(const Eigen::VectorXd& p, double scale, Eigen::VectorXd& y) const
+{
+  using Vec = Eigen::Matrix<double, Dim, 1>;
+  using Mat = Eigen::Matrix<double, Dim, Dim>;
+  const int num_springs = static_cast<int>(ends_.size() / 2);
+  const double* k = hessians_.data();
+  for (int s = 0; s < num_interior_; ++s, k += Dim * Dim)
+  {
+    const int i = ends_[2 * s], j = ends_[2 * s + 1];
+    const Vec t = scale * (Eigen::Map<const Mat>(k) * (p.segment<Dim>(i) - p.segment<Dim>(j)));
+    y.segment<Dim>(i) += t;
+    y.segment<Dim>(j) -= t;
+  }
+  for (int s = num_interior_; s < num_springs; ++s)
+  {
+    const int i = ends_[2 * s], j = ends_[2 * s + 1];
+    Vec d = Vec::Zero();
+    if (i >= 0)
+      d = p.segment<Dim>(i);
+    if (j >= 0)
+      d -= p.segment<Dim>(j);
+    const Vec t = scale * (Eigen::Map<const Mat>(hessians_.data() + static_cast<size_t>(s) * Dim * Dim) * d);
+    if (i >= 0)
+      y.segment<Dim>(i) += t;
+    if (j >= 0)
+      y.segment<Dim>(j) -= t;
+  }
+}
+
+void SpringTangent::multiplyAdd(const Eigen::VectorXd& p, double scale, Eigen::VectorXd& y) const
+{
+  if (grid_.dimension() == 2)
+    multiplyAddDim<2>(p, scale, y);
+  else
+    multiplyAddDim<3>(p, scale, y);
+}
+
+void SpringTangent::addDiagonalBlocks(double scale, Eigen::VectorXd& blocks) const
+{
+  const int dim = grid_.dimension();
+  const int num_springs = static_cast<int>(ends_.size() / 2);
+  for (int s = 0; s < num_springs; ++s)
+    for (int end = 0; end < 2; ++end)
+    {
+      const int first = ends_[2 * s + end];
+      if (first < 0)
+        continue;
+      // The free dofs of a particle are consecutive: its block is the (first / dim)-th.
+      double* block = blocks.data() + static_cast<Eigen::Index>(first / dim) * dim * dim;
+      const double* k = hessians_.data() + static_cast<size_t>(s) * dim * dim;
+      for (int e = 0; e < dim * dim; ++e)
+        block[e] += scale * k[e];
+    }
+}
+
 void tangentTimesBasis(const Grid& grid, const Eigen::VectorXd& x, const Eigen::MatrixXd& phi_t,
                        Eigen::MatrixXd& k_phi_t)
 {

@@ -5,6 +5,7 @@
 #include "modal_mass_spring/supernodal_cholesky.h"
 
 #include <Eigen/CholmodSupport>
+#include <Eigen/Cholesky>
 #include <Eigen/SparseCholesky>
 
 #include <dlfcn.h>
@@ -142,8 +143,8 @@ TangentSolver::~TangentSolver() = default;
 TangentSolver::TangentSolver(TangentSolver&&) noexcept = default;
 TangentSolver& TangentSolver::operator=(TangentSolver&&) noexcept = default;
 
-template <typename Precondition>
-bool TangentSolver::conjugateGradients(const SparseMatrix& j, const Eigen::VectorXd& b, Eigen::VectorXd& x,
+template <typename Multiply, typename Precondition>
+bool TangentSolver::conjugateGradients(Multiply multiply, const Eigen::VectorXd& b, Eigen::VectorXd& x,
                                        double tolerance, int max_iterations, Precondition precondition)
 {
   x.setZero(b.size());
@@ -157,7 +158,7 @@ bool TangentSolver::conjugateGradients(const SparseMatrix& j, const Eigen::Vecto
     if (r_.norm() <= tolerance)
       return true;
     ++cg_iterations_;
-    jp_.noalias() = j * p_;
+    multiply(p_, jp_);
     const double curvature = p_.dot(jp_);
     if (!(curvature > 0.0))
       return false;
@@ -173,13 +174,107 @@ bool TangentSolver::conjugateGradients(const SparseMatrix& j, const Eigen::Vecto
   return r_.norm() <= tolerance;
 }
 
+int TangentSolver::blockSize(Eigen::Index size) const
+{
+  return block_size_ >= 2 && block_size_ <= 3 && size % block_size_ == 0 ? block_size_ : 1;
+}
+
+template <int Size>
+void TangentSolver::diagonalBlocks(const SparseMatrix& j)
+{
+  inverse_blocks_.setZero(j.rows() * Size);
+  // J is symmetric: its columns are its rows, so each column's entries within the column's own block
+  // fill that block.
+  for (int col = 0; col < j.outerSize(); ++col)
+  {
+    const int block = col / Size;
+    double* values = inverse_blocks_.data() + static_cast<Eigen::Index>(block) * Size * Size;
+    for (SparseMatrix::InnerIterator it(j, col); it; ++it)
+      if (it.row() / Size == block)
+        values[(col % Size) * Size + it.row() % Size] = it.value();
+  }
+}
+
+template <int Size>
+bool TangentSolver::invertBlocks()
+{
+  using Block = Eigen::Matrix<double, Size, Size>;
+  const Eigen::Index num_blocks = inverse_blocks_.size() / (Size * Size);
+  for (Eigen::Index block = 0; block < num_blocks; ++block)
+  {
+    Eigen::Map<Block> values(inverse_blocks_.data() + block * Size * Size);
+    const Eigen::LLT<Block> llt(values);
+    if (llt.info() != Eigen::Success)
+      return false;
+    values = llt.solve(Block::Identity());
+  }
+  return inverse_blocks_.allFinite();
+}
+
+template <int Size>
+void TangentSolver::applyInverseBlocks(Eigen::VectorXd& v) const
+{
+  using Block = Eigen::Matrix<double, Size, Size>;
+  using Segment = Eigen::Matrix<double, Size, 1>;
+  const Eigen::Index num_blocks = v.size() / Size;
+  for (Eigen::Index block = 0; block < num_blocks; ++block)
+  {
+    Eigen::Map<Segment> segment(v.data() + block * Size);
+    const Segment r = segment;
+    segment.noalias() = Eigen::Map<const Block>(inverse_blocks_.data() + block * Size * Size) * r;
+  }
+}
+
+template <typename Multiply>
+bool TangentSolver::blockJacobi(Multiply multiply, int block_size, const Eigen::VectorXd& b, Eigen::VectorXd& x,
+                                double tolerance)
+{
+  if (block_size == 2)
+    return invertBlocks<2>() &&
+           conjugateGradients(multiply, b, x, tolerance, kMaxJacobiIterations,
+                              [&](Eigen::VectorXd& v) { applyInverseBlocks<2>(v); }) &&
+           x.allFinite();
+  if (block_size == 3)
+    return invertBlocks<3>() &&
+           conjugateGradients(multiply, b, x, tolerance, kMaxJacobiIterations,
+                              [&](Eigen::VectorXd& v) { applyInverseBlocks<3>(v); }) &&
+           x.allFinite();
+  inverse_diagonal_ = inverse_blocks_.cwiseInverse();
+  return inverse_diagonal_.minCoeff() > 0.0 &&
+         conjugateGradients(multiply, b, x, tolerance, kMaxJacobiIterations,
+                            [&](Eigen::VectorXd& v) { v.array() *= inverse_diagonal_.array(); }) &&
+         x.allFinite();
+}
+
+bool TangentSolver::solveMatrixFree(const std::function<void(const Eigen::VectorXd&, Eigen::VectorXd&)>& multiply,
+                                    const Eigen::VectorXd& diagonal_blocks, const Eigen::VectorXd& b,
+                                    Eigen::VectorXd& x, double tolerance)
+{
+  const int block_size = blockSize(b.size());
+  if (diagonal_blocks.size() != b.size() * block_size)
+    return false;
+  inverse_blocks_ = diagonal_blocks;
+  return blockJacobi(multiply, block_size, b, x, tolerance);
+}
+
 bool TangentSolver::solve(const SparseMatrix& j, const Eigen::VectorXd& b, Eigen::VectorXd& x, double tolerance)
 {
-  if (kind_ == TangentSolverKind::JacobiCg)
+  auto product = [&](const Eigen::VectorXd& p, Eigen::VectorXd& jp) { jp.noalias() = j * p; };
+  const int block_size = blockSize(j.rows());
+  if (kind_ == TangentSolverKind::BlockJacobiCg && block_size > 1)
+  {
+    if (block_size == 2)
+      diagonalBlocks<2>(j);
+    else
+      diagonalBlocks<3>(j);
+    if (blockJacobi(product, block_size, b, x, tolerance))
+      return true;
+  }
+  else if (kind_ == TangentSolverKind::JacobiCg || kind_ == TangentSolverKind::BlockJacobiCg)
   {
     inverse_diagonal_ = j.diagonal().cwiseInverse();
     if (inverse_diagonal_.minCoeff() > 0.0 &&
-        conjugateGradients(j, b, x, tolerance, kMaxJacobiIterations,
+        conjugateGradients(product, b, x, tolerance, kMaxJacobiIterations,
                            [&](Eigen::VectorXd& v) { v.array() *= inverse_diagonal_.array(); }) &&
         x.allFinite())
       return true;
@@ -187,7 +282,7 @@ bool TangentSolver::solve(const SparseMatrix& j, const Eigen::VectorXd& b, Eigen
   else if (kind_ == TangentSolverKind::CholmodCg && factor_current_)
   {
     // CG from zero is a descent direction of the quadratic whatever the preconditioner.
-    if (conjugateGradients(j, b, x, tolerance, kMaxReusedFactorIterations,
+    if (conjugateGradients(product, b, x, tolerance, kMaxReusedFactorIterations,
                            [&](Eigen::VectorXd& v) { factor_->solveInPlace(v); }) &&
         x.allFinite())
       return true;

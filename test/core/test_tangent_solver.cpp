@@ -22,7 +22,8 @@ namespace
 {
 
 const TangentSolverKind kNewKinds[] = {TangentSolverKind::Cholmod, TangentSolverKind::Supernodal,
-                                       TangentSolverKind::JacobiCg, TangentSolverKind::CholmodCg};
+                                       TangentSolverKind::JacobiCg, TangentSolverKind::CholmodCg,
+                                       TangentSolverKind::BlockJacobiCg};
 
 std::string name(TangentSolverKind kind)
 {
@@ -67,10 +68,12 @@ Eigen::VectorXd deformation(const Grid& grid, double scale, double noise)
 
 // Steps `steps` times from the same state with the given solver; returns the final q.
 Eigen::VectorXd stepWith(TangentSolverKind kind, const Grid& grid, const Eigen::VectorXd& q0, double dt, int steps,
-                         int* substeps = nullptr)
+                         int* substeps = nullptr, NewtonStart start = NewtonStart::ConstantVelocity,
+                         long* newton_iterations = nullptr, long* cg_iterations = nullptr)
 {
   FullForceModel model(grid, grid.initialPositions());
   ImplicitNewmark integrator(massDamping(grid, 0.5), dt, 50, -0.1, 1e-9, kind);
+  integrator.setNewtonStart(start);
   State state, next;
   state.q = q0;
   state.v = Eigen::VectorXd::Zero(q0.size());
@@ -80,8 +83,12 @@ Eigen::VectorXd stepWith(TangentSolverKind kind, const Grid& grid, const Eigen::
     EXPECT_TRUE(integrator.step(model, state, next)) << name(kind) << " step " << k;
     if (substeps)
       *substeps = std::max(*substeps, integrator.lastSubsteps());
+    if (newton_iterations)
+      *newton_iterations += integrator.lastIterations();
     std::swap(state, next);
   }
+  if (cg_iterations)
+    *cg_iterations = integrator.linearSolver().cgIterations();
   return state.q;
 }
 
@@ -137,6 +144,7 @@ TEST(TangentSolver, EveryKindSolvesAPositiveDefiniteTangentAndRefusesAnIndefinit
   for (TangentSolverKind kind : kNewKinds)
   {
     TangentSolver solver(kind);
+    solver.setBlockSize(3);  // a particle's dofs: BlockJacobiCg's blocks (the others ignore it)
     Eigen::VectorXd x_solved;
     const double tolerance = 1e-10 * b.norm();
     ASSERT_TRUE(solver.solve(j, b, x_solved, tolerance)) << name(kind);
@@ -186,6 +194,10 @@ TEST(TangentSolver, ANonConvergingStepIsStillSplitOrRefused)
 {
   const Grid grid(cloth(10));
   const Eigen::VectorXd q0 = deformation(grid, 1.0, 0.3);
+  // (BlockJacobiCg is not among them: on this squeezed, noisy grid at 50 ms its Newton needs the step
+  // split in 3 where the others take it whole, presumably because its conjugate gradients converge
+  // before they meet J's negative curvature, so no inertia is added (not yet checked); the parts still
+  // converge.)
   for (TangentSolverKind kind : {TangentSolverKind::SimplicialLdlt, TangentSolverKind::CholmodCg, TangentSolverKind::JacobiCg})
   {
     FullForceModel model(grid, grid.initialPositions());
@@ -207,6 +219,80 @@ TEST(TangentSolver, ANonConvergingStepIsStillSplitOrRefused)
     // One iteration converges nothing, even in 1/16 of the step: refused.
     ImplicitNewmark refused(massDamping(grid, 0.5), 0.05, 1, -0.1, 1e-9, kind);
     EXPECT_FALSE(refused.step(model, state, next)) << name(kind);
+  }
+}
+
+TEST(SpringTangent, ProductsAndDiagonalBlocksMatchTheAssembledTangent)
+{
+  for (int dimension : {2, 3})
+  {
+    // Handles and the fixed top row leave springs with one end or none free; squeezed and noisy,
+    // some springs are compressed (the exact Hessian keeps their geometric part).
+    GridParams g = cloth(7, {{40, 41}});
+    g.dimension = dimension;
+    const Grid grid(g);
+    Eigen::VectorXd x = grid.initialPositions();
+    grid.addFree(deformation(grid, 0.9, 0.3), x);
+    const SparseMatrix k = tangentStiffness(grid, x);
+    SpringTangent springs(grid);
+    springs.update(x);
+    std::srand(5);
+    const Eigen::VectorXd p = Eigen::VectorXd::Random(k.rows());
+    Eigen::VectorXd kp = Eigen::VectorXd::Ones(k.rows());
+    springs.multiplyAdd(p, 2.0, kp);
+    const Eigen::VectorXd expected = Eigen::VectorXd::Ones(k.rows()) + 2.0 * (k * p);
+    EXPECT_LT((kp - expected).norm(), 1e-12 * expected.norm()) << dimension << "D";
+
+    Eigen::VectorXd blocks = Eigen::VectorXd::Zero(k.rows() * dimension);
+    springs.addDiagonalBlocks(0.5, blocks);
+    const Eigen::MatrixXd dense(k);
+    double largest_error = 0.0;
+    for (int particle = 0; particle < k.rows() / dimension; ++particle)
+      for (int c = 0; c < dimension; ++c)
+        for (int r = 0; r < dimension; ++r)
+          largest_error = std::max(largest_error, std::abs(blocks[(particle * dimension + c) * dimension + r] -
+                                                           0.5 * dense(particle * dimension + r, particle * dimension + c)));
+    EXPECT_LT(largest_error, 1e-12 * dense.cwiseAbs().maxCoeff()) << dimension << "D";
+  }
+}
+
+// A swinging cloth: the sheet turned 60 degrees out of the vertical about its fixed top row, released
+// from rest.
+GridParams swinging(int n)
+{
+  GridParams g = cloth(n);
+  g.rotation_deg = 60.0;
+  return g;
+}
+
+TEST(TangentSolver, ParticleBlocksNeedFewerIterationsThanTheDiagonalForTheSameSteps)
+{
+  const Grid grid(swinging(12));
+  const Eigen::VectorXd q0 = Eigen::VectorXd::Zero(grid.numFreeDofs());
+  long jacobi = 0, blocks = 0;
+  const Eigen::VectorXd reference =
+      stepWith(TangentSolverKind::JacobiCg, grid, q0, 0.005, 40, nullptr, NewtonStart::ConstantVelocity, nullptr, &jacobi);
+  const Eigen::VectorXd q =
+      stepWith(TangentSolverKind::BlockJacobiCg, grid, q0, 0.005, 40, nullptr, NewtonStart::ConstantVelocity, nullptr, &blocks);
+  ASSERT_GT((reference - q0).norm(), 1e-2);
+  EXPECT_LT((q - reference).norm(), 1e-6 * (reference - q0).norm());
+  EXPECT_LT(blocks, jacobi);
+}
+
+TEST(ImplicitNewmark, StartingFromTheConstantAccelerationConvergesToTheSameStepsInNoMoreIterations)
+{
+  const Grid grid(swinging(12));
+  const Eigen::VectorXd q0 = Eigen::VectorXd::Zero(grid.numFreeDofs());
+  for (TangentSolverKind kind : {TangentSolverKind::SimplicialLdlt, TangentSolverKind::BlockJacobiCg})
+  {
+    long constant_velocity = 0, constant_acceleration = 0;
+    const Eigen::VectorXd reference =
+        stepWith(kind, grid, q0, 0.005, 40, nullptr, NewtonStart::ConstantVelocity, &constant_velocity);
+    const Eigen::VectorXd q =
+        stepWith(kind, grid, q0, 0.005, 40, nullptr, NewtonStart::ConstantAcceleration, &constant_acceleration);
+    ASSERT_GT((reference - q0).norm(), 1e-2) << name(kind);
+    EXPECT_LT((q - reference).norm(), 1e-6 * (reference - q0).norm()) << name(kind);
+    EXPECT_LE(constant_acceleration, constant_velocity) << name(kind);
   }
 }
 
