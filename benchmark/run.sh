@@ -4,7 +4,7 @@
 # The basis against scipy's eigsh: /usr/bin/python3 benchmark/basis_vs_eigsh.py (needs the tests built,
 # `catkin_make tests`, for basis_timing; python3-scipy is installed here, it is no test dependency).
 set -euo pipefail
-source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
+source "$(dirname "${BASH_SOURCE[0]}")/../scripts/env.sh"
 if ! dpkg-query -W -f='${Status}' python3-scipy 2>/dev/null | grep -q "install ok installed"; then
   export DEBIAN_FRONTEND=noninteractive
   ${SUDO:-} apt-get update -q

@@ -3,10 +3,10 @@
 # config/compare/large_motion*.yaml and the released sheets, every method against a converged `full`,
 # on the modal basis, with modal derivatives and (when the core has it) on the skinning subspace; and
 # the step times on the 100 x 100 held cloth. Writes docs/data/large_motion/ and docs/*large_motion*.png.
-# Uses the modal_compare already built in $MODAL_WS. Usage: scripts/large_motion.sh [part ...], parts
+# Uses the modal_compare already built in $MODAL_WS. Usage: benchmark/large_motion.sh [part ...], parts
 # held, grips, release, swing, large (default: all); extra modal_compare options in LARGE_MOTION_ARGS.
 set -euo pipefail
-source "$(dirname "${BASH_SOURCE[0]}")/env.sh"
+source "$(dirname "${BASH_SOURCE[0]}")/../scripts/env.sh"
 
 tool="$WS_DIR/devel/lib/modal_mass_spring/modal_compare"
 out="$REPO_DIR/docs/data/large_motion"
