@@ -66,6 +66,12 @@ public:
   }
   bool isLinear() const override { return inner_.isLinear(); }
   bool isSymmetric() const override { return !linear_ && inner_.isSymmetric(); }
+  int blockSize() const override { return inner_.blockSize(); }
+  // The load is constant: K is the inner model's, so are its springs' blocks; L has none.
+  const SpringTangent* springTangent(const Eigen::VectorXd& q) override
+  {
+    return linear_ ? nullptr : inner_.springTangent(q);
+  }
   // A force -L q linear in q (a turning frame's Euler and centrifugal forces), L kept by the caller;
   // null: none. It has no potential in energy(): the energy check is off while a frame moves.
   void setLinearTerm(const SparseMatrix* l) { linear_ = l; }

@@ -113,8 +113,11 @@ FullMethod::FullMethod(const LinearizedGrid& linearized, const IntegratorSetting
 
 MassDamping FullMethod::massDamping(double alpha, double beta) const
 {
-  // Rayleigh damping with the constant K of the linearization point.
-  return MassDamping{lin_.mass, alpha * diagonalMatrix(lin_.mass) + beta * lin_.stiffness};
+  // Rayleigh damping with the constant K of the linearization point. Without beta, K's pattern of
+  // zeros would go into every product with C and into the implicit inertia (its blocks, J p).
+  SparseMatrix damping = alpha * diagonalMatrix(lin_.mass) + beta * lin_.stiffness;
+  damping.prune(0.0);
+  return MassDamping{lin_.mass, damping};
 }
 
 double FullMethod::assign(const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder)
