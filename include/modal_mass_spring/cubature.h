@@ -4,6 +4,7 @@
 
 #include "modal_mass_spring/force_model.h"
 #include "modal_mass_spring/grid.h"
+#include "modal_mass_spring/handles.h"
 #include "modal_mass_spring/modal_basis.h"
 
 #include <Eigen/Core>
@@ -99,6 +100,16 @@ public:
   void tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k) override;
   double energy(const Eigen::VectorXd& modal) override;
 
+  // With handles: moves the reference with them in O(|T| x handle dofs), or O(|T|) for a motion that
+  // is one affine map of all handles (a turned clamp), where setReference is O(all springs) and its
+  // caller O(free dofs x handle dofs). `psi` (free dofs x handle dofs): the free dofs' part of a
+  // handle displacement dx_b, the handle dofs moving by dx_b itself; `fit`: the handles' affine maps.
+  // The exact force at X = 0 is then that of the last setReference's reference; how the handles' move
+  // since changes it is the cubature's own estimate, from its springs (the springs' rows of psi).
+  void setHandleMap(const Eigen::MatrixXd& psi, const AffineHandleFit& fit);
+  // The handles' displacement from where they were at the last setReference (setHandleMap first).
+  void moveHandles(const Eigen::VectorXd& dx_b);
+
 private:
   // Weighted sum over T of spring forces (returned in f) and energies at X.
   double weightedSprings(const Eigen::VectorXd& modal, Eigen::VectorXd* f);
@@ -120,6 +131,14 @@ private:
   Eigen::VectorXd rest_diff_;   // x_ref_j - x_ref_i per spring of T
   Eigen::VectorXd constant_;    // Phi^T f_g plus the correction that makes F exact at X = 0
   double energy_constant_ = 0.0;
+  // Handles: the springs' rows of [Psi; I] (x_j - x_i per unit dx_b), (|T| dim) x handle dofs, those
+  // times the fit's H, and f_g^T [Psi; I] (the gravity energy's change per dx_b); rest_diff_ and
+  // energy_constant_ at the last setReference.
+  Eigen::MatrixXd handle_rows_, handle_affine_rows_;
+  Eigen::VectorXd handle_gravity_;
+  AffineHandleFit fit_;
+  Eigen::VectorXd base_rest_diff_, affine_, non_affine_;
+  double base_energy_constant_ = 0.0;
   // Scratch, kept so that a step allocates nothing: spring vectors (and the X they are at), weighted
   // forces, the blocks (w_s K_s D_s)^T, D_s^T u and the reduced tangent.
   Eigen::VectorXd d_, d_modal_, fd_, d_rows_;

@@ -33,6 +33,23 @@ SparseMatrix handleCoupling(const Grid& grid, const Eigen::VectorXd& x);
 // rest has no out-of-plane stiffness).
 Eigen::MatrixXd constraintModes(const SparseMatrix& k_ii, const SparseMatrix& k_ib);
 
+// The handle dofs' motions that are one affine map of the handle particles, x -> A (x - c) + t about
+// their centroid c: H (handle dofs x dim (dim + 1)) and its least-squares inverse H^+. A linear map P
+// of handle motions (the constraint modes) then splits as P dx_b = (P H) (H^+ dx_b) + P (dx_b - H H^+
+// dx_b), and for a rigid or affine motion of all handles together (a turned clamp) the second term
+// is zero: precomputing P H makes P dx_b cost O(rows of P x dim (dim + 1)) instead of
+// O(rows x handle dofs).
+struct AffineHandleFit
+{
+  AffineHandleFit() = default;
+  // x: the positions the map is taken about (x_ref). Empty without handles.
+  AffineHandleFit(const Grid& grid, const Eigen::VectorXd& x);
+  Eigen::MatrixXd h, h_plus;
+  // The affine coordinates a = H^+ dx and the rest dx - H a; false when the rest is zero to
+  // round-off (below 1e-12 of |dx|), so that P (dx - H a) may be left out.
+  bool split(const Eigen::VectorXd& dx, Eigen::VectorXd& a, Eigen::VectorXd& rest) const;
+};
+
 // A rigid handle: particles at fixed offsets in a moving frame. The frame moves from pose 0 to pose 1
 // over a duration T, translation linearly and rotation by slerp (constant angular velocity); the
 // particles' positions, velocities and accelerations at the fraction s in [0, 1] of that interval.

@@ -275,6 +275,15 @@ private:
   const Eigen::VectorXd& psiV() const;
   mutable Eigen::VectorXd psi_dx_, psi_v_;  // empty without handles
   mutable bool psi_dx_stale_ = false, psi_v_stale_ = false;
+  // Psi applied to a handle motion through its affine part (AffineHandleFit): Psi H (interior x
+  // dim (dim + 1)) makes Psi dx_b O(interior) when the handles move as one rigid or affine body.
+  void applyPsi(const Eigen::VectorXd& dx, Eigen::VectorXd& out) const;
+  AffineHandleFit handle_fit_;
+  Eigen::MatrixXd psi_affine_;
+  // `cubature` moves its reference with the handles itself, through its springs' rows of Psi only
+  // (CubatureForceModel::moveHandles): the step then touches no full-size vector. Null otherwise.
+  CubatureForceModel* cubature_force_ = nullptr;
+  Eigen::VectorXd reference_handles_;  // dx_b at the force model's last setReference
   Eigen::MatrixXd interface_mass_;  // Phi^T M Psi (r x handle dofs)
   // Phi^T (K_ii Psi + K_ib): the stiffness-proportional damping of the handles' velocity; empty when
   // Psi is static (zero).

@@ -424,6 +424,53 @@ void CubatureForceModel::setReference(const Eigen::VectorXd& x_ref)
   const double cubature_energy = weightedSprings(zero, &at_zero);
   constant_ = basis_.phi.transpose() * grid_.gatherFree(f_all) - at_zero;
   energy_constant_ = spring_energy + gravityEnergy(grid_, x_ref) - cubature_energy;
+  base_rest_diff_ = rest_diff_;
+  base_energy_constant_ = energy_constant_;
+  cache_.clear();
+}
+
+void CubatureForceModel::setHandleMap(const Eigen::MatrixXd& psi, const AffineHandleFit& fit)
+{
+  const std::vector<int>& handle_dofs = grid_.handleDofs();
+  const Eigen::Index nb = static_cast<Eigen::Index>(handle_dofs.size());
+  std::vector<Eigen::Index> handle_index(static_cast<size_t>(grid_.numDofs()), -1);
+  for (Eigen::Index k = 0; k < nb; ++k)
+    handle_index[static_cast<size_t>(handle_dofs[static_cast<size_t>(k)])] = k;
+  // Dof `dof`'s row of [Psi; I] added `sign` times to `row`; fixed dofs do not move.
+  auto add = [&](int dof, double sign, Eigen::Index row) {
+    const int free = grid_.freeIndex(dof);
+    if (free >= 0)
+      handle_rows_.row(row) += sign * psi.row(free);
+    else if (handle_index[static_cast<size_t>(dof)] >= 0)
+      handle_rows_(row, handle_index[static_cast<size_t>(dof)]) += sign;
+  };
+  handle_rows_.setZero(diff_.rows(), nb);
+  for (size_t t = 0; t < springs_.size(); ++t)
+    for (int a = 0; a < dim_; ++a)
+    {
+      const Eigen::Index row = static_cast<Eigen::Index>(t) * dim_ + a;
+      add(dim_ * springs_[t].j + a, 1.0, row);
+      add(dim_ * springs_[t].i + a, -1.0, row);
+    }
+  fit_ = fit;
+  handle_affine_rows_ = handle_rows_ * fit.h;
+  const Eigen::VectorXd& g = grid_.gravityForce();
+  handle_gravity_ = psi.transpose() * grid_.gatherFree(g);
+  for (Eigen::Index k = 0; k < nb; ++k)
+    handle_gravity_[k] += g[handle_dofs[static_cast<size_t>(k)]];
+}
+
+void CubatureForceModel::moveHandles(const Eigen::VectorXd& dx_b)
+{
+  rest_diff_ = base_rest_diff_;
+  if (fit_.split(dx_b, affine_, non_affine_))
+    rest_diff_.noalias() += handle_rows_ * dx_b;
+  else
+    rest_diff_.noalias() += handle_affine_rows_ * affine_;
+  // The spring part of the correction at X = 0 stays the last setReference's; gravity's is exact.
+  energy_constant_ = base_energy_constant_ - handle_gravity_.dot(dx_b);
+  d_modal_.resize(0);
+  f_modal_.resize(0);
   cache_.clear();
 }
 

@@ -1,6 +1,7 @@
 // Handle coupling, constraint modes and the rigid motion of a handle between two frame poses.
 #include "modal_mass_spring/handles.h"
 
+#include <Eigen/QR>
 #include <Eigen/SparseCholesky>
 
 #include <stdexcept>
@@ -164,6 +165,40 @@ FrameForces frameForces(const FrameMotion& motion, int dimension, const Eigen::V
   f.spin = spin(rows, rows);
   f.none = motion.atRest();
   return f;
+}
+
+AffineHandleFit::AffineHandleFit(const Grid& grid, const Eigen::VectorXd& x)
+{
+  const int dim = grid.dimension();
+  const std::vector<int>& dofs = grid.handleDofs();
+  if (dofs.empty())
+    return;
+  Eigen::VectorXd centre = Eigen::VectorXd::Zero(dim);
+  for (int dof : dofs)
+    centre[dof % dim] += x[dof];
+  centre *= static_cast<double>(dim) / static_cast<double>(dofs.size());
+  // Row (i, a): dof a of handle particle i moved by A (x_i - centre) + t, columns A(a, 0..dim-1), t(a).
+  h = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(dofs.size()), dim * (dim + 1));
+  for (size_t k = 0; k < dofs.size(); ++k)
+  {
+    const int a = dofs[k] % dim, particle = dofs[k] / dim;
+    const Eigen::Index row = static_cast<Eigen::Index>(k);
+    for (int c = 0; c < dim; ++c)
+      h(row, a * (dim + 1) + c) = x[dim * particle + c] - centre[c];
+    h(row, a * (dim + 1) + dim) = 1.0;
+  }
+  Eigen::CompleteOrthogonalDecomposition<Eigen::MatrixXd> fit;
+  fit.setThreshold(1e-9);  // handles in a plane or on a line fix the map only there
+  fit.compute(h);
+  h_plus = fit.pseudoInverse();
+}
+
+bool AffineHandleFit::split(const Eigen::VectorXd& dx, Eigen::VectorXd& a, Eigen::VectorXd& rest) const
+{
+  a.noalias() = h_plus * dx;
+  rest = dx;
+  rest.noalias() -= h * a;
+  return rest.norm() > 1e-12 * dx.norm();
 }
 
 }  // namespace modal_mass_spring

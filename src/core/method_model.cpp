@@ -215,6 +215,17 @@ ModalMethod::ModalMethod(Method method, const LinearizedGrid& linearized, const 
           lin_.basis.phi.transpose() * (lin_.stiffness * *lin_.constraint_modes + Eigen::MatrixXd(*lin_.handle_coupling));
     const Eigen::VectorXd rest = Eigen::VectorXd::Zero(lin_.constraint_modes->cols());
     handle_motion_ = HandleMotion{rest, rest, rest};
+    reference_handles_ = rest;
+    if (lin_.constraint_modes->cols() > 0)
+    {
+      handle_fit_ = AffineHandleFit(lin_.grid, lin_.x_ref);
+      psi_affine_ = *lin_.constraint_modes * handle_fit_.h;
+      if (method == Method::Cubature)
+      {
+        cubature_force_ = static_cast<CubatureForceModel*>(modal_force_);
+        cubature_force_->setHandleMap(*lin_.constraint_modes, handle_fit_);
+      }
+    }
   }
   configure(settings);
   setOffset(Eigen::VectorXd::Zero(lin_.grid.numFreeDofs()));
@@ -320,6 +331,7 @@ void ModalMethod::updateReference()
     for (size_t k = 0; k < dofs.size(); ++k)
       reference[dofs[k]] += handle_motion_.displacement[static_cast<Eigen::Index>(k)];
     lin_.grid.addFree(offset_ + psiDx(), reference);
+    reference_handles_ = handle_motion_.displacement;
   }
   else
   {
@@ -344,7 +356,9 @@ void ModalMethod::setHandleMotion(const HandleMotion& motion)
   handle_motion_.acceleration = orZero(motion.acceleration);
   psi_dx_stale_ = psi_v_stale_ = true;
   // `linear`'s force, linearized at x_ref, is unchanged by the interface: K_ii Psi + K_ib = 0.
-  if (method() != Method::Linear)
+  if (cubature_force_)
+    cubature_force_->moveHandles(handle_motion_.displacement - reference_handles_);
+  else if (method() != Method::Linear)
     updateReference();
   // The interior's acceleration Psi a_b and the mass-proportional damping of its velocity Psi v_b
   // (the stiffness-proportional part cancels with the coupling: beta (K_ii Psi + K_ib) v_b = 0).
@@ -417,10 +431,19 @@ double ModalMethod::velocityAt(const State& s, int k) const
   return handles + lin_.basis.phi.row(k).dot(s.v);
 }
 
+void ModalMethod::applyPsi(const Eigen::VectorXd& dx, Eigen::VectorXd& out) const
+{
+  Eigen::VectorXd affine, rest;
+  if (psi_affine_.size() > 0 && !handle_fit_.split(dx, affine, rest))
+    out.noalias() = psi_affine_ * affine;  // Psi dx = Psi H H^+ dx: dx is affine to round-off
+  else
+    out.noalias() = *lin_.constraint_modes * dx;
+}
+
 const Eigen::VectorXd& ModalMethod::psiDx() const
 {
   if (psi_dx_stale_ || psi_dx_.size() == 0)
-    psi_dx_ = *lin_.constraint_modes * handle_motion_.displacement;
+    applyPsi(handle_motion_.displacement, psi_dx_);
   psi_dx_stale_ = false;
   return psi_dx_;
 }
@@ -428,7 +451,7 @@ const Eigen::VectorXd& ModalMethod::psiDx() const
 const Eigen::VectorXd& ModalMethod::psiV() const
 {
   if (psi_v_stale_ || psi_v_.size() == 0)
-    psi_v_ = *lin_.constraint_modes * handle_motion_.velocity;
+    applyPsi(handle_motion_.velocity, psi_v_);
   psi_v_stale_ = false;
   return psi_v_;
 }

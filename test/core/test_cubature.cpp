@@ -561,3 +561,97 @@ TEST(Cubature, BadParametersAreNamed)
   bending.bending = true;
   EXPECT_EQ(countSprings(bending), static_cast<long long>(Grid(bending).springs().size()));
 }
+
+TEST(Cubature, EverySpringAtWeightOneFollowsPhysicalWhileHandlesMove)
+{
+  // With handles the cubature moves its reference through its springs' rows of Psi only
+  // (CubatureForceModel::moveHandles), never the whole grid: with every spring at weight 1 that is
+  // still exact, so it steps as `physical`, which moves the whole reference by Psi dx_b. Two corner
+  // grips of a hanging 3D cloth on the skinning span: turned together (one affine map, Psi H) and
+  // then one of them shaken alone (not affine, all of Psi).
+  const int n = 8;
+  GridParams g;
+  g.rows = g.cols = n;
+  g.spacing = 0.05;
+  g.dimension = 3;
+  g.mass = 0.005;
+  g.structural_stiffness = 50.0;
+  g.shear_stiffness = 20.0;
+  g.bending = true;
+  g.bending_stiffness = 5.0;
+  g.fixed = {};
+  g.handles = {{0, 1, n, n + 1}, {n - 2, n - 1, 2 * n - 2, 2 * n - 1}};
+  SimulationParams s;
+  s.method = Method::Physical;
+  s.num_modes = 6;
+  s.basis = BasisKind::Skinning;
+  s.num_skinning_weights = 4;
+  s.linearization = Linearization::Equilibrium;
+  s.initial_state = InitialState::Equilibrium;
+  s.alpha = 0.5;
+  s.time_step = 0.002;
+  Simulation sim(g, s);
+  const Grid& grid = sim.grid();
+  const Eigen::VectorXd& x_ref = sim.linearizationPositions();
+  const Cubature all = everySpringAtWeightOne(grid);
+  const SparseMatrix stiffness = tangentStiffness(grid, x_ref);
+  const Eigen::VectorXd mass = Eigen::VectorXd::Constant(grid.numFreeDofs(), grid.particleMass());
+  ASSERT_GT(sim.skinningConstraintModes().cols(), 0);
+  LinearizedGrid lin{grid, sim.physicalBasis(), x_ref, stiffness, mass, &all};
+  lin.handle_coupling = &sim.handleCoupling();
+  lin.constraint_modes = &sim.skinningConstraintModes();
+  lin.static_constraint_modes = false;
+  const std::vector<int>& dofs = grid.handleDofs();
+  const Eigen::Index nb = static_cast<Eigen::Index>(dofs.size());
+  Eigen::VectorXd x_b(nb);
+  for (Eigen::Index k = 0; k < nb; ++k)
+    x_b[k] = x_ref[dofs[static_cast<size_t>(k)]];
+  const Eigen::Vector3d centre(0.5 * (n - 1) * g.spacing, 0.0, 0.0);
+  // dx_b at time t: a turn about the vertical through `centre` up to 1 rad over the first 400 steps,
+  // then the second grip shaken along x by up to 1 cm.
+  auto handleDisplacement = [&](double t) {
+    const double theta = std::min(1.0, t / 0.8);
+    const Eigen::Matrix3d r = Eigen::AngleAxisd(theta, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    Eigen::VectorXd dx(nb);
+    for (Eigen::Index p = 0; p < nb; p += 3)
+      dx.segment<3>(p) = (r - Eigen::Matrix3d::Identity()) * (x_b.segment<3>(p) - centre);
+    if (t > 0.8)
+      for (Eigen::Index p = nb / 2; p < nb; p += 3)
+        dx[p] += 0.01 * std::sin(20.0 * (t - 0.8));
+    return dx;
+  };
+  for (IntegratorKind kind : {IntegratorKind::Explicit, IntegratorKind::Implicit})
+  {
+    IntegratorSettings settings;
+    settings.kind = kind;
+    settings.time_step = s.time_step;
+    settings.alpha = s.alpha;
+    auto physical = makeMethod(Method::Physical, lin, settings);
+    auto cubature = makeMethod(Method::Cubature, lin, settings);
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(grid.numFreeDofs());
+    physical->assign(zero, zero, Remainder::Drop);
+    cubature->assign(zero, zero, Remainder::Drop);
+    double gap = 0.0, moved = 0.0, energy_gap = 0.0, energy_scale = 0.0;
+    for (int k = 1; k <= 600; ++k)
+    {
+      const double t = k * s.time_step, h = 1e-6;
+      const Eigen::VectorXd dx = handleDisplacement(t);
+      const HandleMotion motion{dx, (handleDisplacement(t + h) - handleDisplacement(t - h)) / (2 * h),
+                                (handleDisplacement(t + h) - 2 * dx + handleDisplacement(t - h)) / (h * h)};
+      physical->setHandleMotion(motion);
+      cubature->setHandleMotion(motion);
+      ASSERT_TRUE(physical->step()) << k;
+      ASSERT_TRUE(cubature->step()) << k;
+      physical->commit();
+      cubature->commit();
+      const Eigen::VectorXd u = physical->displacement(physical->state());
+      gap = std::max(gap, (u - cubature->displacement(cubature->state())).cwiseAbs().maxCoeff());
+      moved = std::max(moved, u.cwiseAbs().maxCoeff());
+      energy_gap = std::max(energy_gap, std::abs(physical->energy(physical->state()) - cubature->energy(cubature->state())));
+      energy_scale = std::max(energy_scale, std::abs(physical->energy(physical->state())));
+    }
+    EXPECT_GT(moved, 0.05) << toString(kind);  // the turn moved the cloth
+    EXPECT_LT(gap, 1e-9) << toString(kind);
+    EXPECT_LT(energy_gap, 1e-9 * energy_scale) << toString(kind);
+  }
+}

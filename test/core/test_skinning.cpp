@@ -351,7 +351,7 @@ TEST(Skinning, CubatureFollowsPhysicalOnATurnedClamp)
   // A 10 x 10 cloth held by a clamp of its top two rows, turned 90 degrees about the vertical in 1 s
   // and held 0.5 s: the cubature, trained about the unturned cloth, stands in for `physical` on the
   // same span. The turned clamp turns the reference with it (the handles' part of the span), so the
-  // cubature sees only the deformation (6.6 mm from `physical`, which moved the cloth 0.2 m RMS);
+  // cubature sees only the deformation (5.8 mm from `physical`, which moved the cloth 0.2 m RMS);
   // with the least-squares interior alone it had to fit the turn itself and ended 69 mm off.
   const int n = 10;
   const GridParams g = heldCloth({topRows(n, 2)}, n);
