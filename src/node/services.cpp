@@ -89,8 +89,8 @@ bool SimulationNode::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Respo
   owed_steps_ = 0.0;
   ++state_changes_;
   response.success = true;
-  response.message = "reset to the initial state at rest (method " +
-                     (lockstep() ? std::string("s in lockstep") : toString(primary().simulation->method())) +
+  response.message = "reset to the initial state at rest (" +
+                     (lockstep() ? std::string("methods in lockstep") : "method " + toString(primary().simulation->method())) +
                      (paused_ ? ", still paused)" : ")");
   response.message += forcesActingNote();
   ROS_INFO("%s", response.message.c_str());

@@ -570,8 +570,9 @@ void SimulationNode::onTick()
       status_warns = state(first) == Status::DIVERGED;
       char line[320];
       std::snprintf(line, sizeof line,
-                    "%s: method %s, step %ld, simulated %.3f s, energy %.6g J, %.3f ms of stepping per tick%s",
-                    stateName(first).c_str(), lockstep() ? "s in lockstep" : toString(first.simulation->method()).c_str(),
+                    "%s: %s, step %ld, simulated %.3f s, energy %.6g J, %.3f ms of stepping per tick%s",
+                    stateName(first).c_str(),
+                    lockstep() ? "methods in lockstep" : ("method " + toString(first.simulation->method())).c_str(),
                     steps(first), simTime(first), first.last_energy,
                     1e3 * tick_step_seconds_,
                     lockstep() ? (", real-time factor " + std::to_string(achieved_factor_)).c_str() : "");
