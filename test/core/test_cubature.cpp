@@ -570,17 +570,7 @@ TEST(Cubature, EverySpringAtWeightOneFollowsPhysicalWhileHandlesMove)
   // grips of a hanging 3D cloth on the skinning span: turned together (one affine map, Psi H) and
   // then one of them shaken alone (not affine, all of Psi).
   const int n = 8;
-  GridParams g;
-  g.rows = g.cols = n;
-  g.spacing = 0.05;
-  g.dimension = 3;
-  g.mass = 0.005;
-  g.structural_stiffness = 50.0;
-  g.shear_stiffness = 20.0;
-  g.bending = true;
-  g.bending_stiffness = 5.0;
-  g.fixed = {};
-  g.handles = {{0, 1, n, n + 1}, {n - 2, n - 1, 2 * n - 2, 2 * n - 1}};
+  const GridParams g = heldCloth({{0, 1, n, n + 1}, {n - 2, n - 1, 2 * n - 2, 2 * n - 1}}, n);
   SimulationParams s;
   s.method = Method::Physical;
   s.num_modes = 6;

@@ -26,23 +26,6 @@ namespace
 
 constexpr double kPi = 3.14159265358979323846;
 
-// The cloth of config/compare/held_cloth.yaml: 20 x 20, 3D, bending springs, nothing fixed, hanging
-// at rest from its handles.
-GridParams heldCloth(std::vector<std::vector<int>> handles, int n = 20)
-{
-  GridParams g;
-  g.rows = g.cols = n;
-  g.spacing = 0.05;
-  g.dimension = 3;
-  g.mass = 0.005;
-  g.structural_stiffness = 50.0;
-  g.shear_stiffness = 20.0;
-  g.bending = true;
-  g.bending_stiffness = 5.0;
-  g.fixed = {};
-  g.handles = std::move(handles);
-  return g;
-}
 
 SimulationParams heldParams(Method method, BasisKind basis, int weights)
 {

@@ -9,6 +9,8 @@
 #include <functional>
 #include <stdexcept>
 #include <string>
+#include <utility>
+#include <vector>
 
 // The message of the std::invalid_argument that `build` throws, or "" when it throws none.
 inline std::string refusal(const std::function<void()>& build)
@@ -33,6 +35,24 @@ inline modal_mass_spring::GridParams paper3D()
   g.rows = g.cols = 10;
   g.dimension = 3;
   g.rotation_deg = 45.0;
+  return g;
+}
+
+// The cloth of config/compare/held_cloth.yaml: n x n (20), 3D, bending springs, nothing fixed, hanging
+// at rest from its handles.
+inline modal_mass_spring::GridParams heldCloth(std::vector<std::vector<int>> handles, int n = 20)
+{
+  modal_mass_spring::GridParams g;
+  g.rows = g.cols = n;
+  g.spacing = 0.05;
+  g.dimension = 3;
+  g.mass = 0.005;
+  g.structural_stiffness = 50.0;
+  g.shear_stiffness = 20.0;
+  g.bending = true;
+  g.bending_stiffness = 5.0;
+  g.fixed = {};
+  g.handles = std::move(handles);
   return g;
 }
 
