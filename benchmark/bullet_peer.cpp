@@ -1,5 +1,6 @@
-// Implicit `full` beside Bullet's deformable world on the same swinging cloth, in one run: the cost of
-// one step of this package's converged implicit Newmark against one step of a cloth solver users know.
+// The package's methods beside Bullet's deformable world on the same swinging cloth, in one run: the
+// cost of simulating it with `full` (implicit and explicit), `physical` and `cubature` against a cloth
+// solver users know, per step and per simulated second.
 //
 // The cloth is core_benchmark's BM_ImplicitFullSolver's (config/cloth_large.yaml's at n x n): 0.99 m
 // wide, 2 kg in all, structural/shear/bending springs of 200/80/20 N/m, top row fixed, released 60
@@ -19,13 +20,24 @@
 // - Bullet's Newton takes one iteration a step (its default, printed as read from its solver: it
 //   linearises backward Euler once, a step is not converged); the package's Newton converges to 1e-9
 //   of the forces.
-// The per-step times are medians over the steps; the two solvers run in alternating blocks of steps
-// so that both see the same load. A sample of both trajectories (the centre of mass's angle from the
-// vertical and its distance from the top row) shows that both swing alike.
+// Beside the implicit `full` row, the package steps the same cloth with explicit `full` at the largest
+// step it takes (--explicit-step; by default 1 ms up to 50 x 50, 0.5 ms up to 100 x 100, 0.25 ms up to
+// 200 x 200), and with `physical` and `cubature` on --modes modes at the hanging equilibrium
+// (config/cloth_large.yaml's set-up), implicit at 5 ms and explicit at --modal-explicit-step. Building
+// each Simulation (equilibrium, basis, cubature training) is timed once and printed as its start-up,
+// never in the step times; the modal rows share a precomputation cache (a fresh folder unless
+// --cache-dir), so the first computes the basis, the first `cubature` trains, the others load them.
+// The per-step times are medians over the steps, and every row also gives its time per simulated
+// second (the median step over the step size), which compares rows at different steps. All solvers run
+// in alternating blocks covering the same simulated time (--block 5 ms steps; an explicit row takes as
+// many of its steps) so that all see the same load. A sample of every trajectory (the centre of mass's
+// angle from the vertical and its distance from the top row) shows how each swings.
 //
-// Usage: bullet_peer [--sizes 50,100] [--steps 200] [--block 10] [--bullet-damping 0]
-//                    [--bullet-newton-iterations N] [--bullet-newton-tolerance T]
-//                    [--bullet-krylov-tolerance T] [--semi-implicit]
+// Usage: bullet_peer [--sizes 50,100] [--steps 200] [--block 10] [--explicit-step MS]
+//                    [--modal-explicit-step 1] [--modes 30] [--cache-dir DIR | --no-cache]
+//                    [--bullet-damping 0] [--bullet-newton-iterations N]
+//                    [--bullet-newton-tolerance T] [--bullet-krylov-tolerance T] [--semi-implicit]
+// (--modes 0: no modal rows; --modal-explicit-step 0: no explicit modal rows.)
 // Built against Bullet's double-precision build (bullet_peer) and, where installed, its single-precision
 // one (bullet_peer_float, what pkg-config's `bullet` links): its Krylov tolerance is btScalar's epsilon.
 #include "modal_mass_spring/simulation.h"
@@ -46,6 +58,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
+#include <filesystem>
 #include <fstream>
 #include <iostream>
 #include <memory>
@@ -72,14 +85,20 @@ struct Options
   double bullet_newton_tolerance = -1.0;
   double bullet_krylov_tolerance = -1.0;  // -1: Bullet's default
   bool semi_implicit = false;
+  double explicit_step = -1.0;       // s, full explicit; -1: defaultExplicitStep(n)
+  double modal_explicit_step = 1e-3; // s, physical and cubature explicit; 0: no such rows
+  int modes = 30;                    // physical and cubature's; 0: no modal rows
+  std::string cache_dir;             // empty: a fresh folder, removed at the end
+  bool no_cache = false;
 };
 
 [[noreturn]] void refuse(const std::string& what)
 {
   std::cerr << "bullet_peer: " << what << "\n"
-            << "usage: bullet_peer [--sizes 50,100] [--steps 200] [--block 10] [--bullet-damping 0]\n"
-            << "                   [--bullet-newton-iterations N] [--bullet-newton-tolerance T]\n"
-            << "                   [--bullet-krylov-tolerance T] [--semi-implicit]\n";
+            << "usage: bullet_peer [--sizes 50,100] [--steps 200] [--block 10] [--explicit-step MS]\n"
+            << "                   [--modal-explicit-step 1] [--modes 30] [--cache-dir DIR | --no-cache]\n"
+            << "                   [--bullet-damping 0] [--bullet-newton-iterations N]\n"
+            << "                   [--bullet-newton-tolerance T] [--bullet-krylov-tolerance T] [--semi-implicit]\n";
   std::exit(2);
 }
 
@@ -115,15 +134,16 @@ Options parse(int argc, char** argv)
   for (int i = 1; i < argc; ++i)
   {
     const std::string flag = argv[i];
-    if (flag == "--semi-implicit")
+    if (flag == "--semi-implicit" || flag == "--no-cache")
     {
-      o.semi_implicit = true;
+      (flag == "--semi-implicit" ? o.semi_implicit : o.no_cache) = true;
       continue;
     }
     if (i + 1 >= argc)
       refuse(flag == "--sizes" || flag == "--steps" || flag == "--block" || flag == "--bullet-damping" ||
                      flag == "--bullet-newton-iterations" || flag == "--bullet-newton-tolerance" ||
-                     flag == "--bullet-krylov-tolerance"
+                     flag == "--bullet-krylov-tolerance" || flag == "--explicit-step" ||
+                     flag == "--modal-explicit-step" || flag == "--modes" || flag == "--cache-dir"
                  ? flag + ": needs a value"
                  : "unknown argument '" + flag + "'");
     const std::string value = argv[++i];
@@ -141,6 +161,27 @@ Options parse(int argc, char** argv)
       o.steps = whole(flag, value, 1, 100000);
     else if (flag == "--block")
       o.block = whole(flag, value, 1, 100000);
+    else if (flag == "--explicit-step" || flag == "--modal-explicit-step")
+    {
+      // ms; a whole number of them make the others' 5 ms step, so that all cover the same time.
+      const double ms = number(flag, value);
+      const double ratio = 1e3 * kTimeStep / ms;
+      if (flag == "--modal-explicit-step" && ms == 0.0)
+        o.modal_explicit_step = 0.0;
+      else if (ms <= 0.0 || ratio > 10000.0 || std::abs(ratio - std::round(ratio)) > 1e-9 * ratio)
+        refuse(flag + " '" + value + "': must be a step in ms that divides 5 ms (5, 2.5, 1, 0.5, 0.25, ...)" +
+               (flag == "--modal-explicit-step" ? ", or 0 for no such rows" : ""));
+      else
+        (flag == "--explicit-step" ? o.explicit_step : o.modal_explicit_step) = kTimeStep / std::round(ratio);
+    }
+    else if (flag == "--modes")
+      o.modes = whole(flag, value, 0, 500);
+    else if (flag == "--cache-dir")
+    {
+      if (value.empty())
+        refuse("--cache-dir '': must be a folder (or --no-cache)");
+      o.cache_dir = value;
+    }
     else if (flag == "--bullet-damping")
     {
       o.bullet_damping = number(flag, value);
@@ -164,6 +205,8 @@ Options parse(int argc, char** argv)
     else
       refuse("unknown argument '" + flag + "'");
   }
+  if (o.no_cache && !o.cache_dir.empty())
+    refuse("--cache-dir '" + o.cache_dir + "': must not be given with --no-cache");
   return o;
 }
 
@@ -417,52 +460,153 @@ struct Timing
   std::vector<double> cpu, wall;
 };
 
+// One of the package's rows: a method and integrator at its step, stepped through the Simulation API.
+struct PackageRow
+{
+  std::string label;
+  SimulationParams params;
+  int steps_per_peer_step = 1;  // its steps per 5 ms step of the others: the same simulated time
+  std::unique_ptr<Simulation> sim;
+  double startup_cpu = 0.0, startup_wall = 0.0;  // s: building the Simulation (precomputation included)
+  Timing time;
+  long newton = 0, substeps = 0;
+  bool failed = false;
+  std::vector<Swing> samples;
+};
+
+SimulationParams packageParams(Method method, IntegratorKind integrator, double dt, const Options& o)
+{
+  SimulationParams s;
+  s.method = method;
+  s.integrator = integrator;
+  s.time_step = dt;
+  s.alpha = kAlpha;
+  s.hht_alpha = -0.1;
+  if (method != Method::Full)
+  {
+    // config/cloth_large.yaml's modal set-up: the modes at the hanging equilibrium, cubature trained
+    // at its defaults (1% of the force on fresh poses).
+    s.num_modes = o.modes;
+    s.linearization = Linearization::Equilibrium;
+  }
+  return s;
+}
+
+// The full explicit step of the n x n cloth when --explicit-step is not given: the largest of 1,
+// 0.5, 0.25, 0.125 ms that stays stable on it (the highest frequency grows with n, the particle mass
+// falling as 1/n^2 with the same springs): on 50 x 50 and 100 x 100 the next divisor of 5 ms up
+// (2.5 ms, 1 ms) diverges within a dozen steps (docs/benchmarks.md).
+double defaultExplicitStep(int size)
+{
+  if (size <= 50)
+    return 1e-3;
+  if (size <= 100)
+    return 5e-4;
+  if (size <= 200)
+    return 2.5e-4;
+  return 1.25e-4;
+}
+
+std::string stepLabel(double dt)
+{
+  char text[32];
+  std::snprintf(text, sizeof text, "%g ms", 1e3 * dt);
+  return text;
+}
+
 void run(int size, const Options& o)
 {
   const GridParams g = swingingCloth(size);
-  SimulationParams s;
-  s.method = Method::Full;
-  s.integrator = IntegratorKind::Implicit;
-  s.time_step = kTimeStep;
-  s.alpha = kAlpha;
-  s.hht_alpha = -0.1;
-  Simulation package(g, s);
-  const Grid& grid = package.grid();
+  const double explicit_step = o.explicit_step > 0.0 ? o.explicit_step : defaultExplicitStep(size);
+  const int explicit_ratio = static_cast<int>(std::lround(kTimeStep / explicit_step));
+  if (std::abs(explicit_ratio * explicit_step - kTimeStep) > 1e-12)
+    refuse("--explicit-step: " + stepLabel(explicit_step) + " must divide the 5 ms step");
+
+  std::vector<PackageRow> rows;
+  auto add = [&](const std::string& name, Method method, IntegratorKind integrator, double dt) {
+    PackageRow row;
+    row.label = name + " " + toString(integrator) + " " + stepLabel(dt);
+    row.params = packageParams(method, integrator, dt, o);
+    row.steps_per_peer_step = static_cast<int>(std::lround(kTimeStep / dt));
+    rows.push_back(std::move(row));
+  };
+  add("full", Method::Full, IntegratorKind::Implicit, kTimeStep);
+  add("full", Method::Full, IntegratorKind::Explicit, explicit_step);
+  if (o.modes > 0)
+  {
+    // Built in this order, the cache computes the equilibrium and basis once (physical implicit),
+    // trains the cubature once (cubature implicit), and the later rows load both.
+    add("physical", Method::Physical, IntegratorKind::Implicit, kTimeStep);
+    add("cubature", Method::Cubature, IntegratorKind::Implicit, kTimeStep);
+    if (o.modal_explicit_step > 0.0)
+    {
+      add("physical", Method::Physical, IntegratorKind::Explicit, o.modal_explicit_step);
+      add("cubature", Method::Cubature, IntegratorKind::Explicit, o.modal_explicit_step);
+    }
+  }
+  CacheOptions cache;
+  cache.directory = o.cache_dir;
+  cache.warn = [](const std::string& warning) { std::fprintf(stderr, "bullet_peer: cache: %s\n", warning.c_str()); };
+  for (PackageRow& row : rows)
+  {
+    const double c0 = cpuSeconds(), w0 = wallSeconds();
+    row.sim = std::make_unique<Simulation>(g, row.params, StageFn{}, cache);
+    row.startup_cpu = cpuSeconds() - c0;
+    row.startup_wall = wallSeconds() - w0;
+  }
+  const Grid& grid = rows.front().sim->grid();
   BulletCloth bullet(grid, o);
   const double top_y = grid.initialPositions()[1], top_z = grid.initialPositions()[2];
 
   std::printf("\n== %d x %d: %d particles, %d springs (%d structural, %d shear, %d bending), %d free dofs; "
-              "%d steps of %g s\n",
+              "%d steps of %g s (%g s simulated) each, in blocks of %d alternating over all solvers\n",
               size, size, grid.numParticles(), static_cast<int>(grid.springs().size()), grid.numStructuralSprings(),
-              grid.numShearSprings(), grid.numBendingSprings(), grid.numFreeDofs(), o.steps, kTimeStep);
-  std::printf("package: full, implicit Newmark HHT alpha %g, Newton to 1e-9 of the forces (at most %d "
-              "iterations), alpha %g /s\n",
-              s.hht_alpha, s.newton_max_iterations, s.alpha);
+              grid.numShearSprings(), grid.numBendingSprings(), grid.numFreeDofs(), o.steps, kTimeStep,
+              o.steps * kTimeStep, o.block);
+  std::printf("package: alpha %g /s; implicit: Newmark HHT alpha %g, Newton to 1e-9 of the forces (at most %d "
+              "iterations); explicit: the paper's Newmark, one force evaluation a step; physical and cubature: "
+              "%d modes at the hanging equilibrium, started from the released cloth projected onto them\n",
+              kAlpha, -0.1, rows.front().params.newton_max_iterations, o.modes);
+  std::printf("start-up (building the Simulation: for the modal rows the equilibrium, basis and cubature, or "
+              "loading them from the cache under %s), not in the step times:\n",
+              o.cache_dir.empty() ? "(none)" : o.cache_dir.c_str());
+  for (const PackageRow& row : rows)
+  {
+    std::string what = row.params.method == Method::Full ? "" : "; " + describeCache(row.sim->cacheReport());
+    if (const Cubature* c = row.sim->cubature())
+      what += "; " + describeCubature(*c, static_cast<int>(grid.springs().size()), row.params.cubature_tolerance);
+    std::printf("  %-28s %.2f s CPU, %.2f s wall%s\n", row.label.c_str(), row.startup_cpu, row.startup_wall,
+                what.c_str());
+  }
 
-  Timing package_time, bullet_time;
-  long newton = 0, substeps = 0;
-  bool package_failed = false;
+  Timing bullet_time;
   const int sample_every = std::max(1, static_cast<int>(std::lround(0.1 / kTimeStep)));
-  std::vector<Swing> package_samples{swing(package.points(), top_y, top_z)};
+  for (PackageRow& row : rows)
+    row.samples.push_back(swing(row.sim->points(), top_y, top_z));
   std::vector<Swing> bullet_samples{swing(bullet.points(), top_y, top_z)};
   for (int done = 0; done < o.steps;)
   {
     const int count = std::min(o.block, o.steps - done);
-    for (int k = 0; k < count && !package_failed; ++k)
+    for (PackageRow& row : rows)
     {
-      const double c0 = cpuSeconds(), w0 = wallSeconds();
-      const StepResult result = package.step(1);
-      package_time.cpu.push_back(cpuSeconds() - c0);
-      package_time.wall.push_back(wallSeconds() - w0);
-      newton += package.lastNewtonIterations();
-      substeps += package.lastImplicitSubsteps();
-      if (result.diverged || result.steps_taken != 1)
+      const int ratio = row.steps_per_peer_step;
+      for (int k = 0; k < count * ratio && !row.failed; ++k)
       {
-        std::printf("package: step %d refused: %s\n", done + k + 1, result.message.c_str());
-        package_failed = true;
+        const double c0 = cpuSeconds(), w0 = wallSeconds();
+        const StepResult result = row.sim->step(1);
+        row.time.cpu.push_back(cpuSeconds() - c0);
+        row.time.wall.push_back(wallSeconds() - w0);
+        row.newton += row.sim->lastNewtonIterations();
+        row.substeps += row.sim->lastImplicitSubsteps();
+        if (result.diverged || result.steps_taken != 1)
+        {
+          std::printf("package %s: step %ld (t = %.4f s) refused: %s\n", row.label.c_str(),
+                      row.sim->stepCount() + 1, row.sim->time(), result.message.c_str());
+          row.failed = true;
+        }
+        if ((done * ratio + k + 1) % (sample_every * ratio) == 0)
+          row.samples.push_back(swing(row.sim->points(), top_y, top_z));
       }
-      if ((done + k + 1) % sample_every == 0)
-        package_samples.push_back(swing(package.points(), top_y, top_z));
     }
     for (int k = 0; k < count; ++k)
     {
@@ -486,29 +630,59 @@ void run(int size, const Options& o)
               g.structural_stiffness, g.bending_stiffness, o.bullet_damping,
               o.semi_implicit ? "by the soft body's drag alpha dt" : "alpha M, implicit (a force of this benchmark's)");
 
-  const double package_steps = static_cast<double>(package_time.cpu.size());
-  const double bullet_steps = static_cast<double>(bullet_time.cpu.size());
-  std::printf("\n| solver | CPU ms/step (median) | wall ms/step (median) | Newton iterations/step | "
-              "Krylov products/step |\n|---|---|---|---|---|\n");
-  std::printf("| package implicit full | %.2f | %.2f | %.2f (substeps %.2f) | (Jacobi CG, not counted here) |\n",
-              1e3 * median(package_time.cpu), 1e3 * median(package_time.wall), newton / package_steps,
-              substeps / package_steps);
+  // The time per simulated second: the median step's time times the steps a second takes, what
+  // compares solvers at different steps.
+  std::printf("\n| solver | step | CPU ms/step (median) | CPU ms per simulated s | wall ms/step (median) | "
+              "wall ms per simulated s | steps timed | Newton iterations/step | Krylov products/step |\n"
+              "|---|---|---|---|---|---|---|---|---|\n");
+  for (const PackageRow& row : rows)
+  {
+    const double dt = row.params.time_step;
+    const double timed = static_cast<double>(row.time.cpu.size());
+    char newton[64] = "-";
+    if (row.params.integrator == IntegratorKind::Implicit && timed > 0)
+      std::snprintf(newton, sizeof newton, "%.2f (substeps %.2f)", row.newton / timed, row.substeps / timed);
+    const double cpu = timed > 0 ? median(row.time.cpu) : std::nan("");
+    const double wall = timed > 0 ? median(row.time.wall) : std::nan("");
+    std::printf("| package %s%s | %s | %.3f | %.1f | %.3f | %.1f | %d | %s | - |\n", row.label.c_str(),
+                row.failed ? " (diverged)" : "", stepLabel(dt).c_str(), 1e3 * cpu, 1e3 * cpu / dt, 1e3 * wall,
+                1e3 * wall / dt, static_cast<int>(timed), newton);
+  }
   // Each Newton iteration evaluates the forces once more; the iterations a step are Bullet's setting
   // unless its tolerance stops them earlier (never with one).
-  std::printf("| Bullet deformable | %.2f | %.2f | at most %d (force evaluations %.2f) | %.1f |\n",
-              1e3 * median(bullet_time.cpu), 1e3 * median(bullet_time.wall), bullet.solver->newtonIterations(),
+  const double bullet_steps = static_cast<double>(bullet_time.cpu.size());
+  std::printf("| Bullet deformable | %s | %.3f | %.1f | %.3f | %.1f | %d | at most %d (force evaluations %.2f) | %.1f |\n",
+              stepLabel(kTimeStep).c_str(), 1e3 * median(bullet_time.cpu), 1e3 * median(bullet_time.cpu) / kTimeStep,
+              1e3 * median(bullet_time.wall), 1e3 * median(bullet_time.wall) / kTimeStep,
+              static_cast<int>(bullet_steps), bullet.solver->newtonIterations(),
               bullet.springs->force_evaluations / bullet_steps, bullet.springs->tangent_products / bullet_steps);
-  std::printf("CPU ratio Bullet / package: %.3f\n", median(bullet_time.cpu) / median(package_time.cpu));
+  std::printf("CPU per simulated second, Bullet / each package row:");
+  for (const PackageRow& row : rows)
+    std::printf(" %s %.3f;", row.label.c_str(),
+                (median(bullet_time.cpu) / kTimeStep) / (median(row.time.cpu) / row.params.time_step));
+  std::printf("\n");
 
-  std::printf("\nswing: the centre of mass's angle from the vertical (deg) and distance from the top row (m)\n"
-              "| t (s) | package angle | Bullet angle | package distance | Bullet distance |\n|---|---|---|---|---|\n");
-  for (std::size_t k = 0; k < std::max(package_samples.size(), bullet_samples.size()); ++k)
+  std::printf("\nswing: the centre of mass's angle from the vertical (deg) / distance from the top row (m)\n| t (s) |");
+  for (const PackageRow& row : rows)
+    std::printf(" %s |", row.label.c_str());
+  std::printf(" Bullet |\n|---|");
+  for (std::size_t r = 0; r <= rows.size(); ++r)
+    std::printf("---|");
+  std::printf("\n");
+  std::size_t samples = bullet_samples.size();
+  for (const PackageRow& row : rows)
+    samples = std::max(samples, row.samples.size());
+  const Swing none{std::nan(""), std::nan("")};
+  for (std::size_t k = 0; k < samples; ++k)
   {
-    const Swing none{std::nan(""), std::nan("")};
-    const Swing p = k < package_samples.size() ? package_samples[k] : none;
+    std::printf("| %.2f |", k * sample_every * kTimeStep);
+    for (const PackageRow& row : rows)
+    {
+      const Swing p = k < row.samples.size() ? row.samples[k] : none;
+      std::printf(" %.1f / %.4f |", p.angle_deg, p.distance);
+    }
     const Swing b = k < bullet_samples.size() ? bullet_samples[k] : none;
-    std::printf("| %.2f | %.1f | %.1f | %.4f | %.4f |\n", k * sample_every * kTimeStep, p.angle_deg, b.angle_deg,
-                p.distance, b.distance);
+    std::printf(" %.1f / %.4f |\n", b.angle_deg, b.distance);
   }
   if (!bullet.points().allFinite())
     std::printf("Bullet: the state is not finite (exploded)\n");
@@ -518,7 +692,20 @@ void run(int size, const Options& o)
 
 int main(int argc, char** argv)
 {
-  const Options o = parse(argc, argv);
+  Options o = parse(argc, argv);
+  // Without --cache-dir a fresh folder: the modal rows after the first load its basis and cubature
+  // instead of computing them again, and nothing outlives the run.
+  std::string temporary_cache;
+  if (o.cache_dir.empty() && !o.no_cache && o.modes > 0)
+  {
+    char pattern[] = "/tmp/bullet_peer_cache_XXXXXX";
+    if (!mkdtemp(pattern))
+    {
+      std::cerr << "bullet_peer: cannot create a cache folder under /tmp (give --cache-dir or --no-cache)\n";
+      return 1;
+    }
+    temporary_cache = o.cache_dir = pattern;
+  }
   std::setvbuf(stdout, nullptr, _IOLBF, 0);  // each table as it is measured, also into a file
   std::printf("bullet_peer: load average %s at the start\n", loadAverage().c_str());
   try
@@ -529,8 +716,12 @@ int main(int argc, char** argv)
   catch (const std::exception& e)
   {
     std::cerr << "bullet_peer: " << e.what() << "\n";
+    if (!temporary_cache.empty())
+      std::filesystem::remove_all(temporary_cache);
     return 1;
   }
+  if (!temporary_cache.empty())
+    std::filesystem::remove_all(temporary_cache);
   std::printf("\nload average %s at the end\n", loadAverage().c_str());
   return 0;
 }
