@@ -41,6 +41,7 @@
 // Built against Bullet's double-precision build (bullet_peer) and, where installed, its single-precision
 // one (bullet_peer_float, what pkg-config's `bullet` links): its Krylov tolerance is btScalar's epsilon.
 #include "modal_mass_spring/simulation.h"
+#include "swinging_cloth.h"
 
 #include <BulletCollision/BroadphaseCollision/btDbvtBroadphase.h>
 #include <BulletCollision/CollisionDispatch/btCollisionDispatcher.h>
@@ -208,21 +209,6 @@ Options parse(int argc, char** argv)
   if (o.no_cache && !o.cache_dir.empty())
     refuse("--cache-dir '" + o.cache_dir + "': must not be given with --no-cache");
   return o;
-}
-
-GridParams swingingCloth(int size)
-{
-  GridParams g;
-  g.rows = g.cols = size;
-  g.dimension = 3;
-  g.spacing = 0.99 / (size - 1);
-  g.mass = 2.0 / (size * size);
-  g.structural_stiffness = 200.0;
-  g.shear_stiffness = 80.0;
-  g.bending = true;
-  g.bending_stiffness = 20.0;
-  g.rotation_deg = 60.0;
-  return g;
 }
 
 // Bullet's mass-spring force, counting what its solver asks of it: the force evaluations (one per

@@ -6,6 +6,7 @@
 #include "modal_mass_spring/modal_derivatives.h"
 #include "modal_mass_spring/simulation.h"
 #include "modal_mass_spring/spring_forces.h"
+#include "swinging_cloth.h"
 
 #include <Eigen/Geometry>
 #include <benchmark/benchmark.h>
@@ -283,19 +284,6 @@ BENCHMARK(BM_ImplicitCubature)->ArgsProduct({kCubatureSizes, {30}})->Unit(benchm
 // row fixed, alpha = 0.5 /s, HHT alpha -0.1) at n x n particles, released 60 degrees out of the
 // vertical, 5 ms steps. Every solver steps the same cloth from the same start for the same number of
 // steps (fixed iterations), each converged to the default Newton tolerance.
-GridParams swingingCloth(int size)
-{
-  GridParams g = square(size, 3);
-  g.spacing = 0.99 / (size - 1);
-  g.mass = 2.0 / (size * size);
-  g.structural_stiffness = 200.0;
-  g.shear_stiffness = 80.0;
-  g.bending = true;
-  g.bending_stiffness = 20.0;
-  g.rotation_deg = 60.0;
-  return g;
-}
-
 MassDamping massDamping(const Grid& grid, double alpha)
 {
   const Eigen::VectorXd mass = Eigen::VectorXd::Constant(grid.numFreeDofs(), grid.particleMass());
