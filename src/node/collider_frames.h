@@ -32,7 +32,20 @@ public:
   // This tick's pose of each frame in the fixed frame; nothing: not usable (the collider keeps its
   // last pose, or stays inactive before its first), for the reason in `problems`. A frame's first
   // pose places its collider there for the whole tick (it appears; no sweep).
+  // A frame that jumps since the last tick, farther than kMaxJumpPerTick or turned more than
+  // kMaxTurnPerTick, is refused and its collider held where it was (a glitching frame: swept there
+  // over one tick's steps it would throw the cloth or pass through it, since contact is found at
+  // each step's end). A jump that stays (the next tick's pose within those limits of the refused
+  // one) is a new placement: the collider is put there at the tick's start without a sweep
+  // (placed(k)), as at a first pose, and follows the frame from there.
   void setTargets(const std::vector<std::optional<FramePose>>& poses, const std::vector<std::string>& problems);
+  static constexpr double kMaxJumpPerTick = 0.5;                  // m
+  static constexpr double kMaxTurnPerTick = 1.5707963267948966;   // rad (90 degrees), as a handle frame's
+  // Frame collider k was placed anew by the last setTargets (a jump that stayed): to be put at
+  // pose(k, 0) without a sweep (Simulation::placeCollider).
+  bool placed(size_t k) const { return colliders_[k].placed; }
+  // The refusals of the last setTargets, one line each (for a warning).
+  std::vector<std::string> refusals() const;
   // Frame collider k's pose in the grid's coordinates at the fraction s of the tick (translation
   // linear, rotation slerp); nothing before its frame's first pose.
   std::optional<Eigen::Isometry3d> pose(size_t k, double s) const;
@@ -47,8 +60,10 @@ private:
     int index = 0;
     std::string frame;
     bool found = false, missing = false;
+    bool refused = false, placed = false;  // this tick: a jump refused, a jump that stayed placed
     std::string problem;
     FramePose current, target;  // in the fixed frame
+    std::optional<FramePose> refused_pose;  // the last tick's refused jump
   };
   Eigen::Vector3d grid_offset_;
   std::vector<Entry> colliders_;

@@ -376,13 +376,22 @@ void SimulationNode::updateColliderTargets()
   for (std::string& problem : problems)
     problem = problem.substr(0, problem.find(" ("));
   collider_frames_->setTargets(poses, problems);
+  for (const std::string& refusal : collider_frames_->refusals())
+    ROS_WARN_THROTTLE(5.0, "%s", refusal.c_str());
   // A collider not placed yet on a track (its frame just found, or the track built anew by a rebuild
-  // while paused) appears now, where its frame is, even if no step follows.
+  // while paused) appears now, where its frame is, even if no step follows; so does one whose frame
+  // jumped and stayed there (placed anew, not swept through the cloth).
   for (size_t k = 0; k < collider_frames_->size(); ++k)
     if (const std::optional<Eigen::Isometry3d> pose = collider_frames_->pose(k, 0.0))
       for (Track& track : tracks_)
-        if (const Contact* contact = track.simulation->contact(); contact && !contact->active(collider_frames_->collider(k)))
-          track.simulation->setColliderPose(collider_frames_->collider(k), *pose);
+        if (const Contact* contact = track.simulation->contact())
+        {
+          const int i = collider_frames_->collider(k);
+          if (!contact->active(i))
+            track.simulation->setColliderPose(i, *pose);
+          else if (collider_frames_->placed(k))
+            track.simulation->placeCollider(i, *pose);
+        }
 }
 
 void SimulationNode::setColliderPoses(double s)

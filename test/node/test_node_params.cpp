@@ -628,6 +628,66 @@ TEST(ColliderFrames, CollidersFollowTheirFrames)
   EXPECT_NE(frames.status().find("stale (kept at its last pose)"), std::string::npos);
 }
 
+// A collider frame that jumps farther than kMaxJumpPerTick or turns more than kMaxTurnPerTick within
+// one tick (a glitch) is refused and held where it was, said in the status; one that comes back is
+// followed again; a jump that stays is placed there at the next tick, without a sweep through the
+// steps of the tick.
+TEST(ColliderFrames, AJumpingFrameIsHeldAndAJumpThatStaysIsPlacedAnew)
+{
+  Collider finger;
+  finger.type = ColliderType::Sphere;
+  finger.frame = "finger";
+  ColliderFrames frames({finger}, Eigen::Vector3d::Zero());
+  auto at = [](double x, double y, double z, double turn = 0.0) {
+    FramePose pose;
+    pose.translation = Eigen::Vector3d(x, y, z);
+    pose.rotation = Eigen::Quaterniond(Eigen::AngleAxisd(turn, Eigen::Vector3d::UnitZ()));
+    return pose;
+  };
+  auto translation = [&](double s) { return Eigen::Vector3d(frames.pose(0, s)->translation()); };
+  frames.setTargets({at(0.0, 0.0, 0.1)}, {""});
+  frames.finishTick(1.0);
+  frames.setTargets({at(0.0, 0.3, 0.1)}, {""});  // 0.3 m in a tick: followed
+  EXPECT_TRUE(translation(0.5).isApprox(Eigen::Vector3d(0.0, 0.15, 0.1)));
+  EXPECT_TRUE(frames.refusals().empty());
+  frames.finishTick(1.0);
+
+  frames.setTargets({at(3.0, 0.3, 0.1)}, {""});  // a glitch: 3 m in a tick
+  for (double s : {0.0, 0.5, 1.0})
+    EXPECT_TRUE(translation(s).isApprox(Eigen::Vector3d(0.0, 0.3, 0.1))) << s;
+  EXPECT_FALSE(frames.placed(0));
+  ASSERT_EQ(frames.refusals().size(), 1u);
+  EXPECT_NE(frames.refusals()[0].find("collider 0 frame 'finger' refused: it jumped 3 m"), std::string::npos)
+      << frames.refusals()[0];
+  EXPECT_NE(frames.status().find("refused: it jumped 3 m"), std::string::npos) << frames.status();
+  frames.finishTick(1.0);
+  frames.setTargets({at(0.0, 0.32, 0.1)}, {""});  // back: followed from where it was held
+  EXPECT_TRUE(frames.refusals().empty());
+  EXPECT_TRUE(frames.status().empty());
+  EXPECT_FALSE(frames.placed(0));
+  EXPECT_TRUE(translation(1.0).isApprox(Eigen::Vector3d(0.0, 0.32, 0.1)));
+  frames.finishTick(1.0);
+
+  frames.setTargets({at(0.0, 0.32, 0.1, 3.0)}, {""});  // turned 172 degrees in a tick: refused
+  ASSERT_EQ(frames.refusals().size(), 1u);
+  EXPECT_NE(frames.refusals()[0].find("turned 172 degrees"), std::string::npos) << frames.refusals()[0];
+  EXPECT_TRUE(frames.pose(0, 1.0)->linear().isApprox(Eigen::Matrix3d::Identity()));
+  frames.finishTick(1.0);
+
+  frames.setTargets({at(2.0, 0.0, 0.0)}, {""});  // a jump that stays (within the limits at the next tick)
+  EXPECT_EQ(frames.refusals().size(), 1u);
+  frames.finishTick(1.0);
+  frames.setTargets({at(2.0, 0.05, 0.0)}, {""});
+  EXPECT_TRUE(frames.refusals().empty());
+  EXPECT_TRUE(frames.placed(0));
+  for (double s : {0.0, 0.5, 1.0})
+    EXPECT_TRUE(translation(s).isApprox(Eigen::Vector3d(2.0, 0.05, 0.0))) << s;
+  frames.finishTick(1.0);
+  frames.setTargets({at(2.0, 0.1, 0.0)}, {""});
+  EXPECT_FALSE(frames.placed(0));
+  EXPECT_TRUE(translation(0.5).isApprox(Eigen::Vector3d(2.0, 0.075, 0.0)));
+}
+
 // Particles held by a frame follow its motion applied to their offsets at the first lookup; the
 // velocity is the derivative of the interpolated path; a missing frame holds them and says so.
 TEST(HandleFrames, ParticlesFollowTheirFrame)
