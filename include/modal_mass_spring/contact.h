@@ -111,6 +111,9 @@ public:
   // A collider with a `frame` is inactive (touches nothing) until its first pose, which places it
   // there without a motion over the step (it appears; nothing is swept from the identity pose).
   void setPose(int i, const Eigen::Isometry3d& pose);
+  // Puts collider i at `pose` for the next step without a motion over it (as a first pose does): a
+  // frame that jumped and stayed there is placed, not swept through the cloth. Activates it.
+  void place(int i, const Eigen::Isometry3d& pose);
   const Eigen::Isometry3d& pose(int i) const { return poses_[i]; }
   bool active(int i) const { return active_[i]; }
   // True once a collider moved since the last reset(): it can then do work on the grid.

@@ -219,6 +219,8 @@ private:
                   SparseMatrix& gyroscopic) override;
   Eigen::VectorXd anchor_;
   Eigen::VectorXd y_ref_;  // x_ref on the free dofs, once a frame moves
+  // The contact pass's absolute end and start positions, kept between steps (no allocation a step).
+  Eigen::VectorXd contact_x_, contact_start_;
 };
 
 // `linear`, `physical` and `cubature`: q = X, u = offset + Phi X with a mass-orthonormal Phi. With

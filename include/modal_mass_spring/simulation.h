@@ -236,6 +236,9 @@ public:
   // collider with a `frame` touches nothing until its first pose, which places it (Contact::setPose).
   // Throws std::invalid_argument for an index out of range or a non-finite pose.
   void setColliderPose(int i, const Eigen::Isometry3d& pose);
+  // Places collider i at `pose` without a motion over the next step (Contact::place): the node's
+  // answer to a collider frame that jumped and stayed. The same refusals as setColliderPose.
+  void placeCollider(int i, const Eigen::Isometry3d& pose);
   // The CPU time the last step's contact correction took (s, the process's; 0 without colliders).
   double lastContactSeconds() const { return contact_seconds_; }
   // The force the grid puts on each handle (N, grid coordinates), what holding it takes reversed:
@@ -279,6 +282,8 @@ public:
 
 private:
   IntegratorSettings integratorSettings() const;
+  // Throws what setColliderPose and placeCollider refuse.
+  void checkColliderPose(int i, const Eigen::Isometry3d& pose) const;
   // Replaces the method object, carrying (u, v) over; Keep: no particle moves (a switch).
   void install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder);
   // The equilibrium and the bases: from the cache when it holds them, else computed (and stored).

@@ -32,14 +32,15 @@ void requirePositive(const std::string& name, double value)
     rejectParameter(name, value, "must be a finite number > 0 (m)");
 }
 
-// The correction that Coulomb friction with the bound `limit` makes to a tangential quantity t:
-// cancel it where the bound covers it (stick), else shorten it by the bound (slip).
+// The correction that Coulomb friction with the bound `limit` (>= 0) makes to a tangential quantity
+// t: cancel it where the bound covers it (stick), else shorten it by the bound (slip). Compared
+// squared: a resting particle sticks, and needs no square root.
 Eigen::Vector3d coulomb(const Eigen::Vector3d& t, double limit)
 {
-  const double size = t.norm();
-  if (size <= limit)
+  const double squared = t.squaredNorm();
+  if (squared <= limit * limit)
     return -t;
-  return -limit / size * t;
+  return -limit / std::sqrt(squared) * t;
 }
 
 // Two unit vectors completing n to an orthonormal basis.
@@ -190,8 +191,9 @@ namespace
 
 // The shape's signed distance at p (the collider's frame) and, where it is below `limit`, its outward
 // unit normal there (that frame): the particles a pass rejects, and the depth checks, skip the
-// normal's divisions. unit_normal: the plane's normal, normalized.
-double localDistance(const Collider& c, const Eigen::Vector3d& unit_normal, const Eigen::Vector3d& p, double limit,
+// normal's divisions. unit_normal: the plane's normal, normalized. Inlined into the contact pass,
+// which calls it for every particle near a collider.
+inline double localDistance(const Collider& c, const Eigen::Vector3d& unit_normal, const Eigen::Vector3d& p, double limit,
                      Eigen::Vector3d& n)
 {
   n = Eigen::Vector3d::UnitZ();
@@ -223,8 +225,28 @@ double localDistance(const Collider& c, const Eigen::Vector3d& unit_normal, cons
     {
       const Eigen::Vector3d q = p - c.center;
       const Eigen::Vector3d excess = q.cwiseAbs() - c.half_extents;
+      int outside = 0, face = 0;
+      for (int k = 0; k < 3; ++k)
+        if (excess[k] > 0.0)
+        {
+          ++outside;
+          face = k;
+        }
+      if (outside == 1)
+      {
+        // Beyond one face only (a particle on a table top): the distance is that excess and the normal
+        // the face's, what the general case below gives (sqrt(e^2) = e in floating point), without
+        // its square root and divisions.
+        d = excess[face];
+        if (d < limit)
+        {
+          n = Eigen::Vector3d::Zero();
+          n[face] = q[face] < 0.0 ? -1.0 : 1.0;
+        }
+        break;
+      }
       const Eigen::Vector3d sign = q.unaryExpr([](double v) { return v < 0.0 ? -1.0 : 1.0; });
-      if (excess.maxCoeff() > 0.0)
+      if (outside > 1)
       {
         const Eigen::Vector3d out = excess.cwiseMax(0.0).cwiseProduct(sign);
         d = out.norm();
@@ -358,16 +380,20 @@ void Contact::setPose(int i, const Eigen::Isometry3d& pose)
 {
   if (!active_[i])
   {
-    // It appears where its frame is: no sweep from the identity. Appearing on the cloth pushes it out
-    // (work done on the grid), so it counts as a move.
-    poses_[i] = start_poses_[i] = pose;
-    active_[i] = true;
-    moved_ = true;
+    place(i, pose);  // it appears where its frame is: no sweep from the identity
     return;
   }
   if (!pose.isApprox(poses_[i], 0.0))
     moved_ = true;
   poses_[i] = pose;
+}
+
+void Contact::place(int i, const Eigen::Isometry3d& pose)
+{
+  // Appearing on the cloth pushes it out (work done on the grid), so it counts as a move.
+  poses_[i] = start_poses_[i] = pose;
+  active_[i] = true;
+  moved_ = true;
 }
 
 void Contact::commit() { start_poses_ = poses_; }
@@ -428,6 +454,8 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
     }
   const int count = static_cast<int>(placed.size());
   std::vector<int> touched(count);  // the colliders the current particle touches
+  // Per collider: the sum of the touching particles' m dv (its force is minus that over dt, once).
+  std::vector<Eigen::Vector3d> impulse(count, Eigen::Vector3d::Zero());
   auto add = [&](Eigen::VectorXd& target, int p, const Eigen::Vector3d& delta) {
     if (dim == 3)
       target.segment<3>(3 * p) += delta;
@@ -480,14 +508,15 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
       add(x, p, push * n + coulomb(slip - slip.dot(n) * n, mu * push));
       corrected = true;
       // Velocities: remove the approach, Coulomb on the tangential velocity relative to the surface.
-      const Eigen::Vector3d relative = point(v, p) - surface_step / dt;
+      const Eigen::Vector3d relative =
+          placed_k.still ? point(v, p) : Eigen::Vector3d(point(v, p) - surface_step / dt);
       const double approach = -relative.dot(n);
       if (approach <= 0.0)
         continue;
       const Eigen::Vector3d tangential = relative + approach * n;
       const Eigen::Vector3d dv = approach * n + coulomb(tangential, mu * approach);
       add(v, p, dv);
-      report_.force[c] -= mass[dim * p] * dv / dt;
+      impulse[k] += mass[dim * p] * dv;
     }
     // Its depth below each surface it touched, once all of them corrected it. A particle that one
     // collider alone touched and corrected, in 3D, ends at least the thickness out, so it cannot
@@ -507,6 +536,8 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
       report_.penetration_after = std::max(report_.penetration_after, -d);
     }
   }
+  for (int k = 0; k < count; ++k)
+    report_.force[index[k]] = -impulse[k] / dt;
 }
 
 void Contact::correctModal(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x, const Eigen::VectorXd& v,

@@ -16,9 +16,10 @@ void FullMethod::correctContacts(Contact& contact)
 {
   State& next = mutableNext();
   const Eigen::VectorXd& reference = freeReference();
-  Eigen::VectorXd x = reference + next.q;
-  contact.correctParticles(reference + state().q, x, next.v, lin_.mass, settings_.time_step);
-  next.q = x - reference;
+  contact_x_.noalias() = reference + next.q;
+  contact_start_.noalias() = reference + state().q;
+  contact.correctParticles(contact_start_, contact_x_, next.v, lin_.mass, settings_.time_step);
+  next.q.noalias() = contact_x_ - reference;
 }
 
 void ModalMethod::correctContacts(Contact& contact)

@@ -719,7 +719,7 @@ double Simulation::totalEnergy(const Eigen::VectorXd& x) const
   return kineticEnergy() + springEnergy(grid_, x) + gravityEnergy(grid_, x);
 }
 
-void Simulation::setColliderPose(int i, const Eigen::Isometry3d& pose)
+void Simulation::checkColliderPose(int i, const Eigen::Isometry3d& pose) const
 {
   const int count = contact_ ? static_cast<int>(contact_->colliders().size()) : 0;
   if (i < 0 || i >= count)
@@ -727,7 +727,18 @@ void Simulation::setColliderPose(int i, const Eigen::Isometry3d& pose)
                                 std::to_string(count) + " colliders");
   if (!pose.matrix().allFinite())
     throw std::invalid_argument("the pose of collider " + std::to_string(i) + " is not finite");
+}
+
+void Simulation::setColliderPose(int i, const Eigen::Isometry3d& pose)
+{
+  checkColliderPose(i, pose);
   contact_->setPose(i, pose);
+}
+
+void Simulation::placeCollider(int i, const Eigen::Isometry3d& pose)
+{
+  checkColliderPose(i, pose);
+  contact_->place(i, pose);
 }
 
 std::vector<Eigen::Vector3d> Simulation::handleForces() const
