@@ -193,7 +193,7 @@ namespace
 // unit normal there (that frame): the particles a pass rejects, and the depth checks, skip the
 // normal's divisions. unit_normal: the plane's normal, normalized. Inlined into the contact pass,
 // which calls it for every particle near a collider.
-inline double localDistance(const Collider& c, const Eigen::Vector3d& unit_normal, const Eigen::Vector3d& p, double limit,
+[[gnu::always_inline]] inline double localDistance(const Collider& c, const Eigen::Vector3d& unit_normal, const Eigen::Vector3d& p, double limit,
                      Eigen::Vector3d& n)
 {
   n = Eigen::Vector3d::UnitZ();
@@ -398,11 +398,89 @@ void Contact::place(int i, const Eigen::Isometry3d& pose)
 
 void Contact::commit() { start_poses_ = poses_; }
 
-Eigen::Vector3d Contact::point(const Eigen::VectorXd& x, int particle) const
+namespace
 {
-  if (grid_.dimension() == 3)
+
+// A particle's position (or velocity) in 3D; a 2D grid's x-z plane is y = 0. Here, not a member, so
+// that the contact pass inlines it (a member of a shared library is called through its PLT).
+inline Eigen::Vector3d pointOf(const Eigen::VectorXd& x, int particle, int dim)
+{
+  if (dim == 3)
     return x.segment<3>(3 * particle);
   return Eigen::Vector3d(x[2 * particle], 0.0, x[2 * particle + 1]);
+}
+
+// The pass of correctParticles below with one active collider on a 3D grid (a table, a floor): the
+// same arithmetic in the same order, so the same results to the bit, but on local copies of the
+// collider and the sums, which the stores to x and v cannot alias (the general pass reloads them
+// after every store), and with no per-collider bookkeeping.
+struct OnePassResult
+{
+  int touching = 0;
+  double before = 0.0, after = 0.0;
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();
+};
+
+OnePassResult onePass(const Placed& placed, double thickness, const Eigen::VectorXd& x_start, Eigen::VectorXd& x,
+                      Eigen::VectorXd& v, const Eigen::VectorXd& mass, double dt)
+{
+  const Collider shape = *placed.collider;
+  Placed one = placed;
+  one.collider = &shape;
+  const double mu = shape.friction;
+  int touching = 0;
+  double before = 0.0, after = 0.0;
+  Eigen::Vector3d impulse = Eigen::Vector3d::Zero();
+  double* const xs = x.data();
+  double* const vs = v.data();
+  const double* const starts = x_start.data();
+  const int particles = static_cast<int>(x.size()) / 3;
+  for (int p = 0; p < particles; ++p)
+  {
+    const Eigen::Vector3d at = Eigen::Map<const Eigen::Vector3d>(xs + 3 * p);
+    if (one.bounded && !one.reach.contains(at))
+      continue;
+    Eigen::Vector3d local_n;
+    const double d = one.distance(at, thickness, local_n);
+    if (d >= thickness)
+      continue;
+    const Eigen::Vector3d n = one.normal(local_n);
+    before = std::max(before, -d);
+    ++touching;
+    const Eigen::Vector3d surface_step = one.still ? Eigen::Vector3d::Zero() : Eigen::Vector3d(at - one.step_back * at);
+    const double push = thickness - d;
+    const Eigen::Vector3d slip = at - Eigen::Map<const Eigen::Vector3d>(starts + 3 * p) - surface_step;
+    const Eigen::Vector3d corrected = at + (push * n + coulomb(slip - slip.dot(n) * n, mu * push));
+    Eigen::Map<Eigen::Vector3d>(xs + 3 * p) = corrected;
+    const Eigen::Vector3d velocity = Eigen::Map<const Eigen::Vector3d>(vs + 3 * p);
+    const Eigen::Vector3d relative = one.still ? velocity : Eigen::Vector3d(velocity - surface_step / dt);
+    const double approach = -relative.dot(n);
+    if (approach > 0.0)
+    {
+      const Eigen::Vector3d tangential = relative + approach * n;
+      const Eigen::Vector3d dv = approach * n + coulomb(tangential, mu * approach);
+      Eigen::Map<Eigen::Vector3d>(vs + 3 * p) = velocity + dv;
+      impulse += mass[3 * p] * dv;
+    }
+    // The depth after: measured only where the proof below (correctParticles) does not cover it.
+    if (d > one.centre_distance && thickness > 1e-6 * (one.scale + corrected.cwiseAbs().maxCoeff()))
+      continue;
+    Eigen::Vector3d unused;
+    after = std::max(after, -one.distance(corrected, -std::numeric_limits<double>::infinity(), unused));
+  }
+  OnePassResult result;
+  result.touching = touching;
+  result.before = before;
+  result.after = after;
+  result.force = -impulse / dt;
+  return result;
+}
+
+}  // namespace
+
+Eigen::Vector3d Contact::point(const Eigen::VectorXd& x, int particle) const
+{
+  return pointOf(x, particle, grid_.dimension());
 }
 
 std::vector<Contact::Touch> Contact::detect(const Eigen::VectorXd& x, double /*dt*/)
@@ -469,9 +547,18 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
   // finding every collider's touches at the uncorrected positions and then correcting them collider
   // by collider, with no list of touches kept.
   const int particles = static_cast<int>(x.size()) / dim;
+  if (count == 1 && dim == 3)
+  {
+    const OnePassResult one = onePass(placed[0], thickness_, x_start, x, v, mass, dt);
+    report_.touching[index[0]] = one.touching;
+    report_.penetration_before = one.before;
+    report_.penetration_after = one.after;
+    report_.force[index[0]] = one.force;
+    return;
+  }
   for (int p = 0; p < particles; ++p)
   {
-    const Eigen::Vector3d at = point(x, p);  // touches are found where the step left the particle
+    const Eigen::Vector3d at = pointOf(x, p, dim);  // touches are found where the step left the particle
     int touching = 0;
     bool corrected = false;  // an earlier collider's correction moved the particle
     double first_distance = 0.0;
@@ -496,7 +583,7 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
           placed_k.still ? Eigen::Vector3d::Zero() : Eigen::Vector3d(at - placed_k.step_back * at);
       if (corrected)
       {
-        d = placed_k.distance(point(x, p), thickness_, local_n);  // after the earlier collider's correction
+        d = placed_k.distance(pointOf(x, p, dim), thickness_, local_n);  // after the earlier collider's correction
         if (d >= thickness_)
           continue;
         n = placed_k.normal(local_n);
@@ -504,12 +591,12 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
       const double mu = colliders_[c].friction;
       // Positions: push out, and Coulomb on the slip over the step with the push as the normal bound.
       const double push = thickness_ - d;
-      const Eigen::Vector3d slip = point(x, p) - point(x_start, p) - surface_step;
+      const Eigen::Vector3d slip = pointOf(x, p, dim) - pointOf(x_start, p, dim) - surface_step;
       add(x, p, push * n + coulomb(slip - slip.dot(n) * n, mu * push));
       corrected = true;
       // Velocities: remove the approach, Coulomb on the tangential velocity relative to the surface.
       const Eigen::Vector3d relative =
-          placed_k.still ? point(v, p) : Eigen::Vector3d(point(v, p) - surface_step / dt);
+          placed_k.still ? pointOf(v, p, dim) : Eigen::Vector3d(pointOf(v, p, dim) - surface_step / dt);
       const double approach = -relative.dot(n);
       if (approach <= 0.0)
         continue;
@@ -527,12 +614,12 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
     // thickness, which the test asks) except at a round shape's centre or axis, where n is a fixed
     // direction, and in 2D, where the move loses its out-of-plane part.
     if (dim == 3 && touching == 1 && corrected && first_distance > placed[touched[0]].centre_distance &&
-        thickness_ > 1e-6 * (placed[touched[0]].scale + point(x, p).cwiseAbs().maxCoeff()))
+        thickness_ > 1e-6 * (placed[touched[0]].scale + pointOf(x, p, dim).cwiseAbs().maxCoeff()))
       continue;
     for (int j = 0; j < touching; ++j)
     {
       Eigen::Vector3d unused;
-      const double d = placed[touched[j]].distance(point(x, p), -std::numeric_limits<double>::infinity(), unused);
+      const double d = placed[touched[j]].distance(pointOf(x, p, dim), -std::numeric_limits<double>::infinity(), unused);
       report_.penetration_after = std::max(report_.penetration_after, -d);
     }
   }
