@@ -588,13 +588,15 @@ TEST(Contact, APlacedColliderIsNotSweptToItsNewPose)
   finger.radius = 0.05;
   s.colliders = {finger};
   Simulation placed(g, s), swept(g, s);
-  const Eigen::Isometry3d into(Eigen::Translation3d(0.0, -0.26, 0.0));  // its centre 40 mm off the particle
   for (Simulation* sim : {&placed, &swept})
   {
     for (int k = 0; k < 20; ++k)
       ASSERT_FALSE(sim->step().diverged);
     EXPECT_EQ(sim->contact()->report().touching[0], 0);
   }
+  // Its centre 40 mm off the particle where it hangs now (0.26 m from where the finger is).
+  const Eigen::Vector3d now = placed.points().col(6 * g.cols + 4);
+  const Eigen::Isometry3d into(Eigen::Translation3d(now + Eigen::Vector3d(0.0, 0.04, 0.0) - finger.center));
   placed.placeCollider(0, into);
   swept.setColliderPose(0, into);
   for (Simulation* sim : {&placed, &swept})
