@@ -13,6 +13,7 @@
 
 #include <random>
 #include <string>
+#include <vector>
 
 namespace modal_mass_spring
 {
@@ -20,10 +21,21 @@ namespace modal_mass_spring
 // Reduced coordinates per weight: a dim x dim matrix and a dim translation.
 inline int skinningCoordinatesPerWeight(int dimension) { return (dimension + 1) * dimension; }
 
-// The m lowest eigenvectors of the spring graph's Laplacian (edge weight k_s / L_s^2, L_s the
-// spring's length at x) against the particle masses, over all particles whether free, fixed or held
-// (the first is constant: rigid and affine motions of the whole cloth are in the span). Particles x m.
-// Throws std::invalid_argument naming num_skinning_weights outside [1, particles].
+// The held groups of the skinning weights: each handle's particles, handle by handle, then the fixed
+// particles as one group when there are any; empty when nothing is held.
+std::vector<std::vector<int>> skinningHandleGroups(const Grid& grid);
+
+// Particles x m weights from the spring graph's Laplacian L (edge weight k_s / L_s^2, L_s the spring's
+// length at x) against the particle masses. Nothing held: its m lowest eigenvectors (the first
+// constant: rigid and affine motions of the whole cloth are in the span). Else, with g held groups
+// (skinningHandleGroups): first one harmonic weight per group, 1 on it, 0 on the others and L w = 0
+// at every other particle (they sum to one: any affine map of all handles together is in the span,
+// and a group's transform moves its particles alone); then the m - g lowest eigenvectors of L with
+// every held particle as a Dirichlet boundary, zero there, so that the handles' constraints take
+// the groups' coordinates only and every further weight's coordinates move the cloth between them.
+// Throws std::invalid_argument naming num_skinning_weights outside [1, particles] (nothing held) or
+// [g, g + particles neither held nor fixed], and naming handles and fixed when a part of the cloth is
+// connected to no held particle.
 Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int m);
 
 // B over all dofs (numDofs x (dim + 1) dim m): column (j, a, b) moves dof a of particle i by
@@ -67,8 +79,8 @@ struct SkinningBasis
 Eigen::MatrixXd skinningProjection(const Grid& grid, const Eigen::VectorXd& x_ref, const ModalBasis& basis,
                                    const Eigen::VectorXd& mass, int num_weights);
 
-// `count` cubature training poses (columns of X) that turn the cloth: the whole cloth (the first,
-// constant weight) by a random rotation of up to 180 degrees, every further weight's transform by
+// `count` cubature training poses (columns of X) that turn the cloth: the first weight's region (the
+// whole cloth when it is constant: nothing held, one handle, or only fixed particles) by a random rotation of up to 180 degrees, every further weight's transform by
 // one of up to 90 / sqrt(j) degrees, projected by P, plus a pose of trainingPoses' law (stretches up
 // to `size`). The rotations of the further weights are halved while a spring would be shortened
 // below kShortestTrainingSpring of its length (the pose would fold the cloth).
