@@ -49,7 +49,7 @@ struct SkinningInfo
   int weights = 0;
   int coordinates = 0;        // (dim + 1) dim weights: the transforms' entries
   int constraint_dofs = 0;    // fixed and handle dofs, the equations B_c z = dx_c
-  int constraint_rank = 0;    // of B_c: constraint_dofs - constraint_rank of them the span meets only by least squares
+  int constraint_rank = 0;    // of B_c: the held groups' affine motions are met exactly, the rest only by least squares
   int modes = 0;              // fixed-interface modes added to the span
   int basis_size = 0;         // the interior subspace's dimension (coordinates - rank + modes, less dependent directions)
   double seconds = 0.0;
@@ -57,7 +57,7 @@ struct SkinningInfo
 
 // "skinning: 24 weights, 288 coordinates, 24 constraint dofs (fixed and handles) met exactly, with 30
 // modes 294 directions for the free particles, built in 41 ms"; "... 60 constraint dofs (fixed and
-// handles) of rank 52: 8 met by least squares only ...".
+// handles) of rank 18 (each held group's affine motions met exactly, the rest of 6 by least squares) ...".
 std::string describeSkinning(const SkinningInfo& info);
 
 struct SkinningBasis

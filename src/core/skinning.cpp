@@ -184,8 +184,9 @@ std::string describeSkinning(const SkinningInfo& info)
   if (info.constraint_rank == info.constraint_dofs)
     out << info.constraint_dofs << " constraint dofs (fixed and handles) met exactly";
   else
-    out << info.constraint_dofs << " constraint dofs (fixed and handles) of rank " << info.constraint_rank << ": "
-        << info.constraint_dofs - info.constraint_rank << " met by least squares only";
+    out << info.constraint_dofs << " constraint dofs (fixed and handles) of rank " << info.constraint_rank
+        << " (each held group's affine motions met exactly, the rest of " << info.constraint_dofs - info.constraint_rank
+        << " by least squares)";
   out << ", with " << info.modes << " modes " << info.basis_size << " directions for the free particles, built in " << 1e3 * info.seconds << " ms";
   return out.str();
 }

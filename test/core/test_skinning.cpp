@@ -157,17 +157,20 @@ TEST(Skinning, WeightsAreHarmonicBetweenTheHandlesAndVanishOnThemPastOnePerHandl
     EXPECT_NEAR(w(i, 0) + w(i, 1), 1.0, 1e-10) << "particle " << i;
     const int handle = grid.isHandle(i) ? (i % n < n / 2 ? 0 : 1) : -1;
     for (int j = 0; j < 2; ++j)
+    {
       if (handle >= 0)
+      {
         EXPECT_EQ(w(i, j), handle == j ? 1.0 : 0.0) << "particle " << i << ", weight " << j;
+      }
       else
       {
         EXPECT_NEAR(lw(i, j), 0.0, 1e-10 * scale) << "particle " << i << ", weight " << j;
         EXPECT_GT(w(i, j), 0.0);
         EXPECT_LT(w(i, j), 1.0);
       }
-    for (int j = 2; j < m; ++j)
-      if (handle >= 0)
-        EXPECT_EQ(w(i, j), 0.0) << "particle " << i << ", weight " << j;
+    }
+    for (int j = 2; j < m && handle >= 0; ++j)
+      EXPECT_EQ(w(i, j), 0.0) << "particle " << i << ", weight " << j;
   }
   // Dirichlet eigenvectors: L w = lambda m w at every particle not held, lambda > 0, ascending.
   double previous = 0.0;
@@ -184,8 +187,12 @@ TEST(Skinning, WeightsAreHarmonicBetweenTheHandlesAndVanishOnThemPastOnePerHandl
     EXPECT_GT(lambda, previous * (1.0 - 1e-9));
     previous = lambda;
     for (int i = 0; i < grid.numParticles(); ++i)
+    {
       if (!grid.isHandle(i))
+      {
         EXPECT_NEAR(lw(i, j), lambda * grid.particleMass() * w(i, j), 1e-7 * scale) << "weight " << j;
+      }
+    }
   }
   // A clamp alone: its weight is one everywhere. Fixed particles are a group of their own.
   const Grid clamp(heldCloth({topRows(n, 2)}, n));
