@@ -362,12 +362,20 @@ SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref,
   const Eigen::MatrixXd b_i = b(grid.freeDofs(), Eigen::all);
   Eigen::MatrixXd interior(b_i.rows(), null_space.cols() + modes.cols());
   interior << b_i * null_space, modes;
-  // Unit mass norm each, so that the rank tolerance compares directions, not their scales.
+  // Unit mass norm each, so that the rank tolerance compares directions, not their scales; a column
+  // of round-off only (a null-space vector of coordinates that move nothing, such as an out-of-plane
+  // column of A_j on a planar sheet, carries round-off of coordinates the constraints fix) is
+  // dropped rather than blown up into a direction that would move the held particles.
+  Eigen::VectorXd norms(interior.cols());
+  for (Eigen::Index k = 0; k < interior.cols(); ++k)
+    norms[k] = std::sqrt(interior.col(k).cwiseAbs2().dot(mass));
+  const double largest_norm = norms.size() > 0 ? norms.maxCoeff() : 0.0;
   for (Eigen::Index k = 0; k < interior.cols(); ++k)
   {
-    const double norm = std::sqrt(interior.col(k).cwiseAbs2().dot(mass));
-    if (norm > 0.0)
-      interior.col(k) /= norm;
+    if (norms[k] > kRankTolerance * largest_norm)
+      interior.col(k) /= norms[k];
+    else
+      interior.col(k).setZero();
   }
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> gram(interior.transpose() * mass.asDiagonal() * interior);
   const Eigen::VectorXd& g = gram.eigenvalues();  // ascending
