@@ -57,7 +57,8 @@ struct SkinningInfo
 
 // "skinning: 24 weights, 288 coordinates, 24 constraint dofs (fixed and handles) met exactly, with 30
 // modes 294 directions for the free particles, built in 41 ms"; "... 60 constraint dofs (fixed and
-// handles) of rank 18 (each held group's affine motions met exactly, the rest of 6 by least squares) ...".
+// handles) of rank 18 (each held group's affine motions met exactly, the rest of 6 by least
+// squares) ...".
 std::string describeSkinning(const SkinningInfo& info);
 
 struct SkinningBasis
@@ -80,9 +81,9 @@ Eigen::MatrixXd skinningProjection(const Grid& grid, const Eigen::VectorXd& x_re
                                    const Eigen::VectorXd& mass, int num_weights);
 
 // `count` cubature training poses (columns of X) that turn the cloth: the first weight's region (the
-// whole cloth when it is constant: nothing held, one handle, or only fixed particles) by a random rotation of up to 180 degrees, every further weight's transform by
-// one of up to 90 / sqrt(j) degrees, projected by P, plus a pose of trainingPoses' law (stretches up
-// to `size`). The rotations of the further weights are halved while a spring would be shortened
+// whole cloth when it is constant: nothing held, one handle, or only fixed particles) by a random
+// rotation of up to 180 degrees, every further weight's transform by one of up to 90 / sqrt(j)
+// degrees, projected by P, plus a pose of trainingPoses' law (stretches up to `size`). The rotations of the further weights are halved while a spring would be shortened
 // below kShortestTrainingSpring of its length (the pose would fold the cloth).
 Eigen::MatrixXd skinningTrainingPoses(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref,
                                       const Eigen::MatrixXd& projection, int count, double size, std::mt19937_64& rng);
