@@ -57,11 +57,7 @@ SparseMatrix springLaplacian(const Grid& grid, const Eigen::VectorXd& x)
 
 std::vector<std::vector<int>> skinningHandleGroups(const Grid& grid)
 {
-  std::vector<std::vector<int>> groups;
-  if (grid.handles().empty() && grid.fixedParticles().empty())
-    return groups;
-  for (const std::vector<int>& handle : grid.handles())
-    groups.push_back(handle);
+  std::vector<std::vector<int>> groups = grid.handles();
   if (!grid.fixedParticles().empty())
     groups.push_back(grid.fixedParticles());
   return groups;
