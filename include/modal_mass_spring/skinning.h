@@ -13,6 +13,7 @@
 
 #include <random>
 #include <string>
+#include <vector>
 
 namespace modal_mass_spring
 {
@@ -20,10 +21,21 @@ namespace modal_mass_spring
 // Reduced coordinates per weight: a dim x dim matrix and a dim translation.
 inline int skinningCoordinatesPerWeight(int dimension) { return (dimension + 1) * dimension; }
 
-// The m lowest eigenvectors of the spring graph's Laplacian (edge weight k_s / L_s^2, L_s the
-// spring's length at x) against the particle masses, over all particles whether free, fixed or held
-// (the first is constant: rigid and affine motions of the whole cloth are in the span). Particles x m.
-// Throws std::invalid_argument naming num_skinning_weights outside [1, particles].
+// The held groups of the skinning weights: each handle's particles, handle by handle, then the fixed
+// particles as one group when there are any; empty when nothing is held.
+std::vector<std::vector<int>> skinningHandleGroups(const Grid& grid);
+
+// Particles x m weights from the spring graph's Laplacian L (edge weight k_s / L_s^2, L_s the spring's
+// length at x) against the particle masses. Nothing held: its m lowest eigenvectors (the first
+// constant: rigid and affine motions of the whole cloth are in the span). Else, with g held groups
+// (skinningHandleGroups): first one harmonic weight per group, 1 on it, 0 on the others and L w = 0
+// at every other particle (they sum to one: any affine map of all handles together is in the span,
+// and a group's transform moves its particles alone); then the m - g lowest eigenvectors of L with
+// every held particle as a Dirichlet boundary, zero there, so that the handles' constraints take
+// the groups' coordinates only and every further weight's coordinates move the cloth between them.
+// Throws std::invalid_argument naming num_skinning_weights outside [1, particles] (nothing held) or
+// [g, g + particles neither held nor fixed], and naming handles and fixed when a part of the cloth is
+// connected to no held particle.
 Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int m);
 
 // B over all dofs (numDofs x (dim + 1) dim m): column (j, a, b) moves dof a of particle i by
@@ -37,7 +49,7 @@ struct SkinningInfo
   int weights = 0;
   int coordinates = 0;        // (dim + 1) dim weights: the transforms' entries
   int constraint_dofs = 0;    // fixed and handle dofs, the equations B_c z = dx_c
-  int constraint_rank = 0;    // of B_c: constraint_dofs - constraint_rank of them the span meets only by least squares
+  int constraint_rank = 0;    // of B_c: the held groups' affine motions are met exactly, the rest only by least squares
   int modes = 0;              // fixed-interface modes added to the span
   int basis_size = 0;         // the interior subspace's dimension (coordinates - rank + modes, less dependent directions)
   double seconds = 0.0;
@@ -45,7 +57,8 @@ struct SkinningInfo
 
 // "skinning: 24 weights, 288 coordinates, 24 constraint dofs (fixed and handles) met exactly, with 30
 // modes 294 directions for the free particles, built in 41 ms"; "... 60 constraint dofs (fixed and
-// handles) of rank 52: 8 met by least squares only ...".
+// handles) of rank 18 (each held group's affine motions met exactly, the rest of 6 by least
+// squares) ...".
 std::string describeSkinning(const SkinningInfo& info);
 
 struct SkinningBasis
@@ -67,10 +80,10 @@ struct SkinningBasis
 Eigen::MatrixXd skinningProjection(const Grid& grid, const Eigen::VectorXd& x_ref, const ModalBasis& basis,
                                    const Eigen::VectorXd& mass, int num_weights);
 
-// `count` cubature training poses (columns of X) that turn the cloth: the whole cloth (the first,
-// constant weight) by a random rotation of up to 180 degrees, every further weight's transform by
-// one of up to 90 / sqrt(j) degrees, projected by P, plus a pose of trainingPoses' law (stretches up
-// to `size`). The rotations of the further weights are halved while a spring would be shortened
+// `count` cubature training poses (columns of X) that turn the cloth: the first weight's region (the
+// whole cloth when it is constant: nothing held, one handle, or only fixed particles) by a random
+// rotation of up to 180 degrees, every further weight's transform by one of up to 90 / sqrt(j)
+// degrees, projected by P, plus a pose of trainingPoses' law (stretches up to `size`). The rotations of the further weights are halved while a spring would be shortened
 // below kShortestTrainingSpring of its length (the pose would fold the cloth).
 Eigen::MatrixXd skinningTrainingPoses(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref,
                                       const Eigen::MatrixXd& projection, int count, double size, std::mt19937_64& rng);

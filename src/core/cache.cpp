@@ -334,8 +334,10 @@ std::string basisKey(const GridParams& g, const SimulationParams& p)
       << '\n';
   // The handles' part of the skinning span moves the whole cloth by their affine motion (entries
   // stored before it was, with the least-squares interior alone, must not be read for it).
+  // Its weights are harmonic between the held particles and vanish on them past one per group
+  // (entries stored with the global Laplacian's eigenvectors must not be read for them).
   if (p.basis == BasisKind::Skinning)
-    key << "skinning_handle_extension=affine\n";
+    key << "skinning_handle_extension=affine\nskinning_weights=held_groups\n";
   return key.str();
 }
 

@@ -10,6 +10,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/QR>
 #include <Eigen/SVD>
+#include <Eigen/SparseCholesky>
 
 #include <chrono>
 #include <sstream>
@@ -29,12 +30,12 @@ constexpr double kRankTolerance = 1e-9;
 
 }  // namespace
 
-Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int m)
+namespace
 {
-  const int particles = grid.numParticles();
-  if (m < 1 || m > particles)
-    rejectParameter("num_skinning_weights", m,
-                    "must be in [1, " + std::to_string(particles) + "], the number of particles");
+
+// The spring graph's Laplacian over all particles, edge weight k_s / L_s^2 (L_s the spring's length at x).
+SparseMatrix springLaplacian(const Grid& grid, const Eigen::VectorXd& x)
+{
   const int dim = grid.dimension();
   std::vector<Eigen::Triplet<double>> entries;
   entries.reserve(4 * grid.springs().size());
@@ -47,13 +48,103 @@ Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int 
     entries.emplace_back(s.i, s.j, -w);
     entries.emplace_back(s.j, s.i, -w);
   }
-  SparseMatrix laplacian(particles, particles);
+  SparseMatrix laplacian(grid.numParticles(), grid.numParticles());
   laplacian.setFromTriplets(entries.begin(), entries.end());
-  const Eigen::VectorXd mass = Eigen::VectorXd::Constant(particles, grid.particleMass());
-  Eigen::MatrixXd weights = computeModalBasis(laplacian, mass, m).phi;
-  // Each of order one, so that B's columns are of the size of the cloth's coordinates.
-  for (int j = 0; j < m; ++j)
-    weights.col(j) /= weights.col(j).cwiseAbs().maxCoeff();
+  return laplacian;
+}
+
+}  // namespace
+
+std::vector<std::vector<int>> skinningHandleGroups(const Grid& grid)
+{
+  std::vector<std::vector<int>> groups = grid.handles();
+  if (!grid.fixedParticles().empty())
+    groups.push_back(grid.fixedParticles());
+  return groups;
+}
+
+Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int m)
+{
+  const int particles = grid.numParticles();
+  const std::vector<std::vector<int>> groups = skinningHandleGroups(grid);
+  const int num_groups = static_cast<int>(groups.size());
+  std::vector<int> group_of(static_cast<size_t>(particles), -1);
+  for (int k = 0; k < num_groups; ++k)
+    for (int particle : groups[static_cast<size_t>(k)])
+      group_of[static_cast<size_t>(particle)] = k;
+  std::vector<int> interior;
+  for (int i = 0; i < particles; ++i)
+    if (group_of[static_cast<size_t>(i)] < 0)
+      interior.push_back(i);
+  const int num_interior = static_cast<int>(interior.size());
+  if (num_groups == 0)
+  {
+    if (m < 1 || m > particles)
+      rejectParameter("num_skinning_weights", m,
+                      "must be in [1, " + std::to_string(particles) + "], the number of particles");
+  }
+  else if (m < num_groups || m > num_groups + num_interior)
+    rejectParameter("num_skinning_weights", m,
+                    "must be in [" + std::to_string(num_groups) + ", " + std::to_string(num_groups + num_interior) +
+                        "]: one weight per handle (and one for the fixed particles), plus at most one per particle "
+                        "neither held nor fixed");
+  const SparseMatrix laplacian = springLaplacian(grid, x);
+  const double particle_mass = grid.particleMass();
+  if (num_groups == 0)
+  {
+    // Nothing held: the lowest eigenvectors of the Laplacian against the masses (the first constant).
+    Eigen::MatrixXd weights = computeModalBasis(laplacian, Eigen::VectorXd::Constant(particles, particle_mass), m).phi;
+    // Each of order one, so that B's columns are of the size of the cloth's coordinates.
+    for (int j = 0; j < m; ++j)
+      weights.col(j) /= weights.col(j).cwiseAbs().maxCoeff();
+    return weights;
+  }
+  // Held: one harmonic weight per group (1 on it, 0 on the other groups, L w = 0 at every other
+  // particle), so the groups' weights sum to one and a group's affine transform moves its particles
+  // alone; then the lowest eigenvectors of the Laplacian with every held particle as a Dirichlet
+  // boundary (zero there), which leave the held particles' constraints to the groups' transforms and
+  // spend their coordinates on the cloth between them.
+  Eigen::MatrixXd weights = Eigen::MatrixXd::Zero(particles, m);
+  for (int i = 0; i < particles; ++i)
+    if (group_of[static_cast<size_t>(i)] >= 0)
+      weights(i, group_of[static_cast<size_t>(i)]) = 1.0;
+  if (num_interior == 0)
+    return weights;
+  std::vector<int> interior_index(static_cast<size_t>(particles), -1);
+  for (int k = 0; k < num_interior; ++k)
+    interior_index[static_cast<size_t>(interior[static_cast<size_t>(k)])] = k;
+  std::vector<Eigen::Triplet<double>> l_ii_entries;
+  Eigen::MatrixXd l_ib_groups = Eigen::MatrixXd::Zero(num_interior, num_groups);  // L_ib times the groups' indicators
+  for (int col = 0; col < laplacian.outerSize(); ++col)
+    for (SparseMatrix::InnerIterator it(laplacian, col); it; ++it)
+    {
+      const int row = interior_index[static_cast<size_t>(it.row())];
+      if (row < 0)
+        continue;
+      if (interior_index[static_cast<size_t>(col)] >= 0)
+        l_ii_entries.emplace_back(row, interior_index[static_cast<size_t>(col)], it.value());
+      else
+        l_ib_groups(row, group_of[static_cast<size_t>(col)]) += it.value();
+    }
+  SparseMatrix l_ii(num_interior, num_interior);
+  l_ii.setFromTriplets(l_ii_entries.begin(), l_ii_entries.end());
+  const Eigen::SimplicialLDLT<SparseMatrix> ldlt(l_ii);
+  const Eigen::MatrixXd harmonic = ldlt.solve(-l_ib_groups);
+  if (ldlt.info() != Eigen::Success || !harmonic.allFinite() || ldlt.vectorD().minCoeff() <= 0.0)
+    rejectParameter("handles, fixed", "(as given)",
+                    "must hold every connected part of the cloth: the skinning weights are harmonic between the "
+                    "held particles, and a part connected to none has none");
+  for (int k = 0; k < num_interior; ++k)
+    weights.row(interior[static_cast<size_t>(k)]).head(num_groups) = harmonic.row(k);
+  if (m > num_groups)
+  {
+    Eigen::MatrixXd dirichlet =
+        computeModalBasis(l_ii, Eigen::VectorXd::Constant(num_interior, particle_mass), m - num_groups).phi;
+    for (int j = 0; j < dirichlet.cols(); ++j)
+      dirichlet.col(j) /= dirichlet.col(j).cwiseAbs().maxCoeff();
+    for (int k = 0; k < num_interior; ++k)
+      weights.row(interior[static_cast<size_t>(k)]).tail(m - num_groups) = dirichlet.row(k);
+  }
   return weights;
 }
 
@@ -89,8 +180,9 @@ std::string describeSkinning(const SkinningInfo& info)
   if (info.constraint_rank == info.constraint_dofs)
     out << info.constraint_dofs << " constraint dofs (fixed and handles) met exactly";
   else
-    out << info.constraint_dofs << " constraint dofs (fixed and handles) of rank " << info.constraint_rank << ": "
-        << info.constraint_dofs - info.constraint_rank << " met by least squares only";
+    out << info.constraint_dofs << " constraint dofs (fixed and handles) of rank " << info.constraint_rank
+        << " (each held group's affine motions met exactly, the rest of " << info.constraint_dofs - info.constraint_rank
+        << " by least squares)";
   out << ", with " << info.modes << " modes " << info.basis_size << " directions for the free particles, built in " << 1e3 * info.seconds << " ms";
   return out.str();
 }
@@ -266,12 +358,20 @@ SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref,
   const Eigen::MatrixXd b_i = b(grid.freeDofs(), Eigen::all);
   Eigen::MatrixXd interior(b_i.rows(), null_space.cols() + modes.cols());
   interior << b_i * null_space, modes;
-  // Unit mass norm each, so that the rank tolerance compares directions, not their scales.
+  // Unit mass norm each, so that the rank tolerance compares directions, not their scales; a column
+  // of round-off only (a null-space vector of coordinates that move nothing, such as an out-of-plane
+  // column of A_j on a planar sheet, carries round-off of coordinates the constraints fix) is
+  // dropped rather than blown up into a direction that would move the held particles.
+  Eigen::VectorXd norms(interior.cols());
+  for (Eigen::Index k = 0; k < interior.cols(); ++k)
+    norms[k] = std::sqrt(interior.col(k).cwiseAbs2().dot(mass));
+  const double largest_norm = norms.size() > 0 ? norms.maxCoeff() : 0.0;
   for (Eigen::Index k = 0; k < interior.cols(); ++k)
   {
-    const double norm = std::sqrt(interior.col(k).cwiseAbs2().dot(mass));
-    if (norm > 0.0)
-      interior.col(k) /= norm;
+    if (norms[k] > kRankTolerance * largest_norm)
+      interior.col(k) /= norms[k];
+    else
+      interior.col(k).setZero();
   }
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> gram(interior.transpose() * mass.asDiagonal() * interior);
   const Eigen::VectorXd& g = gram.eigenvalues();  // ascending

@@ -79,10 +79,20 @@ void validateBasis(const GridParams& grid, const SimulationParams& p, long long 
   const long long particles = static_cast<long long>(grid.rows) * grid.cols;
   if (p.basis == BasisKind::Skinning)
   {
-    if (w < 1 || w > particles)
+    // One weight per held group (each handle, the fixed particles), then at most one per particle
+    // neither held nor fixed (skinningWeights); nothing held, at most one per particle.
+    const long long fixed = static_cast<long long>(effectiveFixed(grid).size());
+    long long held = fixed;
+    for (const std::vector<int>& handle : grid.handles)
+      held += static_cast<long long>(handle.size());
+    const long long groups = static_cast<long long>(grid.handles.size()) + (fixed > 0 ? 1 : 0);
+    const long long lowest = std::max(1LL, groups);
+    const long long highest = held == 0 ? particles : particles - held + groups;
+    if (w < lowest || w > highest)
       rejectParameter("num_skinning_weights", w,
-                      "must be an integer in [1, " + std::to_string(particles) +
-                          "] with basis: skinning (at most one weight per particle)");
+                      "must be an integer in [" + std::to_string(lowest) + ", " + std::to_string(highest) +
+                          "] with basis: skinning (one weight per handle and one for the fixed particles, then at "
+                          "most one per particle neither held nor fixed)");
     if (d != 0)
       rejectParameter("num_derivative_modes", d, "must be 0 with basis: skinning");
     return;
