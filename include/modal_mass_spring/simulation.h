@@ -40,7 +40,7 @@ struct SimulationParams
   // Newton iterations of the static equilibrium before it is refused (linearization or
   // initial_state 'equilibrium'): a 100 x 100 cloth hanging from its flat vertical sheet takes 3 to
   // 20; config/cloth.yaml, released at 30 degrees and buckling as it hangs, 50 to 250.
-  int equilibrium_max_iterations = 200;
+  int equilibrium_max_iterations = 300;
   // The implicit integrator's Hilber-Hughes-Taylor alpha in [-1/3, 0]: 0 is Newmark average
   // acceleration, which lets stiff nonlinear springs gain energy without bound at large steps;
   // negative values damp the highest frequencies and keep those steps bounded (see ImplicitNewmark).
