@@ -389,7 +389,7 @@ void BM_Equilibrium100(benchmark::State& state)
                                },
                                solver);
     }
-    catch (const std::runtime_error& refused)
+    catch (const std::runtime_error&)
     {
       // What a start is told, after how long.
       state.counters["equilibrium_cpu_s"] = processCpuSeconds() - start;
