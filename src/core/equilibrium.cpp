@@ -167,11 +167,12 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
     return result;
   std::ostringstream msg;
   msg << "static equilibrium not found: Newton stopped after " << result.iterations << " iterations"
-      << (result.iterations >= max_iterations ? " (its limit, equilibrium_max_iterations = " + std::to_string(max_iterations) + ")"
-                                              : std::string(" (no descent left)"))
-      << " with an unbalanced force of " << result.residual << " N (tolerance " << target
-      << " N, of which the spring forces' round-off is about " << roundoff << " N); "
-      << (result.iterations >= max_iterations ? "raise equilibrium_max_iterations, or " : "")
+      << (result.iterations >= max_iterations ? " (its limit)" : " (no descent left)") << " with an unbalanced force of "
+      << result.residual << " N (tolerance " << target << " N, of which the spring forces' round-off is about "
+      << roundoff << " N); "
+      << (result.iterations >= max_iterations
+              ? "raise equilibrium_max_iterations (now " + std::to_string(max_iterations) + "), or "
+              : std::string())
       << "use linearization 'rest' and initial_state 'initial', which need no equilibrium";
   throw std::runtime_error(msg.str());
 }

@@ -158,9 +158,20 @@ double largestUnbalancedForce(const Grid& grid, const Eigen::VectorXd& x)
 
 }  // namespace
 
+TEST(Equilibrium, CholmodConvergesOnClothYaml)
+{
+  // Released at 30 degrees the sheet buckles as it hangs: Newton's path (and which of the buckled
+  // equilibria it finds) hangs on round-off, so only the force balance is compared here.
+  const Grid grid(clothYaml());
+  const Equilibrium eq = solveEquilibrium(grid, grid.initialPositions());
+  EXPECT_LE(largestUnbalancedForce(grid, eq.positions), 1e-9 * grid.particleMass() * 9.81);
+}
+
 TEST(Equilibrium, CholmodFindsTheSimplicialLdltsEquilibrium)
 {
-  for (const GridParams& g : {clothYaml(), turnedSheet(), paper2D()})
+  GridParams hanging = clothYaml();
+  hanging.rotation_deg = 0.0;  // hangs from the flat vertical sheet without buckling
+  for (const GridParams& g : {hanging, turnedSheet(), paper2D()})
   {
     const Grid grid(g);
     const Equilibrium cholmod = solveEquilibrium(grid, grid.initialPositions());
@@ -204,8 +215,9 @@ TEST(Equilibrium, TellsItsProgressAndItsLimitNamesTheParameter)
     std::ostringstream reached;
     reached << "unbalanced force of " << residuals[eq.iterations - 2] << " N";
     EXPECT_TRUE(contains(e.what(), reached.str())) << e.what();
-    EXPECT_TRUE(contains(e.what(), "equilibrium_max_iterations = " + std::to_string(eq.iterations - 2))) << e.what();
-    EXPECT_TRUE(contains(e.what(), "raise equilibrium_max_iterations")) << e.what();
+    EXPECT_TRUE(contains(e.what(), "(its limit)")) << e.what();
+    EXPECT_TRUE(contains(e.what(), "raise equilibrium_max_iterations (now " + std::to_string(eq.iterations - 2) + ")"))
+        << e.what();
   }
 }
 
