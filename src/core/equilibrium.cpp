@@ -45,21 +45,30 @@ public:
   bool solve(const TangentAssembler& assembler, const Eigen::VectorXd& x, const Eigen::VectorXd& r,
              bool simplicial_only, Eigen::VectorXd& d)
   {
+    // The simplicial factorisation only where CHOLMOD's failed on both: an indefinite exact Hessian,
+    // which CHOLMOD refuses at once, would only be refused again after a whole simplicial one.
+    if (!simplicial_only && solveWith(cholmod_, assembler, x, r, d))
+      return true;
+    return solveWith(simplicial_, assembler, x, r, d);
+  }
+
+private:
+  bool solveWith(TangentSolver& solver, const TangentAssembler& assembler, const Eigen::VectorXd& x,
+                 const Eigen::VectorXd& r, Eigen::VectorXd& d)
+  {
     for (CompressedSprings compressed : {CompressedSprings::Keep, CompressedSprings::Drop})
     {
       assembler.assemble(x, k_, compressed);
       const double regularisation = 1e-8 * k_.diagonal().cwiseAbs().maxCoeff();
       for (int i = 0; i < k_.rows(); ++i)
         k_.coeffRef(i, i) += regularisation;
-      if (!simplicial_only && cholmod_.solve(k_, r, d, 0.0) && refine(cholmod_, r, d))
-        return true;
-      if (simplicial_.solve(k_, r, d, 0.0) && refine(simplicial_, r, d))
+      if (solver.solve(k_, r, d, 0.0) && refine(solver, r, d))
         return true;
     }
     return false;
   }
 
-private:
+
   // Iterative refinement: d += K^-1 (r - K d) while the residual of the linear system shrinks.
   bool refine(TangentSolver& solver, const Eigen::VectorXd& r, Eigen::VectorXd& d)
   {
