@@ -38,7 +38,7 @@ enum class EquilibriumSolver
   Cholmod,
   SimplicialLdlt,
 };
-constexpr int kDefaultEquilibriumMaxIterations = 300;
+constexpr int kDefaultEquilibriumMaxIterations = 1000;
 constexpr double kEquilibriumTolerance = 1e-9;
 Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start,
                              int max_iterations = kDefaultEquilibriumMaxIterations,
