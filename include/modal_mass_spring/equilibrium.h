@@ -17,7 +17,8 @@ struct Equilibrium
   double residual = 0.0;       // largest unbalanced force component left, N
 };
 
-// Newton on the free dofs from `start`, the fixed particles held. The direction comes from the
+// Newton on the free dofs from `start`, the fixed particles held. The direction (CHOLMOD's
+// supernodal Cholesky, refined; the simplicial LDL^T where that fails or makes no progress) comes from the
 // tangent with compressed springs' geometric part dropped (positive semi-definite, so a descent
 // direction of the potential energy) plus a 1e-8 relative regularisation (a flat 3D sheet has no
 // out-of-plane stiffness); a backtracking line search on the energy makes it converge from far away,
@@ -28,8 +29,20 @@ struct Equilibrium
 // larger. Throws std::runtime_error otherwise, saying whether the iteration limit stopped it.
 // `progress`, when given, is told each iteration's number, its largest unbalanced force and the
 // target (N) before the iteration, so that a slow solve can be reported.
+// The limit, when it stops Newton, is named in the refusal as the parameter equilibrium_max_iterations.
 using EquilibriumProgress = std::function<void(int iteration, double residual, double target)>;
-Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int max_iterations = 1000,
-                             double tolerance = 1e-9, const EquilibriumProgress& progress = {});
+// `solver` SimplicialLdlt keeps to the simplicial LDL^T throughout (as before CHOLMOD was used here):
+// for tests and the benchmark's side-by-side comparison.
+enum class EquilibriumSolver
+{
+  Cholmod,
+  SimplicialLdlt,
+};
+constexpr int kDefaultEquilibriumMaxIterations = 1000;
+constexpr double kEquilibriumTolerance = 1e-9;
+Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start,
+                             int max_iterations = kDefaultEquilibriumMaxIterations,
+                             double tolerance = kEquilibriumTolerance, const EquilibriumProgress& progress = {},
+                             EquilibriumSolver solver = EquilibriumSolver::Cholmod);
 
 }  // namespace modal_mass_spring

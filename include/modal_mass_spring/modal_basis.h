@@ -32,6 +32,10 @@ struct ModalBasis
 // Told the name of each stage of a long computation as it starts ("factorisation", "eigensolver"),
 // so a caller can say what a slow start-up is doing.
 using StageFn = std::function<void(const std::string& stage)>;
+// Told how the iterations of a long stage go, so a caller can show that it moves: "equilibrium" with
+// Newton's iteration, its largest unbalanced force and the target (N); "eigensolver" with the Lanczos
+// step, the largest residual estimate of the wanted Ritz values relative to them and the tolerance.
+using IterationFn = std::function<void(const std::string& stage, int iteration, double residual, double target)>;
 
 // The most Lanczos vectors (of the free dofs' length) computeModalBasis holds for r modes; for memory
 // estimates.
@@ -41,6 +45,6 @@ inline int maxLanczosVectors(int r) { return std::max(4 * r, r + 80) + 1; }
 // dofs. Throws std::invalid_argument for r outside [1, size] and std::runtime_error when the
 // eigensolver does not converge.
 ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorXd& mass, int r,
-                             const StageFn& on_stage = {});
+                             const StageFn& on_stage = {}, const IterationFn& on_iteration = {});
 
 }  // namespace modal_mass_spring

@@ -37,6 +37,11 @@ struct SimulationParams
   IntegratorKind integrator = IntegratorKind::Explicit;
   InitialState initial_state = InitialState::Initial;
   int newton_max_iterations = 50;  // per implicit solve
+  // Newton iterations of the static equilibrium before it is refused (linearization or
+  // initial_state 'equilibrium'): a 100 x 100 cloth hanging from its flat vertical sheet takes 3 to
+  // 20; config/cloth.yaml, released at 30 degrees and buckling as it hangs, 60 to 400 (its path hangs
+  // on round-off).
+  int equilibrium_max_iterations = 1000;
   // The implicit integrator's Hilber-Hughes-Taylor alpha in [-1/3, 0]: 0 is Newmark average
   // acceleration, which lets stiff nonlinear springs gain energy without bound at large steps;
   // negative values damp the highest frequencies and keep those steps bounded (see ImplicitNewmark).
@@ -108,16 +113,18 @@ class Simulation
 {
 public:
   // Validates both parameter sets (validateParameters) before building anything, then builds the
-  // linearization point and the basis, telling on_stage as each stage starts ("equilibrium",
-  // "stiffness", "factorisation", "eigensolver", "modal derivatives" or "skinning" with that basis, and "cubature"
-  // when the method is `cubature`). Throws std::invalid_argument naming the offending
-  // parameter, std::runtime_error when a stage fails.
+  // linearization point and, unless the method is `full` (which needs none: buildBasis() builds it at
+  // the first switch to a modal method), the basis, telling on_stage as each stage starts
+  // ("equilibrium", "stiffness", "factorisation", "eigensolver", "modal derivatives" or "skinning"
+  // with that basis, and "cubature" when the method is `cubature`) and on_iteration how the
+  // equilibrium's Newton iterations and the eigensolver's Lanczos steps go. Throws
+  // std::invalid_argument naming the offending parameter, std::runtime_error when a stage fails.
   // With a cache directory (CacheOptions), the equilibrium, the bases and the cubature are loaded
   // from it when it holds them for these parameters, and written to it when they are computed
   // (including a cubature trained at a later switch); a file that is unusable or cannot be written
   // is a warning, never an error (see cache.h).
   Simulation(const GridParams& grid_params, const SimulationParams& params, const StageFn& on_stage = {},
-             const CacheOptions& cache = {});
+             const CacheOptions& cache = {}, const IterationFn& on_iteration = {});
 
   // The force models and integrators refer to the grid, basis and matrices held here: a Simulation
   // stays where it was built.
@@ -127,6 +134,13 @@ public:
   Simulation& operator=(Simulation&&) = delete;
 
   const Grid& grid() const { return grid_; }
+  // Builds the bases (and stores them in the cache) unless they are built: what the first switch to
+  // a modal method does, here with the stages and iterations told, so that a caller can build them
+  // before it switches (the node, while the old method runs on). Throws as the constructor.
+  void buildBasis(const StageFn& on_stage = {}, const IterationFn& on_iteration = {});
+  // False for `full` until a modal method was first set (or buildBasis called): basis() and
+  // physicalBasis() are empty until then.
+  bool basisBuilt() const { return basis_built_; }
   // The eigenbasis: the num_modes lowest modes, `linear`'s basis.
   const ModalBasis& basis() const { return basis_; }
   // The basis of every modal method that computes spring forces (all but `linear`): the eigenbasis
@@ -142,8 +156,9 @@ public:
   // Switches method, carrying the motion over without moving a particle: going to a modal method,
   // X = Phi^T M u and the rest of u, which the modes cannot carry, stays frozen as an offset of the
   // modal reference configuration (until reset); going to full, u = offset + Phi X. Clears a
-  // divergence: the last good state goes on under the new method. The first switch to `cubature`
-  // trains it (trainCubature, seconds on a large grid).
+  // divergence: the last good state goes on under the new method. The first switch to a modal
+  // method builds the bases (buildBasis) unless they are built; the first to `cubature` trains it
+  // (trainCubature, seconds on a large grid).
   void setMethod(Method method);
   // The trained cubature (springs, weights, training report), or null before `cubature` was first used.
   const Cubature* cubature() const { return cubature_ ? &*cubature_ : nullptr; }
@@ -287,7 +302,7 @@ private:
   // Replaces the method object, carrying (u, v) over; Keep: no particle moves (a switch).
   void install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder);
   // The equilibrium and the bases: from the cache when it holds them, else computed (and stored).
-  void precompute(const StageFn& on_stage);
+  void precompute(const StageFn& on_stage, const IterationFn& on_iteration);
   // Loads, or trains and stores, the cubature on the physical basis.
   void prepareCubature();
   // The grid is simulated in a moving frame that has left its start: B's coordinates are not the world's.
@@ -309,6 +324,8 @@ private:
   Eigen::VectorXd x_start_;  // where reset() puts the grid
   Eigen::VectorXd u_start_;  // the same as a free-dof displacement from x_ref_
   Eigen::VectorXd anchor_;   // the run's start as its method held it: divergence is measured from here
+  bool basis_built_ = false;
+  Eigen::VectorXd equilibrium_;  // all dofs, when it was solved: stored in the cache with the bases
   ModalBasis basis_;            // the eigenbasis (`linear`)
   ModalBasis physical_basis_;   // the basis of the modal methods other than `linear`
   DerivativeBasisInfo derivative_info_;

@@ -57,6 +57,9 @@ public:
   bool solveMatrixFree(const std::function<void(const Eigen::VectorXd&, Eigen::VectorXd&)>& multiply,
                        const Eigen::VectorXd& diagonal_blocks, const Eigen::VectorXd& b, Eigen::VectorXd& x,
                        double tolerance);
+  // x <- J^-1 b with the factor of the J that solve() last factorised (iterative refinement: no new
+  // factorisation); false when there is none or it failed.
+  bool solveWithFactor(const Eigen::VectorXd& b, Eigen::VectorXd& x);
   // The next J is far from the earlier ones (another step size): factorise it rather than iterate.
   void forgetFactor() { factor_current_ = false; }
   TangentSolverKind kind() const { return kind_; }

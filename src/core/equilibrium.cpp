@@ -2,6 +2,7 @@
 #include "modal_mass_spring/equilibrium.h"
 
 #include "modal_mass_spring/spring_forces.h"
+#include "modal_mass_spring/tangent_solver.h"
 
 #include <Eigen/SparseCholesky>
 
@@ -28,10 +29,78 @@ Eigen::VectorXd unbalanced(const Grid& grid, const Eigen::VectorXd& x)
   return grid.gatherFree(f + grid.gravityForce());
 }
 
+// Newton's direction K^-1 r. CHOLMOD's supernodal LLT (BLAS) factorises a 100 x 100 cloth's tangent
+// several times faster than the simplicial LDL^T; its solve is refined against K, because near a
+// flat start K is nearly singular (out of its plane only the 1e-8 regularisation holds a sheet), and
+// there an unrefined solve is accurate to only about cond(K) eps of r, which stalled Newton near
+// 1e-8 N on config/cloth.yaml. The simplicial LDL^T, whose pivots tell an indefinite K, where
+// CHOLMOD's factorisation fails or its direction makes no progress.
+class NewtonDirection
+{
+public:
+  NewtonDirection() : cholmod_(TangentSolverKind::Cholmod), simplicial_(TangentSolverKind::SimplicialLdlt) {}
+
+  // d <- (K + regularisation)^-1 r with the exact Hessian where that is positive definite, else the
+  // one without compressed springs' geometric part; false where neither gives a descent direction.
+  bool solve(const TangentAssembler& assembler, const Eigen::VectorXd& x, const Eigen::VectorXd& r,
+             bool simplicial_only, Eigen::VectorXd& d)
+  {
+    // The simplicial factorisation only where CHOLMOD's failed on both: an indefinite exact Hessian,
+    // which CHOLMOD refuses at once, would only be refused again after a whole simplicial one.
+    if (!simplicial_only && solveWith(cholmod_, assembler, x, r, d))
+      return true;
+    return solveWith(simplicial_, assembler, x, r, d);
+  }
+
+private:
+  bool solveWith(TangentSolver& solver, const TangentAssembler& assembler, const Eigen::VectorXd& x,
+                 const Eigen::VectorXd& r, Eigen::VectorXd& d)
+  {
+    for (CompressedSprings compressed : {CompressedSprings::Keep, CompressedSprings::Drop})
+    {
+      assembler.assemble(x, k_, compressed);
+      const double regularisation = 1e-8 * k_.diagonal().cwiseAbs().maxCoeff();
+      for (int i = 0; i < k_.rows(); ++i)
+        k_.coeffRef(i, i) += regularisation;
+      if (solver.solve(k_, r, d, 0.0) && refine(solver, r, d))
+        return true;
+    }
+    return false;
+  }
+
+
+  // Iterative refinement: d += K^-1 (r - K d) while the residual of the linear system shrinks.
+  bool refine(TangentSolver& solver, const Eigen::VectorXd& r, Eigen::VectorXd& d)
+  {
+    if (!d.allFinite())
+      return false;
+    Eigen::VectorXd residual = r - k_ * d;
+    double norm = residual.norm();
+    for (int pass = 0; pass < kMaxRefinements && norm > 1e-15 * r.norm(); ++pass)
+    {
+      Eigen::VectorXd correction;
+      if (!solver.solveWithFactor(residual, correction))
+        break;
+      const Eigen::VectorXd refined = d + correction;
+      const Eigen::VectorXd refined_residual = r - k_ * refined;
+      if (!(refined_residual.norm() < 0.5 * norm))
+        break;
+      d = refined;
+      residual = refined_residual;
+      norm = residual.norm();
+    }
+    return r.dot(d) > 0.0;
+  }
+
+  static constexpr int kMaxRefinements = 3;
+  TangentSolver cholmod_, simplicial_;
+  SparseMatrix k_;
+};
+
 }  // namespace
 
 Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int max_iterations, double tolerance,
-                             const EquilibriumProgress& progress)
+                             const EquilibriumProgress& progress, EquilibriumSolver solver)
 {
   const GridParams& p = grid.params();
   // Forces are compared with one particle's weight, or without gravity with a small spring force.
@@ -46,11 +115,11 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
   Equilibrium result;
   result.positions = start;
   Eigen::VectorXd r = unbalanced(grid, start);
-  // K's pattern never changes: assembled in place, analysed once. Eigen's simplicial LDL^T, whose
-  // pivots tell an indefinite K: with CHOLMOD's LLT Newton stalled near 1e-8 N on config/cloth.yaml.
+  // K's pattern never changes: assembled in place, analysed once by each factorisation.
   const TangentAssembler assembler(grid);
-  Eigen::SimplicialLDLT<SparseMatrix> ldlt;
-  SparseMatrix k;
+  NewtonDirection newton;
+  // Once a CHOLMOD direction made no progress, the simplicial LDL^T for the rest.
+  bool simplicial_only = solver == EquilibriumSolver::SimplicialLdlt;
   for (result.iterations = 0; result.iterations < max_iterations; ++result.iterations)
   {
     result.residual = r.cwiseAbs().maxCoeff();
@@ -62,42 +131,33 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
     // The exact Hessian where it is positive definite (Newton converges quadratically near a
     // stable equilibrium); where compressed springs make it indefinite, the one without their
     // geometric part, which is semi-definite and so gives a descent direction.
-    Eigen::VectorXd direction;
-    for (CompressedSprings compressed : {CompressedSprings::Keep, CompressedSprings::Drop})
-    {
-      assembler.assemble(result.positions, k, compressed);
-      const double regularisation = 1e-8 * k.diagonal().cwiseAbs().maxCoeff();
-      for (int i = 0; i < k.rows(); ++i)
-        k.coeffRef(i, i) += regularisation;
-      if (result.iterations == 0)
-        ldlt.analyzePattern(k);
-      ldlt.factorize(k);
-      if (ldlt.info() == Eigen::Success && ldlt.vectorD().minCoeff() > 0.0)
-      {
-        direction = ldlt.solve(r);
-        break;
-      }
-    }
-    if (direction.size() == 0 || !direction.allFinite())
-      break;
-
-    // Backtrack until the energy drops (Armijo) or, where energy differences are lost in round-off
-    // near the solution, the unbalanced force shrinks.
-    const double energy = potential(grid, result.positions);
-    const double slope = r.dot(direction);  // -dE/ds along the direction, > 0
     bool accepted = false;
-    for (double s = 1.0; s > 1e-10 && !accepted; s *= 0.5)
+    for (;;)
     {
-      Eigen::VectorXd trial = result.positions;
-      grid.addFree(s * direction, trial);
-      const Eigen::VectorXd trial_r = unbalanced(grid, trial);
-      const double trial_energy = potential(grid, trial);
-      if (trial_energy <= energy - 1e-4 * s * slope || trial_r.norm() < (1.0 - 1e-4 * s) * r.norm())
+      Eigen::VectorXd direction;
+      if (!newton.solve(assembler, result.positions, r, simplicial_only, direction))
+        break;
+
+      // Backtrack until the energy drops (Armijo) or, where energy differences are lost in
+      // round-off near the solution, the unbalanced force shrinks.
+      const double energy = potential(grid, result.positions);
+      const double slope = r.dot(direction);  // -dE/ds along the direction, > 0
+      for (double s = 1.0; s > 1e-10 && !accepted; s *= 0.5)
       {
-        result.positions = trial;
-        r = trial_r;
-        accepted = true;
+        Eigen::VectorXd trial = result.positions;
+        grid.addFree(s * direction, trial);
+        const Eigen::VectorXd trial_r = unbalanced(grid, trial);
+        const double trial_energy = potential(grid, trial);
+        if (trial_energy <= energy - 1e-4 * s * slope || trial_r.norm() < (1.0 - 1e-4 * s) * r.norm())
+        {
+          result.positions = trial;
+          r = trial_r;
+          accepted = true;
+        }
       }
+      if (accepted || simplicial_only)
+        break;
+      simplicial_only = true;  // the same iteration again on the simplicial LDL^T
     }
     if (!accepted)
     {
@@ -116,9 +176,13 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
     return result;
   std::ostringstream msg;
   msg << "static equilibrium not found: Newton stopped after " << result.iterations << " iterations"
-      << (result.iterations >= max_iterations ? " (its limit)" : " (no descent left)") << " with an unbalanced force of " << result.residual << " N (tolerance " << target
-      << " N, of which the spring forces' round-off is about " << roundoff
-      << " N); use linearization 'rest' and initial_state 'initial', which need no equilibrium";
+      << (result.iterations >= max_iterations ? " (its limit)" : " (no descent left)") << " with an unbalanced force of "
+      << result.residual << " N (tolerance " << target << " N, of which the spring forces' round-off is about "
+      << roundoff << " N); "
+      << (result.iterations >= max_iterations
+              ? "raise equilibrium_max_iterations (now " + std::to_string(max_iterations) + "), or "
+              : std::string())
+      << "use linearization 'rest' and initial_state 'initial', which need no equilibrium";
   throw std::runtime_error(msg.str());
 }
 

@@ -86,7 +86,8 @@ private:
 // reorthogonalised only when it passes sqrt(eps) (every third step there), which keeps them
 // semi-orthogonal: enough for Ritz values to working precision. The Ritz vectors are orthonormalised
 // afterwards.
-bool partialLanczos(const ShiftInvert& op, int nev, int max_steps, Eigen::MatrixXd& vectors)
+bool partialLanczos(const ShiftInvert& op, int nev, int max_steps, Eigen::MatrixXd& vectors,
+                    const IterationFn& on_iteration)
 {
   const int n = static_cast<int>(op.rows());
   const int m = std::min(n, max_steps);
@@ -211,10 +212,13 @@ bool partialLanczos(const ShiftInvert& op, int nev, int max_steps, Eigen::Matrix
         beta[j] = 0.0;
       ritz.computeFromTridiagonal(alpha.head(j + 1), beta.head(j), Eigen::ComputeEigenvectors);
       // Ascending: the wanted (largest) ones are the last columns; residual beta_j |last entry|.
-      bool converged = true;
-      for (int i = j + 1 - nev; i <= j && converged && !exhausted; ++i)
-        converged = beta[j] * std::abs(ritz.eigenvectors()(j, i)) <=
-                    kTolerance * std::max(std::abs(ritz.eigenvalues()[i]), 1e-11);
+      double worst = 0.0;  // the largest residual estimate relative to its Ritz value
+      for (int i = j + 1 - nev; i <= j && !exhausted; ++i)
+        worst = std::max(worst, beta[j] * std::abs(ritz.eigenvectors()(j, i)) /
+                                    std::max(std::abs(ritz.eigenvalues()[i]), 1e-11));
+      const bool converged = worst <= kTolerance;
+      if (on_iteration)
+        on_iteration("eigensolver", j + 1, worst, kTolerance);
       if (converged)
       {
         vectors = v.leftCols(j + 1) * ritz.eigenvectors().rightCols(nev);
@@ -279,9 +283,9 @@ void orthonormalRayleighRitz(const SparseMatrix& a, Eigen::VectorXd& values, Eig
 // partial reorthogonalisation; Spectra's restarted Lanczos (full reorthogonalisation, a bounded
 // space) when that has not converged within maxLanczosVectors(nev) - 1 steps.
 void lanczos(const SparseMatrix& a, ShiftInvert& op, int nev, double sigma, Eigen::VectorXd& values,
-             Eigen::MatrixXd& vectors)
+             Eigen::MatrixXd& vectors, const IterationFn& on_iteration)
 {
-  if (partialLanczos(op, nev, maxLanczosVectors(nev) - 1, vectors))
+  if (partialLanczos(op, nev, maxLanczosVectors(nev) - 1, vectors, on_iteration))
   {
     orthonormalRayleighRitz(a, values, vectors);
     return;
@@ -301,7 +305,7 @@ void lanczos(const SparseMatrix& a, ShiftInvert& op, int nev, double sigma, Eige
 }  // namespace
 
 ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorXd& mass, int r,
-                             const StageFn& on_stage)
+                             const StageFn& on_stage, const IterationFn& on_iteration)
 {
   auto stage = [&](const std::string& name) {
     if (on_stage)
@@ -343,7 +347,7 @@ ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorX
     ShiftInvert op(a, basis.shift);
     basis.factorization_seconds = seconds();
     stage("eigensolver");
-    lanczos(a, op, r, basis.shift, values, vectors);
+    lanczos(a, op, r, basis.shift, values, vectors, on_iteration);
     // A Krylov space holds one vector per eigenvalue, so a null space larger than a few vectors (a
     // flat 3D sheet at rest has one zero mode per free particle) is found only in part, and modes
     // above zero slip in. Look again in the complement of what was found until nothing lower turns
@@ -356,7 +360,7 @@ ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorX
                  Eigen::MatrixXd::Identity(n, vectors.cols()));
       Eigen::VectorXd more_values;
       Eigen::MatrixXd more_vectors;
-      lanczos(a, op, r, basis.shift, more_values, more_vectors);
+      lanczos(a, op, r, basis.shift, more_values, more_vectors, on_iteration);
       ++basis.deflation_passes;
       if (more_values.minCoeff() >= highest - zero_tolerance)
         break;

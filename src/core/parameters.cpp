@@ -52,6 +52,7 @@ SimulationParams loadSimulationParams(const ParameterSource& s)
   if (const auto name = s.getString("initial_state"))
     p.initial_state = parseInitialState(*name);
   p.newton_max_iterations = s.getInt("newton_max_iterations").value_or(p.newton_max_iterations);
+  p.equilibrium_max_iterations = s.getInt("equilibrium_max_iterations").value_or(p.equilibrium_max_iterations);
   p.hht_alpha = s.getDouble("hht_alpha").value_or(p.hht_alpha);
   p.energy_tolerance = s.getDouble("energy_tolerance").value_or(p.energy_tolerance);
   p.contact_thickness = s.getDouble("contact_thickness").value_or(p.contact_thickness);

@@ -39,14 +39,14 @@ CubatureParams cubatureParams(const SimulationParams& p)
 }
 
 Simulation::Simulation(const GridParams& grid_params, const SimulationParams& params, const StageFn& on_stage,
-                       const CacheOptions& cache)
+                       const CacheOptions& cache, const IterationFn& on_iteration)
   : grid_((validateParameters(grid_params, params), grid_params)), params_(params), cache_(cache)
 {
   const GridParams& g = grid_.params();
   formulation_ = resolveHandleFormulation(g, params_);
   limit_ = params_.divergence_limit > 0.0 ? params_.divergence_limit
                                           : 100.0 * g.spacing * std::max(g.rows, g.cols);
-  precompute(on_stage);
+  precompute(on_stage, on_iteration);
 
   if (grid_.numHandleDofs() > 0)
     handle_coupling_ = modal_mass_spring::handleCoupling(grid_, x_ref_);
@@ -69,7 +69,7 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
   reset();
 }
 
-void Simulation::precompute(const StageFn& on_stage)
+void Simulation::precompute(const StageFn& on_stage, const IterationFn& on_iteration)
 {
   auto stage = [&](const std::string& name) {
     if (on_stage)
@@ -102,7 +102,13 @@ void Simulation::precompute(const StageFn& on_stage)
     {
       stage("equilibrium");
       const auto start = Clock::now();
-      Equilibrium equilibrium = solveEquilibrium(grid_, grid_.initialPositions());
+      EquilibriumProgress progress;
+      if (on_iteration)
+        progress = [&on_iteration](int iteration, double residual, double target) {
+          on_iteration("equilibrium", iteration, residual, target);
+        };
+      Equilibrium equilibrium = solveEquilibrium(grid_, grid_.initialPositions(), params_.equilibrium_max_iterations,
+                                                 kEquilibriumTolerance, progress);
       data.equilibrium_seconds = since(start);
       data.equilibrium_iterations = equilibrium.iterations;
       data.equilibrium_residual = equilibrium.residual;
@@ -116,6 +122,7 @@ void Simulation::precompute(const StageFn& on_stage)
       x_ref_ = data.equilibrium;
     if (params_.initial_state == InitialState::Equilibrium)
       x_start_ = data.equilibrium;
+    equilibrium_ = data.equilibrium;
   }
   // At a hanging equilibrium compressed springs would make K indefinite: their geometric part is
   // dropped so that no mode has a negative lambda^2. At rest no spring is compressed.
@@ -125,9 +132,38 @@ void Simulation::precompute(const StageFn& on_stage)
   linearization_.stiffness_seconds = since(stiffness_start);
   mass_ = Eigen::VectorXd::Constant(n, grid_.particleMass());
   total_mass_ = mass_.sum();
-  if (!cached)
+  if (cached)
   {
-    data.basis = computeModalBasis(stiffness_, mass_, params_.num_modes, on_stage);
+    // The start-up's times are this start's: loading took the place of the solves.
+    data.basis.build_seconds = data.basis.factorization_seconds = 0.0;
+    data.physical_basis.build_seconds = data.physical_basis.factorization_seconds = 0.0;
+    data.derivative_info.seconds = 0.0;
+    data.skinning_info.seconds = 0.0;
+    basis_ = std::move(data.basis);
+    physical_basis_ = std::move(data.physical_basis);
+    derivative_info_ = data.derivative_info;
+    skinning_info_ = data.skinning_info;
+    skinning_constraint_modes_ = std::move(data.skinning_constraint_modes);
+    basis_built_ = true;
+  }
+  // `full` needs no basis: it is built at the first switch to a modal method (on a 200 x 200 grid it
+  // took minutes).
+  else if (params_.method != Method::Full)
+    buildBasis(on_stage, on_iteration);
+}
+
+void Simulation::buildBasis(const StageFn& on_stage, const IterationFn& on_iteration)
+{
+  if (basis_built_)
+    return;
+  auto stage = [&](const std::string& name) {
+    if (on_stage)
+      on_stage(name);
+  };
+  const GridParams& g = grid_.params();
+  Precomputed data;
+  {
+    data.basis = computeModalBasis(stiffness_, mass_, params_.num_modes, on_stage, on_iteration);
     if (!data.basis.phi.allFinite() || !data.basis.eigenvalues.allFinite() || !data.basis.frequencies.allFinite())
     {
       std::ostringstream value;
@@ -161,21 +197,20 @@ void Simulation::precompute(const StageFn& on_stage)
       data.physical_basis = data.basis;
     }
     if (!cache_report_.basis_file.empty())
-      cache_report_.basis_stored = storePrecomputed(cache_report_.basis_file, key, data, cache_);
-  }
-  else
-  {
-    // The start-up's times are this start's: loading took the place of the solves.
-    data.basis.build_seconds = data.basis.factorization_seconds = 0.0;
-    data.physical_basis.build_seconds = data.physical_basis.factorization_seconds = 0.0;
-    data.derivative_info.seconds = 0.0;
-    data.skinning_info.seconds = 0.0;
+    {
+      data.equilibrium = equilibrium_;
+      data.equilibrium_iterations = linearization_.equilibrium_iterations;
+      data.equilibrium_residual = linearization_.equilibrium_residual;
+      data.equilibrium_seconds = linearization_.equilibrium_seconds;
+      cache_report_.basis_stored = storePrecomputed(cache_report_.basis_file, basisKey(g, params_), data, cache_);
+    }
   }
   basis_ = std::move(data.basis);
   physical_basis_ = std::move(data.physical_basis);
   derivative_info_ = data.derivative_info;
   skinning_info_ = data.skinning_info;
   skinning_constraint_modes_ = std::move(data.skinning_constraint_modes);
+  basis_built_ = true;
 }
 
 void Simulation::prepareCubature()
@@ -217,6 +252,8 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
 {
   // `linear` needs the eigenbasis (F = -Lambda X); every other modal method uses the physical basis,
   // and the cubature is trained on it.
+  if (method != Method::Full)
+    buildBasis();
   const ModalBasis& basis = method == Method::Linear ? basis_ : physical_basis_;
   if (method == Method::Cubature)
     prepareCubature();

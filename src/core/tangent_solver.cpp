@@ -257,6 +257,15 @@ bool TangentSolver::solveMatrixFree(const std::function<void(const Eigen::Vector
   return blockJacobi(multiply, block_size, b, x, tolerance);
 }
 
+bool TangentSolver::solveWithFactor(const Eigen::VectorXd& b, Eigen::VectorXd& x)
+{
+  if (!factor_current_)
+    return false;
+  x = b;
+  factor_->solveInPlace(x);
+  return x.allFinite();
+}
+
 bool TangentSolver::solve(const SparseMatrix& j, const Eigen::VectorXd& b, Eigen::VectorXd& x, double tolerance)
 {
   auto product = [&](const Eigen::VectorXd& p, Eigen::VectorXd& jp) { jp.noalias() = j * p; };

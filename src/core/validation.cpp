@@ -157,6 +157,8 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
                     "must be a finite number > 0 (the energy rise, relative to the grid's energy scale, that counts as divergence)");
   if (p.newton_max_iterations < 1)
     rejectParameter("newton_max_iterations", p.newton_max_iterations, "must be an integer >= 1");
+  if (p.equilibrium_max_iterations < 1)
+    rejectParameter("equilibrium_max_iterations", p.equilibrium_max_iterations, "must be an integer >= 1");
   if (!std::isfinite(p.hht_alpha) || p.hht_alpha < -1.0 / 3.0 || p.hht_alpha > 0.0)
     rejectParameter("hht_alpha", p.hht_alpha, "must be in [-1/3, 0] (0: Newmark average acceleration)");
   if (!std::isfinite(p.cubature_tolerance) || p.cubature_tolerance <= 0.0 || p.cubature_tolerance >= 1.0)

@@ -131,6 +131,7 @@ void SimulationNode::rebuildLoop()
   {
     NodeConfiguration target;
     std::vector<Method> methods;
+    std::vector<bool> with_basis;  // a full track that has switched to a modal method needs it again
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!pending_rebuild_ || stopping_)
@@ -141,17 +142,20 @@ void SimulationNode::rebuildLoop()
       target = *pending_rebuild_;
       pending_rebuild_.reset();
       for (const Track& track : tracks_)
+      {
         methods.push_back(track.simulation->method());
+        with_basis.push_back(track.simulation->basisBuilt());
+      }
     }
     std::vector<std::unique_ptr<Simulation>> built;
     const ros::WallTime start = ros::WallTime::now();
     try
     {
-      for (Method method : methods)
+      for (size_t k = 0; k < methods.size(); ++k)
       {
         SimulationParams params = target.simulation;
-        params.method = method;
-        built.push_back(buildSimulation(target.grid, params, false, "rebuilding"));
+        params.method = methods[k];
+        built.push_back(buildSimulation(target.grid, params, false, "rebuilding", with_basis[k]));
       }
     }
     catch (const std::exception& error)

@@ -49,6 +49,8 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   const bool trains = method == Method::Cubature && !simulation.cubature();
   try
   {
+    if (method != Method::Full)
+      buildBasis(simulation, "building the modal basis");  // once, with its progress logged
     simulation.setMethod(method);  // trains before it replaces anything: a failure keeps the run
   }
   catch (const std::exception& error)

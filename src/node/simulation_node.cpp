@@ -171,9 +171,27 @@ SimulationNode::~SimulationNode()
     rebuild_thread_.join();  // a basis being built is finished and dropped
 }
 
+void SimulationNode::buildBasis(Simulation& simulation, const std::string& activity) const
+{
+  if (simulation.basisBuilt())
+    return;
+  const auto start = Clock::now();
+  StartupProgress progress([](const std::string& line) { ROS_INFO("%s", line.c_str()); },
+                           [start] { return secondsSince(start); }, 1.0, 10.0, activity);
+  {
+    ProgressWatcher watcher(progress);
+    simulation.buildBasis([&progress](const std::string& stage) { progress.onStage(stage); },
+                          [&progress](const std::string& stage, int iteration, double residual, double target) {
+                            progress.onIteration(stage, iteration, residual, target);
+                          });
+  }
+  ROS_INFO("modal basis built in %.3f s: %s", secondsSince(start),
+           describeModes(simulation.basis().frequencies, simulation.basis().num_zero_modes).c_str());
+}
+
 std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& grid_params,
                                                             const SimulationParams& sim_params, bool report,
-                                                            const std::string& activity) const
+                                                            const std::string& activity, bool with_basis) const
 {
   const auto start = Clock::now();
   StartupProgress progress([](const std::string& line) { ROS_INFO("%s", line.c_str()); },
@@ -182,8 +200,14 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
   {
     ProgressWatcher watcher(progress);
     CacheOptions cache{config_.node.cache_dir, [](const std::string& warning) { ROS_WARN("%s", warning.c_str()); }};
-    simulation = std::make_unique<Simulation>(grid_params, sim_params,
-                                              [&progress](const std::string& stage) { progress.onStage(stage); }, cache);
+    const StageFn on_stage = [&progress](const std::string& stage) { progress.onStage(stage); };
+    const IterationFn on_iteration = [&progress](const std::string& stage, int iteration, double residual,
+                                                 double target) {
+      progress.onIteration(stage, iteration, residual, target);
+    };
+    simulation = std::make_unique<Simulation>(grid_params, sim_params, on_stage, cache, on_iteration);
+    if (with_basis)
+      simulation->buildBasis(on_stage, on_iteration);
   }
   if (!report)
     return simulation;
@@ -194,7 +218,9 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
            "%.4g steps per tick at %g Hz, real_time_factor %g",
            grid.params().rows, grid.params().cols, grid.dimension(), grid.numParticles(), grid.springs().size(),
            grid.fixedParticles().size(), toString(simulation->method()).c_str(),
-           describeModes(simulation->basis().frequencies, simulation->basis().num_zero_modes).c_str(),
+           simulation->basisBuilt()
+               ? describeModes(simulation->basis().frequencies, simulation->basis().num_zero_modes).c_str()
+               : "no modal basis yet (full needs none; it is built at the first switch to a modal method)",
            describeStartupTimes(simulation->linearization(), simulation->basis(), total_seconds,
                                 simulation->derivativeInfo(),
                                 simulation->cacheReport().cubature_loaded ? nullptr : simulation->cubature())

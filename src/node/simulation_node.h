@@ -85,7 +85,11 @@ private:
   // Builds a simulation, logging its stages when slow ("<activity> for N s: ...") and, with `report`,
   // the start-up line.
   std::unique_ptr<Simulation> buildSimulation(const GridParams& grid, const SimulationParams& params, bool report,
-                                              const std::string& activity = "starting up") const;
+                                              const std::string& activity = "starting up",
+                                              bool with_basis = false) const;
+  // Builds a `full` simulation's modal basis (Simulation::buildBasis) unless built, logging its
+  // stages and iterations when slow, then the modes.
+  void buildBasis(Simulation& simulation, const std::string& activity) const;
   void buildTracks();
   // Puts every full track at the state of the first reduced one (the same state, the same time), so
   // that the distances measure the methods, not their start.

@@ -147,12 +147,14 @@ std::string describeStage(const std::string& stage)
 }
 
 StartupProgress::StartupProgress(std::function<void(const std::string&)> log, std::function<double()> now,
-                                 double quiet_seconds, double repeat_seconds, std::string activity)
+                                 double quiet_seconds, double repeat_seconds, std::string activity,
+                                 double iteration_seconds)
   : log_(std::move(log)),
     now_(std::move(now)),
     quiet_seconds_(quiet_seconds),
     repeat_seconds_(repeat_seconds),
-    activity_(std::move(activity))
+    activity_(std::move(activity)),
+    iteration_seconds_(iteration_seconds)
 {
   start_ = stage_start_ = now_();
 }
@@ -162,6 +164,22 @@ void StartupProgress::onStage(const std::string& stage)
   std::lock_guard<std::mutex> lock(mutex_);
   stage_ = stage;
   stage_start_ = now_();
+  iteration_.clear();
+  iteration_new_ = false;
+}
+
+void StartupProgress::onIteration(const std::string& stage, int iteration, double residual, double target)
+{
+  char text[160];
+  if (stage == "equilibrium")
+    std::snprintf(text, sizeof text, "Newton iteration %d, largest unbalanced force %.3g N (target %.3g N)", iteration,
+                  residual, target);
+  else
+    std::snprintf(text, sizeof text, "%s step %d, residual %.3g (target %.3g)",
+                  stage == "eigensolver" ? "Lanczos" : stage.c_str(), iteration, residual, target);
+  std::lock_guard<std::mutex> lock(mutex_);
+  iteration_ = text;
+  iteration_new_ = true;
 }
 
 void StartupProgress::poll()
@@ -173,7 +191,8 @@ void StartupProgress::poll()
     if (t - start_ < quiet_seconds_)
       return;
     const bool new_stage = stage_ != reported_stage_;
-    if (!new_stage && t - last_report_ < repeat_seconds_)
+    const bool moved = iteration_new_ && t - last_report_ >= iteration_seconds_;
+    if (!new_stage && !moved && t - last_report_ < repeat_seconds_)
       return;
     std::ostringstream out;
     char text[128];
@@ -184,6 +203,9 @@ void StartupProgress::poll()
       std::snprintf(text, sizeof text, ", for %.1f s so far", t - stage_start_);
       out << text;
     }
+    if (!iteration_.empty())
+      out << ": " << iteration_;
+    iteration_new_ = false;
     line = out.str();
     reported_stage_ = stage_;
     last_report_ = t;

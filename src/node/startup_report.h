@@ -42,18 +42,22 @@ std::string describeHandleFormulation(const GridParams& grid, const SimulationPa
 // "solving the static equilibrium under gravity" for "equilibrium", and so on for the core's stages.
 std::string describeStage(const std::string& stage);
 
-// Follows the core's start-up stages (onStage is a StageFn) and, once the start-up has taken longer
-// than `quiet_seconds`, logs what it is doing: at once, then at each new stage, and every
-// `repeat_seconds` within a long one. poll() is called from another thread (or a test) with the time;
-// `now` gives seconds on any monotonic clock.
+// Follows the core's start-up stages (onStage is a StageFn) and their iterations (onIteration is an
+// IterationFn) and, once the start-up has taken longer than `quiet_seconds`, logs what it is doing:
+// at once, then at each new stage, every `repeat_seconds` within a long one, and every
+// `iteration_seconds` while its iterations move (the latest iteration, its residual and target at
+// the end of the line). poll() is called from another thread (or a test) with the time; `now` gives
+// seconds on any monotonic clock.
 class StartupProgress
 {
 public:
   // `activity` begins each line: "starting up", or "rebuilding" for a live rebuild.
   StartupProgress(std::function<void(const std::string&)> log, std::function<double()> now,
-                  double quiet_seconds = 1.0, double repeat_seconds = 10.0, std::string activity = "starting up");
+                  double quiet_seconds = 1.0, double repeat_seconds = 10.0, std::string activity = "starting up",
+                  double iteration_seconds = 2.0);
 
   void onStage(const std::string& stage);
+  void onIteration(const std::string& stage, int iteration, double residual, double target);
   void poll();
 
 private:
@@ -61,6 +65,9 @@ private:
   std::function<double()> now_;
   double quiet_seconds_, repeat_seconds_;
   std::string activity_;
+  double iteration_seconds_;
+  std::string iteration_;        // the latest iteration's words, empty in a stage without any
+  bool iteration_new_ = false;   // not logged yet
   std::mutex mutex_;
   double start_ = 0.0, stage_start_ = 0.0, last_report_ = 0.0;
   std::string stage_ = "building the grid", reported_stage_;

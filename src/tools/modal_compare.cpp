@@ -616,9 +616,26 @@ void buildEverySetup(const Options& o, const std::vector<ExperimentSetup>& setup
   auto build = [&](const ExperimentSetup& setup, Method m) {
     SimulationParams params = setup.sim;
     params.method = m;
+    // A slow equilibrium or eigensolver says how it goes on stderr, every 2 s.
+    const auto start = std::chrono::steady_clock::now();
+    auto last = start;
+    IterationFn on_iteration;
+    if (!o.quiet)
+      on_iteration = [&](const std::string& stage, int iteration, double residual, double target) {
+        const auto now = std::chrono::steady_clock::now();
+        if (std::chrono::duration<double>(now - last).count() < 2.0)
+          return;
+        last = now;
+        std::cerr << "building " << setup.variant << ": " << stage << ", "
+                  << (stage == "equilibrium" ? "Newton iteration " : "Lanczos step ") << iteration << ", "
+                  << (stage == "equilibrium" ? "largest unbalanced force " : "residual ") << residual
+                  << (stage == "equilibrium" ? " N (target " : " (target ") << target
+                  << (stage == "equilibrium" ? " N), " : "), ") << std::fixed << std::setprecision(1)
+                  << std::chrono::duration<double>(now - start).count() << " s" << std::defaultfloat << "\n";
+      };
     try
     {
-      Simulation built(setup.grid, params, StageFn{}, o.accuracy.cache);
+      Simulation built(setup.grid, params, StageFn{}, o.accuracy.cache, on_iteration);
     }
     catch (const std::bad_alloc&)
     {

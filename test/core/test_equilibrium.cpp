@@ -8,7 +8,11 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+#include <sstream>
+#include <string>
+#include <vector>
 
 using namespace modal_mass_spring;
 
@@ -123,4 +127,125 @@ TEST(Equilibrium, FailureSaysWhatToDoInstead)
     EXPECT_TRUE(contains(e.what(), "linearization 'rest'")) << e.what();
     EXPECT_FALSE(contains(e.what(), "stiffer springs")) << e.what();
   }
+}
+
+namespace
+{
+
+// config/cloth.yaml's sheet: 20 x 20, 0.05 m, 5 g a particle, springs 50/20/5 N/m, released 30
+// degrees out of the vertical (where an unrefined CHOLMOD solve stalled Newton near 1e-8 N).
+GridParams clothYaml()
+{
+  GridParams g;
+  g.rows = g.cols = 20;
+  g.spacing = 0.05;
+  g.dimension = 3;
+  g.mass = 0.005;
+  g.structural_stiffness = 50.0;
+  g.shear_stiffness = 20.0;
+  g.bending = true;
+  g.bending_stiffness = 5.0;
+  g.rotation_deg = 30.0;
+  return g;
+}
+
+double largestUnbalancedForce(const Grid& grid, const Eigen::VectorXd& x)
+{
+  Eigen::VectorXd f;
+  springForces(grid, x, f);
+  return grid.gatherFree(f + grid.gravityForce()).cwiseAbs().maxCoeff();
+}
+
+}  // namespace
+
+TEST(Equilibrium, CholmodConvergesOnClothYaml)
+{
+  // Released at 30 degrees the sheet buckles as it hangs: Newton's path (and which of the buckled
+  // equilibria it finds) hangs on round-off, so only the force balance is compared here.
+  const Grid grid(clothYaml());
+  const Equilibrium eq = solveEquilibrium(grid, grid.initialPositions());
+  EXPECT_LE(largestUnbalancedForce(grid, eq.positions), 1e-9 * grid.particleMass() * 9.81);
+}
+
+TEST(Equilibrium, CholmodFindsTheSimplicialLdltsEquilibrium)
+{
+  GridParams hanging = clothYaml();
+  hanging.rotation_deg = 0.0;  // hangs from the flat vertical sheet without buckling
+  for (const GridParams& g : {hanging, turnedSheet(), paper2D()})
+  {
+    const Grid grid(g);
+    const Equilibrium cholmod = solveEquilibrium(grid, grid.initialPositions());
+    const Equilibrium simplicial = solveEquilibrium(grid, grid.initialPositions(), kDefaultEquilibriumMaxIterations,
+                                                    kEquilibriumTolerance, {}, EquilibriumSolver::SimplicialLdlt);
+    // Both to the full tolerance, 1e-9 of a particle's weight (not the square-root fallback).
+    const double target = 1e-9 * g.mass * 9.81;
+    EXPECT_LE(largestUnbalancedForce(grid, cholmod.positions), target) << g.rows << " x " << g.cols;
+    EXPECT_LE(largestUnbalancedForce(grid, simplicial.positions), target) << g.rows << " x " << g.cols;
+    EXPECT_LT((cholmod.positions - simplicial.positions).cwiseAbs().maxCoeff(), 1e-9) << g.rows << " x " << g.cols;
+  }
+}
+
+TEST(Equilibrium, TellsItsProgressAndItsLimitNamesTheParameter)
+{
+  const Grid grid(clothYaml());
+  std::vector<double> residuals;
+  double told_target = 0.0;
+  const Equilibrium eq = solveEquilibrium(grid, grid.initialPositions(), kDefaultEquilibriumMaxIterations,
+                                          kEquilibriumTolerance, [&](int iteration, double residual, double target) {
+                                            EXPECT_EQ(iteration, static_cast<int>(residuals.size()));
+                                            residuals.push_back(residual);
+                                            told_target = target;
+                                          });
+  ASSERT_EQ(static_cast<int>(residuals.size()), eq.iterations + 1);
+  EXPECT_GT(residuals.front(), 1e3 * told_target);
+  EXPECT_LE(residuals.back(), told_target);
+  ASSERT_GT(eq.iterations, 2);
+
+  // Two iterations fewer than it needs: refused, naming the force reached and the parameter.
+  SimulationParams s = methodParams(Method::Full, 4, 1e-3);
+  s.linearization = Linearization::Equilibrium;
+  s.equilibrium_max_iterations = eq.iterations - 2;
+  try
+  {
+    Simulation sim(clothYaml(), s);
+    FAIL() << "the iteration limit did not stop the equilibrium";
+  }
+  catch (const std::runtime_error& e)
+  {
+    std::ostringstream reached;
+    reached << "unbalanced force of " << residuals[eq.iterations - 2] << " N";
+    EXPECT_TRUE(contains(e.what(), reached.str())) << e.what();
+    EXPECT_TRUE(contains(e.what(), "(its limit)")) << e.what();
+    EXPECT_TRUE(contains(e.what(), "raise equilibrium_max_iterations (now " + std::to_string(eq.iterations - 2) + ")"))
+        << e.what();
+  }
+}
+
+TEST(Equilibrium, FullBuildsItsBasisOnlyWhenAModalMethodIsSet)
+{
+  SimulationParams s = methodParams(Method::Full, 6, 1e-3);
+  s.linearization = Linearization::Equilibrium;
+  GridParams g = clothYaml();
+  g.rows = g.cols = 8;
+  std::vector<std::string> stages, iterated;
+  Simulation full(
+      g, s, [&](const std::string& stage) { stages.push_back(stage); }, {},
+      [&](const std::string& stage, int, double, double) { iterated.push_back(stage); });
+  EXPECT_FALSE(full.basisBuilt());
+  EXPECT_EQ(full.basis().phi.cols(), 0);
+  EXPECT_EQ(std::count(stages.begin(), stages.end(), "eigensolver"), 0);
+  EXPECT_GT(std::count(iterated.begin(), iterated.end(), "equilibrium"), 2);
+  EXPECT_EQ(std::count(iterated.begin(), iterated.end(), "eigensolver"), 0);
+  full.step(20);
+  const Eigen::VectorXd before = full.positions();
+
+  full.setMethod(Method::Physical);  // builds it now, the motion carried over
+  EXPECT_TRUE(full.basisBuilt());
+  EXPECT_LT((full.positions() - before).cwiseAbs().maxCoeff(), 1e-14);
+  s.method = Method::Physical;
+  const Simulation modal(g, s);
+  ASSERT_EQ(full.basis().phi.cols(), 6);
+  EXPECT_LT((full.basis().frequencies - modal.basis().frequencies).cwiseAbs().maxCoeff(),
+            1e-9 * modal.basis().frequencies.maxCoeff());
+  EXPECT_LT((full.basis().phi - modal.basis().phi).cwiseAbs().maxCoeff(), 1e-6);
 }

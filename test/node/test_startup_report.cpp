@@ -149,6 +149,32 @@ TEST(StartupProgress, ASlowStartUpSaysWhatItIsDoing)
   EXPECT_NE(log.lines[3].find("(eigensolver), for 10.2 s so far"), std::string::npos) << log.lines[3];
 }
 
+TEST(StartupProgress, IterationsAreToldEveryTwoSecondsWhileTheyMove)
+{
+  FakeClockLog log;
+  log.progress.onStage("equilibrium");
+  log.progress.onIteration("equilibrium", 3, 2.5e-4, 4.9e-11);
+  log.at(1.05);
+  ASSERT_EQ(log.lines.size(), 1u);
+  EXPECT_NE(log.lines[0].find(": Newton iteration 3, largest unbalanced force 0.00025 N (target 4.9e-11 N)"),
+            std::string::npos)
+      << log.lines[0];
+  log.progress.onIteration("equilibrium", 4, 1e-6, 4.9e-11);
+  log.at(2.9);
+  EXPECT_EQ(log.lines.size(), 1u) << "not within 2 s";
+  log.at(3.1);
+  ASSERT_EQ(log.lines.size(), 2u) << "a new iteration after 2 s";
+  EXPECT_NE(log.lines[1].find("Newton iteration 4, largest unbalanced force 1e-06 N"), std::string::npos) << log.lines[1];
+  log.at(5.5);
+  EXPECT_EQ(log.lines.size(), 2u) << "no new iteration: the 10 s repeat only";
+  log.progress.onStage("eigensolver");
+  log.progress.onIteration("eigensolver", 40, 3e-7, 1e-12);
+  log.at(5.6);
+  ASSERT_EQ(log.lines.size(), 3u);
+  EXPECT_NE(log.lines[2].find("(eigensolver): Lanczos step 40, residual 3e-07 (target 1e-12)"), std::string::npos)
+      << log.lines[2];
+}
+
 }  // namespace
 
 TEST(StartupReport, HandleFormulationAndWhy)
