@@ -114,7 +114,7 @@ private:
   // Weighted sum over T of spring forces (returned in f) and energies at X.
   double weightedSprings(const Eigen::VectorXd& modal, Eigen::VectorXd* f);
   template <int Dim>
-  double weightedSpringForces(const Eigen::VectorXd& modal, bool forces);
+  double weightedSpringForces(const Eigen::VectorXd& modal, Eigen::VectorXd* f);
   template <int Dim>
   void weightedTangentBlocks();
   // d_ = D X + the rest vectors, unless it already holds them for this X (a tangent after the force
@@ -126,8 +126,9 @@ private:
   int dim_;
   std::vector<Spring> springs_;
   Eigen::VectorXd weights_;
-  Eigen::MatrixXd diff_;        // D, (|T| dim) x r: rows of Phi_j - Phi_i, zero for fixed dofs
-  Eigen::MatrixXd diff_t_;      // D^T, for the tangent's blocks (a spring's D_s^T is contiguous there)
+  // D^T, r x (|T| dim), D's rows Phi_j - Phi_i (zero for fixed dofs) stored as columns: a spring's
+  // D_s^T is contiguous, for the force's pass and the tangent's blocks (D itself is not kept).
+  Eigen::MatrixXd diff_t_;
   Eigen::VectorXd rest_diff_;   // x_ref_j - x_ref_i per spring of T
   Eigen::VectorXd constant_;    // Phi^T f_g plus the correction that makes F exact at X = 0
   double energy_constant_ = 0.0;
@@ -139,9 +140,9 @@ private:
   AffineHandleFit fit_;
   Eigen::VectorXd base_rest_diff_, affine_, non_affine_;
   double base_energy_constant_ = 0.0;
-  // Scratch, kept so that a step allocates nothing: spring vectors (and the X they are at), weighted
-  // forces, the blocks (w_s K_s D_s)^T, D_s^T u and the reduced tangent.
-  Eigen::VectorXd d_, d_modal_, fd_, d_rows_;
+  // Scratch, kept so that a step allocates nothing: spring vectors (and the X they are at), the
+  // blocks (w_s K_s D_s)^T, D_s^T u and the reduced tangent.
+  Eigen::VectorXd d_, d_modal_, d_rows_;
   Eigen::MatrixXd weighted_t_, reduced_;
   // The last force and its X: an implicit step asks again for the force at the state it starts from.
   Eigen::VectorXd f_modal_, f_;

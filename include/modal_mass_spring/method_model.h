@@ -287,6 +287,7 @@ private:
   CubatureForceModel* cubature_force_ = nullptr;
   Eigen::VectorXd reference_handles_;  // dx_b at the force model's last setReference
   Eigen::MatrixXd interface_mass_;  // Phi^T M Psi (r x handle dofs)
+  Eigen::MatrixXd interface_mass_affine_;  // Phi^T M Psi H (r x the handles' affine maps), with psi_affine_
   // Phi^T (K_ii Psi + K_ib): the stiffness-proportional damping of the handles' velocity; empty when
   // Psi is static (zero).
   Eigen::MatrixXd interface_stiffness_;

@@ -395,21 +395,20 @@ CubatureForceModel::CubatureForceModel(const Grid& grid, const ModalBasis& basis
 {
   const Eigen::Index count = static_cast<Eigen::Index>(cubature.springs.size());
   const Eigen::MatrixXd phi_t = basis.phi.transpose();
-  diff_.resize(count * dim_, basis.phi.cols());
+  diff_t_.resize(basis.phi.cols(), count * dim_);
   for (Eigen::Index t = 0; t < count; ++t)
   {
     springs_.push_back(grid.springs()[cubature.springs[t]]);
-    diff_.middleRows(t * dim_, dim_) = springRows(grid, phi_t, springs_.back());
+    diff_t_.middleCols(t * dim_, dim_) = springRows(grid, phi_t, springs_.back()).transpose();
   }
   // The exact force at the reference is part of F: it carries the round-off of every spring.
-  diff_t_ = diff_.transpose();
   roundoff_ = modalRoundoff(grid, basis, x_ref);
   setReference(x_ref);
 }
 
 void CubatureForceModel::setReference(const Eigen::VectorXd& x_ref)
 {
-  rest_diff_.resize(diff_.rows());
+  rest_diff_.resize(diff_t_.cols());
   for (size_t t = 0; t < springs_.size(); ++t)
     rest_diff_.segment(static_cast<Eigen::Index>(t) * dim_, dim_) = restDiff(grid_, x_ref, springs_[t]);
   d_modal_.resize(0);
@@ -444,7 +443,7 @@ void CubatureForceModel::setHandleMap(const Eigen::MatrixXd& psi, const AffineHa
     else if (handle_index[static_cast<size_t>(dof)] >= 0)
       handle_rows_(row, handle_index[static_cast<size_t>(dof)]) += sign;
   };
-  handle_rows_.setZero(diff_.rows(), nb);
+  handle_rows_.setZero(diff_t_.cols(), nb);
   for (size_t t = 0; t < springs_.size(); ++t)
     for (int a = 0; a < dim_; ++a)
     {
@@ -478,42 +477,59 @@ void CubatureForceModel::springVectors(const Eigen::VectorXd& modal)
 {
   if (d_modal_.size() == modal.size() && d_modal_ == modal)
     return;
-  d_.noalias() = diff_ * modal;
+  d_.noalias() = diff_t_.transpose() * modal;
   d_ += rest_diff_;
   d_modal_ = modal;
 }
 
 // The per-spring work with the dimension fixed at compile time: Eigen's fixed-size vectors keep it on
-// the stack and unrolled (dynamic ones of at most 3 entries cost twice as much here).
+// the stack and unrolled (dynamic ones of at most 3 entries cost twice as much here). One pass over
+// D^T, spring by spring: its block D_s^T (r x dim, contiguous) gives the spring vector D_s X and,
+// still in cache, takes back its force D_s^T f_s: D is kept once (as D^T) and read once per force.
+// The multiply-adds, 2 |T| dim r, are the cost (docs/benchmarks.md, "The cubature's step").
 template <int Dim>
-double CubatureForceModel::weightedSpringForces(const Eigen::VectorXd& modal, bool forces)
+double CubatureForceModel::weightedSpringForces(const Eigen::VectorXd& modal, Eigen::VectorXd* f)
 {
   using Vector = Eigen::Matrix<double, Dim, 1>;
-  springVectors(modal);
-  fd_.resize(d_.size());
+  // d_ holds the spring vectors already when a tangent or an energy at this X came first.
+  const bool known = d_modal_.size() == modal.size() && d_modal_ == modal;
+  d_.resize(diff_t_.cols());
+  if (f)
+    f->setZero(diff_t_.rows());
   double energy = 0.0;
   for (size_t t = 0; t < springs_.size(); ++t)
   {
     const Eigen::Index row = static_cast<Eigen::Index>(t) * Dim;
     const Spring& s = springs_[t];
-    const Vector d = d_.segment<Dim>(row);
+    const auto block = diff_t_.middleCols<Dim>(row);  // D_s^T
+    Vector d;
+    if (known)
+    {
+      d = d_.segment<Dim>(row);
+    }
+    else
+    {
+      for (int c = 0; c < Dim; ++c)
+        d[c] = block.col(c).dot(modal) + rest_diff_[row + c];
+      d_.segment<Dim>(row) = d;
+    }
     const double l = d.norm();
     const double stretch = l - s.rest_length;
     const double tension = weights_[static_cast<Eigen::Index>(t)] * s.stiffness * stretch;  // w_s k_s (l - L)
     energy += 0.5 * tension * stretch;
-    if (forces)
-      fd_.segment<Dim>(row) = (tension / l) * d;  // w_s times the force on particle i
+    if (f)
+    {
+      const Vector force = (tension / l) * d;  // w_s times the force on particle i
+      f->noalias() -= block * force;             // dE_s/dX = D_s^T f_i, in one pass over f
+    }
   }
+  d_modal_ = modal;
   return energy;
 }
 
 double CubatureForceModel::weightedSprings(const Eigen::VectorXd& modal, Eigen::VectorXd* f)
 {
-  const double energy =
-      dim_ == 3 ? weightedSpringForces<3>(modal, f != nullptr) : weightedSpringForces<2>(modal, f != nullptr);
-  if (f)
-    f->noalias() = -diff_.transpose() * fd_;  // dE_s/dX = D_s^T f_i
-  return energy;
+  return dim_ == 3 ? weightedSpringForces<3>(modal, f) : weightedSpringForces<2>(modal, f);
 }
 
 void CubatureForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorXd& f)
@@ -572,7 +588,7 @@ void CubatureForceModel::tangentStiffness(const Eigen::VectorXd& modal, SparseMa
   else
     weightedTangentBlocks<2>();
   // D^T (w K D) is symmetric: one triangle is computed, half the product's cost, and mirrored.
-  const Eigen::Index r = diff_.cols();
+  const Eigen::Index r = diff_t_.rows();
   reduced_.resize(r, r);
   reduced_.triangularView<Eigen::Lower>() = diff_t_ * weighted_t_.transpose();
   for (Eigen::Index j = 1; j < r; ++j)

@@ -220,6 +220,7 @@ ModalMethod::ModalMethod(Method method, const LinearizedGrid& linearized, const 
     {
       handle_fit_ = AffineHandleFit(lin_.grid, lin_.x_ref);
       psi_affine_ = *lin_.constraint_modes * handle_fit_.h;
+      interface_mass_affine_ = interface_mass_ * handle_fit_.h;
       if (method == Method::Cubature)
       {
         cubature_force_ = static_cast<CubatureForceModel*>(modal_force_);
@@ -362,7 +363,14 @@ void ModalMethod::setHandleMotion(const HandleMotion& motion)
     updateReference();
   // The interior's acceleration Psi a_b and the mass-proportional damping of its velocity Psi v_b
   // (the stiffness-proportional part cancels with the coupling: beta (K_ii Psi + K_ib) v_b = 0).
-  Eigen::VectorXd load = -interface_mass_ * (handle_motion_.acceleration + settings_.alpha * handle_motion_.velocity);
+  // Through the handles' affine part when their motion is affine (a turned clamp): r x 12 instead of
+  // r x handle dofs (a tenth of a cubature step with 1000 springs on the 100 x 100 clamp, more with fewer).
+  const Eigen::VectorXd inertial = handle_motion_.acceleration + settings_.alpha * handle_motion_.velocity;
+  Eigen::VectorXd load, affine, rest;
+  if (interface_mass_affine_.size() > 0 && !handle_fit_.split(inertial, affine, rest))
+    load = -interface_mass_affine_ * affine;
+  else
+    load = -interface_mass_ * inertial;
   if (interface_stiffness_.size() > 0 && settings_.beta != 0.0)
     load.noalias() -= settings_.beta * (interface_stiffness_ * handle_motion_.velocity);
   setHandleLoad(load);

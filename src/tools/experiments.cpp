@@ -14,6 +14,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include <time.h>
+
 namespace modal_mass_spring
 {
 namespace
@@ -24,6 +26,14 @@ using Clock = std::chrono::steady_clock;
 double seconds(Clock::time_point start)
 {
   return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// This thread's CPU time (s): what a step costs whatever else shares the machine's cores.
+double threadCpuSeconds()
+{
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
 }
 
 double median(std::vector<double> values)
@@ -227,7 +237,7 @@ struct AccuracyRun
   int steps_per_sample = 0;
   bool timed = false;  // its wall time per step is reported
   bool diverged = false;
-  double step_seconds = 0.0;
+  double step_seconds = 0.0, step_cpu_seconds = 0.0;
   std::unique_ptr<HandleDriver> driver = nullptr;  // moves the handles of a handle scenario, one step at a time
 
   void advance(const std::string& variant, std::vector<std::string>& messages)
@@ -235,6 +245,7 @@ struct AccuracyRun
     if (diverged)
       return;
     const auto start = Clock::now();
+    const double cpu_start = threadCpuSeconds();
     StepResult r;
     if (driver)
       for (int k = 0; k < steps_per_sample && !r.diverged; ++k)
@@ -245,6 +256,7 @@ struct AccuracyRun
     else
       r = sim->step(steps_per_sample);
     step_seconds = seconds(start) / steps_per_sample;
+    step_cpu_seconds = (threadCpuSeconds() - cpu_start) / steps_per_sample;
     if (r.diverged)
     {
       diverged = true;
@@ -326,6 +338,7 @@ ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, const Accurac
   e.time = step * setup.sim.time_step;
   e.diverged = run.diverged || reference_diverged;
   e.step_seconds = run.timed && step > 0 ? run.step_seconds : 0.0;
+  e.step_cpu_seconds = run.timed && step > 0 ? run.step_cpu_seconds : 0.0;
   if (e.diverged)
   {
     e.max_distance = e.rms_distance = e.max_displacement = e.energy = e.center_y = std::numeric_limits<double>::quiet_NaN();
@@ -405,7 +418,7 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
 std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& rows)
 {
   std::vector<AccuracySummary> out;
-  std::vector<std::vector<double>> times;
+  std::vector<std::vector<double>> times, cpu_times;
   std::vector<int> counts;
   for (const ErrorSample& e : rows)
   {
@@ -418,6 +431,7 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
       out.back().variant = e.variant;
       out.back().method = e.method;
       times.emplace_back();
+      cpu_times.emplace_back();
       counts.push_back(0);
       it = out.end() - 1;
     }
@@ -436,6 +450,8 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
     s.final_rms = e.rms_distance;
     if (e.step_seconds > 0.0)
       times[k].push_back(e.step_seconds);
+    if (e.step_cpu_seconds > 0.0)
+      cpu_times[k].push_back(e.step_cpu_seconds);
     ++counts[k];
   }
   for (size_t k = 0; k < out.size(); ++k)
@@ -454,6 +470,7 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
     if (s.diverged)
       s.final_rms = std::numeric_limits<double>::quiet_NaN();
     s.step_seconds_median = median(times[k]);
+    s.step_cpu_seconds_median = median(cpu_times[k]);
     double sum = 0.0;
     for (double t : times[k])
       sum += t;
@@ -732,14 +749,14 @@ std::vector<AccuracySummary> notBuiltSummaries(const std::string& variant, const
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::vector<AccuracySummary> out;
   for (const auto& [method, reason] : result.not_built)
-    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, false, reason});
+    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, nan, false, reason});
   return out;
 }
 
 void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummary>& rows)
 {
-  precise(out) << "variant,method,mean_rms,max_rms,mean_max,final_rms,step_seconds_median,step_seconds_mean,diverged,"
-                  "not_built\n";
+  precise(out) << "variant,method,mean_rms,max_rms,mean_max,final_rms,step_seconds_median,step_seconds_mean,"
+                  "step_cpu_seconds_median,diverged,not_built\n";
   for (const AccuracySummary& s : rows)
   {
     // The reason is free text: quoted, its quotes doubled.
@@ -748,7 +765,7 @@ void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummar
       reason += c == '"' ? std::string("\"\"") : std::string(1, c);
     out << s.variant << ',' << s.method << ',' << Field{s.mean_rms} << ',' << Field{s.max_rms} << ','
         << Field{s.mean_max} << ',' << Field{s.final_rms} << ',' << Field{s.step_seconds_median} << ','
-        << Field{s.step_seconds_mean} << ',' << (s.diverged ? 1 : 0) << ",\"" << reason << "\"\n";
+        << Field{s.step_seconds_mean} << ',' << Field{s.step_cpu_seconds_median} << ',' << (s.diverged ? 1 : 0) << ",\"" << reason << "\"\n";
   }
 }
 

@@ -96,6 +96,7 @@ struct ErrorSample
   bool diverged = false;          // the method diverged at or before this step: no distances
   // Wall time per step over the `sample` steps that led here (0 at step 0 and for the reference).
   double step_seconds = 0.0;
+  double step_cpu_seconds = 0.0;  // and this thread's CPU time per step, which other processes do not inflate
   // The particles' mean y (m): a swing of a 3D sheet about its top edge (along x) moves it; 0 in 2D.
   double center_y = 0.0;
 };
@@ -233,7 +234,7 @@ struct AccuracySummary
 {
   std::string variant, method;
   double mean_rms = 0.0, max_rms = 0.0, mean_max = 0.0, final_rms = 0.0;
-  double step_seconds_median = 0.0, step_seconds_mean = 0.0;
+  double step_seconds_median = 0.0, step_seconds_mean = 0.0, step_cpu_seconds_median = 0.0;
   bool diverged = false;
   std::string not_built;  // why the method could not be built (no samples, distances NaN); empty when it ran
 };

@@ -645,3 +645,99 @@ TEST(Cubature, EverySpringAtWeightOneFollowsPhysicalWhileHandlesMove)
     EXPECT_LT(energy_gap, 1e-9 * energy_scale) << toString(kind);
   }
 }
+
+TEST(Cubature, ForceEnergyAndTangentEqualTheirSumsOverTheSpringsComputedOnTheWholeGrid)
+{
+  // The model's one pass over its springs' rows of Phi against the same weighted sums assembled the
+  // plain way, particle by particle on the whole grid and projected by Phi^T: F(X) = Phi^T (f(x_ref) +
+  // f_g) + F_T(X) - F_T(0), F_T = Phi^T f_T(x_ref + Phi X), f_T the weighted forces of T's springs;
+  // the energy likewise, and the tangent Phi^T K_T Phi. Whatever order they are asked in (a tangent
+  // or an energy first reuses the spring vectors), at several poses.
+  for (const GridParams& g : {paper2D(), paper3D()})
+  {
+    const int r = g.dimension == 2 ? 4 : 30;
+    Simulation sim(g, paperParams(Method::Physical, r));
+    const Grid& grid = sim.grid();
+    const Eigen::MatrixXd& phi = sim.basis().phi;
+    const Eigen::VectorXd& x_ref = sim.linearizationPositions();
+    const int dim = grid.dimension();
+    Cubature half;
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<double> weight(0.5, 2.0);
+    for (size_t k = 0; k < grid.springs().size(); k += 2)
+      half.springs.push_back(static_cast<int>(k));
+    half.weights.resize(static_cast<Eigen::Index>(half.springs.size()));
+    for (Eigen::Index t = 0; t < half.weights.size(); ++t)
+      half.weights[t] = weight(rng);
+    // f_T, E_T and K_T at X, on the whole grid.
+    auto sums = [&](const Eigen::VectorXd& modal, Eigen::VectorXd& f, Eigen::MatrixXd& k) {
+      Eigen::VectorXd x = x_ref;
+      grid.addFree(phi * modal, x);
+      f.setZero(x.size());
+      k.setZero(x.size(), x.size());
+      double energy = 0.0;
+      for (size_t t = 0; t < half.springs.size(); ++t)
+      {
+        const Spring& s = grid.springs()[static_cast<size_t>(half.springs[t])];
+        const double w = half.weights[static_cast<Eigen::Index>(t)];
+        const Eigen::VectorXd d = x.segment(dim * s.j, dim) - x.segment(dim * s.i, dim);
+        const double l = d.norm();
+        energy += 0.5 * w * s.stiffness * (l - s.rest_length) * (l - s.rest_length);
+        const Eigen::VectorXd on_i = w * s.stiffness * (l - s.rest_length) / l * d;
+        f.segment(dim * s.i, dim) += on_i;
+        f.segment(dim * s.j, dim) -= on_i;
+        const Eigen::VectorXd u = d / l;
+        const Eigen::MatrixXd ks =
+            w * s.stiffness *
+            (u * u.transpose() + (1.0 - s.rest_length / l) * (Eigen::MatrixXd::Identity(dim, dim) - u * u.transpose()));
+        k.block(dim * s.i, dim * s.i, dim, dim) += ks;
+        k.block(dim * s.j, dim * s.j, dim, dim) += ks;
+        k.block(dim * s.i, dim * s.j, dim, dim) -= ks;
+        k.block(dim * s.j, dim * s.i, dim, dim) -= ks;
+      }
+      f = phi.transpose() * grid.gatherFree(f);
+      std::vector<int> free;
+      for (int dof = 0; dof < grid.numDofs(); ++dof)
+        if (grid.freeIndex(dof) >= 0)
+          free.push_back(dof);
+      k = phi.transpose() * k(free, free) * phi;
+      return energy;
+    };
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(r);
+    Eigen::VectorXd f_all, f_0;
+    Eigen::MatrixXd k_0;
+    double e_all = 0.0;
+    springForces(grid, x_ref, f_all, &e_all);
+    const Eigen::VectorXd exact_0 = phi.transpose() * grid.gatherFree(f_all + grid.gravityForce());
+    e_all += gravityEnergy(grid, x_ref);
+    const double e_0 = sums(zero, f_0, k_0);
+    for (int order = 0; order < 3; ++order)
+      for (double size : {0.0, 0.05, 0.3})
+      {
+        CubatureForceModel model(grid, sim.basis(), x_ref, half);
+        const Eigen::VectorXd modal = pose(sim, size, 23);
+        Eigen::VectorXd f_t, f;
+        Eigen::MatrixXd k_t;
+        const double e_t = sums(modal, f_t, k_t);
+        SparseMatrix k;
+        double energy = 0.0;
+        if (order == 1)
+          model.tangentStiffness(modal, k);
+        if (order == 2)
+          energy = model.energy(modal);
+        model.force(modal, f);
+        if (order != 1)
+          model.tangentStiffness(modal, k);
+        if (order != 2)
+          energy = model.energy(modal);
+        const Eigen::VectorXd expected = exact_0 + f_t - f_0;
+        const double expected_energy = e_all + e_t - e_0 - (exact_0 - f_0).dot(modal);
+        const double scale = g.structural_stiffness * g.spacing;  // a spring's force at 100% stretch
+        EXPECT_LT((f - expected).norm(), 1e-12 * (expected.norm() + scale)) << g.dimension << "D " << size << " " << order;
+        EXPECT_NEAR(energy, expected_energy, 1e-12 * (std::abs(expected_energy) + scale * g.spacing))
+          << g.dimension << "D " << size << " " << order;
+        EXPECT_LT((Eigen::MatrixXd(k) - k_t).norm(), 1e-12 * (k_t.norm() + g.structural_stiffness / g.mass))
+          << g.dimension << "D " << size << " " << order;
+      }
+  }
+}
