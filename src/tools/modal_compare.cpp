@@ -578,24 +578,38 @@ double resultBytes(const Options& o, const ExperimentSetup& setup, long steps, l
   return bytes;
 }
 
-// Refuses results that would not fit in memory_limit_gb (with what one setup's simulations need).
+// Refuses results that would not fit in memory_limit_gb (with what one setup's simulations need), and
+// names what takes most of it: the results kept, or the setup's simulations.
 void checkResultMemory(const Options& o, const std::vector<ExperimentSetup>& setups, double result_bytes)
 {
+  const bool cubature = std::find(o.methods.begin(), o.methods.end(), Method::Cubature) != o.methods.end();
   for (const ExperimentSetup& setup : setups)
   {
+    // Every method's simulation and the references are alive at once; only `cubature`'s trains.
     const double runs = o.methods.size() + 2.0;
-    const double needed_gb = (result_bytes + runs * estimateMemoryBytes(setup.grid, setup.sim)) / 1e9;
-    if (needed_gb > setup.sim.memory_limit_gb)
+    const double training_bytes = cubatureTrainingBytes(setup.grid, setup.sim);
+    const double simulation_bytes =
+        runs * (estimateMemoryBytes(setup.grid, setup.sim) - training_bytes) + (cubature ? training_bytes : 0.0);
+    const double needed_gb = (result_bytes + simulation_bytes) / 1e9;
+    if (needed_gb <= setup.sim.memory_limit_gb)
+      continue;
+    std::ostringstream allowed;
+    allowed.precision(3);
+    allowed << "need about " << needed_gb << " GB, above memory_limit_gb = " << setup.sim.memory_limit_gb << " GB ("
+            << setup.variant << "): ";
+    if (result_bytes >= simulation_bytes)
     {
-      std::ostringstream allowed;
-      allowed.precision(3);
       allowed << "the results kept in memory (an error sample per method every --sample steps, every particle "
-              << "every --interval steps) need about " << needed_gb << " GB, above memory_limit_gb = "
-              << setup.sim.memory_limit_gb << " GB (" << setup.variant
-              << "); use fewer --steps, a larger --sample or --interval, or --no-snapshots";
+              << "every --interval steps) take " << result_bytes / 1e9
+              << " GB of it; use fewer --steps, a larger --sample or --interval, or --no-snapshots";
       rejectParameter("--steps, --sample", std::to_string(o.accuracy.steps) + ", " + std::to_string(o.accuracy.sample),
                       allowed.str());
     }
+    allowed << "the setup's " << runs << " simulations take " << simulation_bytes / 1e9 << " GB of it"
+            << (cubature ? " (the cubature's training " + fmt(training_bytes / 1e9) + " GB)" : std::string())
+            << "; use a smaller grid, fewer num_modes or num_skinning_weights, fewer --methods, or raise "
+               "memory_limit_gb";
+    rejectParameter("memory_limit_gb", setup.sim.memory_limit_gb, allowed.str());
   }
 }
 

@@ -249,6 +249,10 @@ def cases(configs):
         tool("tag_too_long", "--tag", "--tag", "t" * 250),
         tool("results_beyond_memory", "--steps", "--experiment", "accuracy", "--steps", "100000000",
              "--sample", "1", "--interval", "1000"),
+        # each setup fits alone, its methods' simulations together do not: the limit is named, not --steps
+        tool("simulations_beyond_memory", "memory_limit_gb", "--set", "rows=300", "--set", "cols=300",
+             "--set", "memory_limit_gb=1", "--methods", "linear,physical", "--experiment", "accuracy",
+             "--steps", "10"),
         # also refused when another experiment runs: the config is read whole
         config("handles_bad_in_accuracy_run", held.replace("name: lift", "name: 'lift,now'"),
                "handle_scenarios[0].name", "--experiment", "accuracy"),
