@@ -303,6 +303,8 @@ private:
   void install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder);
   // The equilibrium and the bases: from the cache when it holds them, else computed (and stored).
   void precompute(const StageFn& on_stage, const IterationFn& on_iteration);
+  // Takes the bases and what they report, loaded or built.
+  void adoptBasis(Precomputed&& data);
   // Loads, or trains and stores, the cubature on the physical basis.
   void prepareCubature();
   // The grid is simulated in a moving frame that has left its start: B's coordinates are not the world's.

@@ -139,12 +139,7 @@ void Simulation::precompute(const StageFn& on_stage, const IterationFn& on_itera
     data.physical_basis.build_seconds = data.physical_basis.factorization_seconds = 0.0;
     data.derivative_info.seconds = 0.0;
     data.skinning_info.seconds = 0.0;
-    basis_ = std::move(data.basis);
-    physical_basis_ = std::move(data.physical_basis);
-    derivative_info_ = data.derivative_info;
-    skinning_info_ = data.skinning_info;
-    skinning_constraint_modes_ = std::move(data.skinning_constraint_modes);
-    basis_built_ = true;
+    adoptBasis(std::move(data));
   }
   // `full` needs no basis: it is built at the first switch to a modal method (on a 200 x 200 grid it
   // took minutes).
@@ -205,6 +200,11 @@ void Simulation::buildBasis(const StageFn& on_stage, const IterationFn& on_itera
       cache_report_.basis_stored = storePrecomputed(cache_report_.basis_file, basisKey(g, params_), data, cache_);
     }
   }
+  adoptBasis(std::move(data));
+}
+
+void Simulation::adoptBasis(Precomputed&& data)
+{
   basis_ = std::move(data.basis);
   physical_basis_ = std::move(data.physical_basis);
   derivative_info_ = data.derivative_info;

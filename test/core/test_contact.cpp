@@ -12,6 +12,7 @@
 
 #include <cmath>
 #include <limits>
+#include <tuple>
 
 using namespace modal_mass_spring;
 
@@ -56,6 +57,26 @@ Collider plane(double height, const Eigen::Vector3d& normal = Eigen::Vector3d::U
   c.normal = normal;
   c.friction = friction;
   return c;
+}
+
+// A box, a ball and a rod (capsule) that overlap around the origin, for the pass's brute-force checks.
+std::tuple<Collider, Collider, Collider> boxBallAndRod()
+{
+  Collider box;
+  box.type = ColliderType::Box;
+  box.center = Eigen::Vector3d(0.1, 0.0, -0.2);
+  box.half_extents = Eigen::Vector3d(0.3, 0.2, 0.1);
+  Collider ball;
+  ball.type = ColliderType::Sphere;
+  ball.center = Eigen::Vector3d(0.3, 0.1, -0.1);
+  ball.radius = 0.15;
+  Collider rod;
+  rod.type = ColliderType::Capsule;
+  rod.a = Eigen::Vector3d(-0.3, -0.2, 0.0);
+  rod.b = Eigen::Vector3d(0.3, 0.25, -0.15);
+  rod.radius = 0.05;
+  rod.friction = 0.2;
+  return {box, ball, rod};
 }
 
 // The deepest any free particle of `sim` is below the surface of any of `colliders` (m, >= 0).
@@ -163,20 +184,7 @@ TEST(Contact, PassFindsEveryTouchAndTheDepthAfterItAsABruteForceCheckDoes)
 {
   const Grid grid(flatSheet());
   const double thickness = 0.02;
-  Collider box;
-  box.type = ColliderType::Box;
-  box.center = Eigen::Vector3d(0.1, 0.0, -0.2);
-  box.half_extents = Eigen::Vector3d(0.3, 0.2, 0.1);
-  Collider ball;
-  ball.type = ColliderType::Sphere;
-  ball.center = Eigen::Vector3d(0.3, 0.1, -0.1);
-  ball.radius = 0.15;
-  Collider rod;
-  rod.type = ColliderType::Capsule;
-  rod.a = Eigen::Vector3d(-0.3, -0.2, 0.0);
-  rod.b = Eigen::Vector3d(0.3, 0.25, -0.15);
-  rod.radius = 0.05;
-  rod.friction = 0.2;
+  const auto [box, ball, rod] = boxBallAndRod();
   const std::vector<Collider> colliders{box, ball, rod, plane(-0.35, Eigen::Vector3d(0.2, -0.1, 1.0), 0.8)};
   std::vector<Eigen::Isometry3d> poses(colliders.size(), Eigen::Isometry3d::Identity());
   poses[0] = Eigen::Translation3d(0.05, -0.02, 0.03) * Eigen::AngleAxisd(0.4, Eigen::Vector3d(1.0, 2.0, 0.5).normalized());
@@ -235,20 +243,7 @@ TEST(Contact, OneColliderPassIsTheGeneralPassToTheBit)
 {
   const Grid grid(flatSheet());
   const double thickness = 0.02;
-  Collider box;
-  box.type = ColliderType::Box;
-  box.center = Eigen::Vector3d(0.1, 0.0, -0.2);
-  box.half_extents = Eigen::Vector3d(0.3, 0.2, 0.1);
-  Collider ball;
-  ball.type = ColliderType::Sphere;
-  ball.center = Eigen::Vector3d(0.3, 0.1, -0.1);
-  ball.radius = 0.15;
-  Collider rod;
-  rod.type = ColliderType::Capsule;
-  rod.a = Eigen::Vector3d(-0.3, -0.2, 0.0);
-  rod.b = Eigen::Vector3d(0.3, 0.25, -0.15);
-  rod.radius = 0.05;
-  rod.friction = 0.2;
+  const auto [box, ball, rod] = boxBallAndRod();
   Collider far = ball;  // touches nothing
   far.center = Eigen::Vector3d(50.0, 0.0, 0.0);
   const Eigen::Isometry3d turned =
