@@ -370,12 +370,13 @@ TEST(Contact, SheetRestsOnATableWithinAMillimetreForFiveSeconds)
 // through their basis, measured against `full`.
 namespace
 {
-struct Push
+// What a contact run leaves: the deepest any particle went into a collider, and where each ended.
+struct ContactRun
 {
   double deepest = 0.0;
   Eigen::Matrix3Xd end;
 };
-Push pushHangingSheet(Method method)
+ContactRun pushHangingSheet(Method method)
 {
   GridParams g = flatSheet();
   g.rotation_deg = 0.0;  // hanging in the x-z plane from row 0
@@ -387,7 +388,7 @@ Push pushHangingSheet(Method method)
   finger.radius = 0.05;
   s.colliders = {finger};
   Simulation sim(g, s);
-  Push result;
+  ContactRun result;
   const int steps = 200;  // 1 s: the finger moves 0.2 m along -y, through the sheet's plane
   for (int k = 1; k <= steps; ++k)
   {
@@ -407,13 +408,13 @@ Push pushHangingSheet(Method method)
 
 TEST(Contact, FingerPushesAHangingSheetInEveryMethod)
 {
-  const Push full = pushHangingSheet(Method::Full);
+  const ContactRun full = pushHangingSheet(Method::Full);
   EXPECT_LT(full.deepest, 1e-3);
   // The sheet was pushed along -y by the finger, 0.05 m past the sheet's plane at its end.
   EXPECT_LT(full.end.row(1).minCoeff(), -0.05);
   for (Method m : {Method::Physical, Method::Cubature})
   {
-    const Push reduced = pushHangingSheet(m);
+    const ContactRun reduced = pushHangingSheet(m);
     const double distance = largestMove(reduced.end, full.end);
     std::cout << toString(m) << ": deepest " << reduced.deepest * 1e3 << " mm, largest distance to full "
               << distance * 1e3 << " mm, full pushed " << -full.end.row(1).minCoeff() * 1e3 << " mm\n";
@@ -430,12 +431,7 @@ TEST(Contact, FingerPushesAHangingSheetInEveryMethod)
 // within a measured distance of `full`.
 namespace
 {
-struct Drape
-{
-  double deepest = 0.0;
-  Eigen::Matrix3Xd end;
-};
-Drape drapeOverTableEdge(Method method, BasisKind basis = BasisKind::LinearModes, int weights = 0)
+ContactRun drapeOverTableEdge(Method method, BasisKind basis = BasisKind::LinearModes, int weights = 0)
 {
   SimulationParams s = withColliders(method, IntegratorKind::Implicit, 5e-3, {});
   s.basis = basis;
@@ -447,7 +443,7 @@ Drape drapeOverTableEdge(Method method, BasisKind basis = BasisKind::LinearModes
   table.friction = 0.5;
   s.colliders = {table};
   Simulation sim(flatSheet(), s);
-  Drape result;
+  ContactRun result;
   result.deepest = deepestOverRun(sim, 1.5);
   EXPECT_GT(sim.contact()->report().touching[0], 0) << toString(method);
   result.end = sim.points();
@@ -457,13 +453,13 @@ Drape drapeOverTableEdge(Method method, BasisKind basis = BasisKind::LinearModes
 
 TEST(Contact, SkinningSheetDrapesOverATableEdgeWithoutPenetratingAMillimetre)
 {
-  const Drape full = drapeOverTableEdge(Method::Full);
+  const ContactRun full = drapeOverTableEdge(Method::Full);
   EXPECT_LT(full.deepest, 1e-3);
   // The far row hangs over the edge: well below the table top.
   EXPECT_LT(full.end.row(2).tail(10).maxCoeff(), -0.15);
   for (Method m : {Method::Physical, Method::Cubature})
   {
-    const Drape skinning = drapeOverTableEdge(m, BasisKind::Skinning, 8);
+    const ContactRun skinning = drapeOverTableEdge(m, BasisKind::Skinning, 8);
     const double distance = largestMove(skinning.end, full.end);
     std::cout << toString(m) << ", skinning (8 weights): deepest " << skinning.deepest * 1e3
               << " mm, largest distance to full " << distance * 1e3 << " mm\n";

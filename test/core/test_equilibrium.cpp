@@ -136,15 +136,7 @@ namespace
 // degrees out of the vertical (where an unrefined CHOLMOD solve stalled Newton near 1e-8 N).
 GridParams clothYaml()
 {
-  GridParams g;
-  g.rows = g.cols = 20;
-  g.spacing = 0.05;
-  g.dimension = 3;
-  g.mass = 0.005;
-  g.structural_stiffness = 50.0;
-  g.shear_stiffness = 20.0;
-  g.bending = true;
-  g.bending_stiffness = 5.0;
+  GridParams g = clothSheet();
   g.rotation_deg = 30.0;
   return g;
 }

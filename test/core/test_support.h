@@ -38,9 +38,9 @@ inline modal_mass_spring::GridParams paper3D()
   return g;
 }
 
-// The cloth of config/compare/held_cloth.yaml: n x n (20), 3D, bending springs, nothing fixed, hanging
-// at rest from its handles.
-inline modal_mass_spring::GridParams heldCloth(std::vector<std::vector<int>> handles, int n = 20)
+// The sheet of config/cloth.yaml (unturned): n x n (20), 0.05 m, 5 g a particle, springs 50/20/5 N/m
+// with bending, top row fixed.
+inline modal_mass_spring::GridParams clothSheet(int n = 20)
 {
   modal_mass_spring::GridParams g;
   g.rows = g.cols = n;
@@ -51,6 +51,14 @@ inline modal_mass_spring::GridParams heldCloth(std::vector<std::vector<int>> han
   g.shear_stiffness = 20.0;
   g.bending = true;
   g.bending_stiffness = 5.0;
+  return g;
+}
+
+// The cloth of config/compare/held_cloth.yaml: that sheet with nothing fixed, hanging at rest from its
+// handles.
+inline modal_mass_spring::GridParams heldCloth(std::vector<std::vector<int>> handles, int n = 20)
+{
+  modal_mass_spring::GridParams g = clothSheet(n);
   g.fixed = {};
   g.handles = std::move(handles);
   return g;
