@@ -59,6 +59,10 @@ struct FramePose
   Eigen::Quaterniond rotation = Eigen::Quaterniond::Identity();
 };
 
+// A frame (a handle's or a collider's) that turns more than this within one tick is flipping or
+// glitching: no gripper turns a quarter turn between two ticks.
+constexpr double kMaxFrameTurnPerTick = EIGEN_PI / 2.0;  // rad (90 degrees)
+
 struct RigidPointMotion
 {
   Eigen::Matrix3Xd position, velocity, acceleration;

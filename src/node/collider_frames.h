@@ -40,7 +40,7 @@ public:
   // (placed(k)), as at a first pose, and follows the frame from there.
   void setTargets(const std::vector<std::optional<FramePose>>& poses, const std::vector<std::string>& problems);
   static constexpr double kMaxJumpPerTick = 0.5;                  // m
-  static constexpr double kMaxTurnPerTick = 1.5707963267948966;   // rad (90 degrees), as a handle frame's
+  static constexpr double kMaxTurnPerTick = kMaxFrameTurnPerTick;
   // Frame collider k was placed anew by the last setTargets (a jump that stayed): to be put at
   // pose(k, 0) without a sweep (Simulation::placeCollider).
   bool placed(size_t k) const { return colliders_[k].placed; }

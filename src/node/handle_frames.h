@@ -39,7 +39,7 @@ public:
   // that stays (the same pose at the next tick) is a new grip: the particles keep where they are and
   // follow the frame from there, as at a first lookup.
   void setTargets(const std::vector<std::optional<FramePose>>& poses, const std::vector<std::string>& problems = {});
-  static constexpr double kMaxTurnPerTick = 1.5707963267948966;  // rad (90 degrees)
+  static constexpr double kMaxTurnPerTick = kMaxFrameTurnPerTick;
   // The handle dofs' positions (grid coordinates), velocities and accelerations at the fraction s of
   // a tick lasting `duration` seconds, in Grid::handleDofs() order.
   void motion(double duration, double s, Eigen::VectorXd& x, Eigen::VectorXd& v, Eigen::VectorXd& a) const;
