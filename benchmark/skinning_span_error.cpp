@@ -5,10 +5,11 @@
 // the RMS distance of the free particles of that pose is printed beside `physical`'s own, for each
 // number of weights. Optionally also: `full` at the setup's step, `full` perturbed at one instant (how
 // sensitive the motion itself is), and `physical` restarted from the projection of the reference at
-// one instant (how fast the reduced dynamics leave the best pose).
+// one instant (how fast the reduced dynamics leave the best pose), and the reference continued from
+// `physical`'s state at one instant (whether `full` itself would go where `physical` goes from there).
 //   skinning_span_error --config FILE --scenario NAME [--weights 24,48,96,192] [--set key=value ...]
 //     [--sample 10] [--reference-time-step 0.0001] [--perturb-time 0.4 --perturb dx,dy,dz]
-//     [--restart-time 0.4] [--every k]
+//     [--restart-time 0.4] [--handover-time 1.2] [--off-plane axis] [--every k]
 #include "handle_scenarios.h"
 #include "yaml_parameter_source.h"
 
@@ -40,7 +41,9 @@ struct Args
   double perturb_time = -1.0;
   Eigen::Vector3d perturb = Eigen::Vector3d::Zero();
   double restart_time = -1.0;
+  double handover_time = -1.0;
   int every = 1;  // print every k-th sample
+  int normal_axis = -1;  // >= 0: also the RMS distance of the reference's and physical's free particles off their start along this axis
 };
 
 std::vector<double> numbers(const std::string& text)
@@ -94,6 +97,10 @@ Args parse(int argc, char** argv)
     }
     else if (key == "--restart-time")
       a.restart_time = std::stod(value);
+    else if (key == "--handover-time")
+      a.handover_time = std::stod(value);
+    else if (key == "--off-plane")
+      a.normal_axis = std::stoi(value);
     else if (key == "--every")
       a.every = std::stoi(value);
     else
@@ -104,6 +111,22 @@ Args parse(int argc, char** argv)
   if (a.sample < 1 || a.every < 1 || !(a.reference_time_step > 0.0))
     throw std::invalid_argument("--sample and --every must be >= 1, --reference-time-step > 0");
   return a;
+}
+
+// RMS over the free particles of their distance from where they start along one axis: how far a
+// sheet that starts in a plane has left it.
+double rmsOffPlane(const Grid& grid, const Eigen::VectorXd& x, int axis)
+{
+  const int dim = grid.dimension();
+  double sum2 = 0.0;
+  int count = 0;
+  for (int k : grid.freeDofs())
+    if (k % dim == axis)
+    {
+      sum2 += std::pow(x[k] - grid.initialPositions()[k], 2);
+      ++count;
+    }
+  return count ? std::sqrt(sum2 / count) : 0.0;
 }
 
 // RMS distance over the free particles (neither fixed nor held) of two all-dof position vectors.
@@ -143,7 +166,8 @@ Eigen::VectorXd bestPose(const Simulation& modal, const Eigen::VectorXd& x)
   for (int k = 0; k < mass.size(); ++k)
     mass[k] = grid.particleMass();
   Eigen::VectorXd carried = Eigen::VectorXd::Zero(grid.numFreeDofs());
-  if (grid.numHandleDofs() > 0)
+  // (The handles' motion is empty while they rest at the linearization point.)
+  if (grid.numHandleDofs() > 0 && modal.handleMotion().displacement.size() > 0)
     carried = modal.skinningConstraintModes() * modal.handleMotion().displacement;
   const Eigen::VectorXd rest = grid.gatherFree(x - x_ref) - carried;
   const Eigen::VectorXd free = carried + phi * (phi.transpose() * mass.cwiseProduct(rest));
@@ -245,6 +269,10 @@ int main(int argc, char** argv)
         SimulationParams p = runs[first_modal + k].sim->params();
         add("restart_" + std::to_string(args.weights[k]), p, 1);
       }
+    const size_t first_handover = runs.size();
+    if (args.handover_time >= 0.0)
+      for (int w : args.weights)
+        add("handover_" + std::to_string(w), ref_params, substeps);
 
     const Grid& grid = runs[0].sim->grid();
     std::vector<Column> columns;
@@ -252,9 +280,10 @@ int main(int argc, char** argv)
                 args.scenario.c_str(), static_cast<size_t>(steps / args.sample), args.sample, dt,
                 args.reference_time_step);
     std::printf("# RMS distance of the free particles to the reference, mm: span_W the best pose of W weights' "
-                "span, physical_W its run%s%s\n",
+                "span, physical_W its run%s%s%s\n",
                 perturbed ? ", perturbed the reference moved at --perturb-time" : "",
-                args.restart_time >= 0.0 ? ", restart_W physical started from span_W's pose at --restart-time" : "");
+                args.restart_time >= 0.0 ? ", restart_W physical started from span_W's pose at --restart-time" : "",
+                args.handover_time >= 0.0 ? ", handover_W the reference continued from physical_W's state at --handover-time" : "");
     std::printf("%8s %9s", "t", "full");
     columns.push_back({"full"});
     if (perturbed)
@@ -268,16 +297,28 @@ int main(int argc, char** argv)
       columns.push_back({"span_" + std::to_string(w)});
       columns.push_back({"physical_" + std::to_string(w)});
     }
-    if (args.restart_time >= 0.0)
+    for (const char* kind : {"restart_", "handover_"})
+      if ((kind[0] == 'r' ? args.restart_time : args.handover_time) >= 0.0)
+        for (int w : args.weights)
+        {
+          std::printf(" %11s", (kind + std::to_string(w)).c_str());
+          columns.push_back({kind + std::to_string(w)});
+        }
+    if (args.normal_axis >= 0)
+    {
+      std::printf(" %9s", "off_ref");
+      columns.push_back({"off_ref"});
       for (int w : args.weights)
       {
-        std::printf(" %11s", ("restart_" + std::to_string(w)).c_str());
-        columns.push_back({"restart_" + std::to_string(w)});
+        std::printf(" %9s", ("off_" + std::to_string(w)).c_str());
+        columns.push_back({"off_" + std::to_string(w)});
       }
+    }
     std::printf("\n");
 
     const long perturb_step = perturbed ? std::lround(args.perturb_time / dt) : -1;
     const long restart_step = args.restart_time >= 0.0 ? std::lround(args.restart_time / dt) : -1;
+    const long handover_step = args.handover_time >= 0.0 ? std::lround(args.handover_time / dt) : -1;
     // Every run one setup step at a time, in lockstep: the perturbation and the restart at the step
     // they name, with the reference at that step.
     for (long step = 0; step <= steps; ++step)
@@ -298,6 +339,9 @@ int main(int argc, char** argv)
         for (Run& r : runs)
           if (r.name.rfind("restart_", 0) == 0)
             takeState(*r.sim, *runs[0].sim);
+      if (step == handover_step)
+        for (size_t k = 0; k < args.weights.size(); ++k)
+          takeState(*runs[first_handover + k].sim, *runs[first_modal + k].sim);
       if (step % args.sample != 0)
         continue;
       const Eigen::VectorXd ref = runs[0].sim->positions();
@@ -324,16 +368,28 @@ int main(int argc, char** argv)
       }
       for (size_t k = first_modal + num_physical; k < runs.size(); ++k)
         cell(runs[k], runs[k].sim->positions(), 11);
+      if (args.normal_axis >= 0)
+      {
+        auto off = [&](const Eigen::VectorXd& x) {
+          const double v = 1e3 * rmsOffPlane(grid, x, args.normal_axis);
+          if (print)
+            std::printf(" %9.2e", v);
+          columns[c++].add(v);
+        };
+        off(ref);
+        for (size_t k = 0; k < num_physical; ++k)
+          off(runs[first_modal + k].sim->positions());
+      }
       if (print)
         std::printf("\n");
     }
     std::printf("%8s", "mean");
     for (const Column& col : columns)
-      std::printf(" %*.2f", col.name.rfind("physical_", 0) == 0 || col.name.rfind("restart_", 0) == 0 ? 11 : 9,
+      std::printf(" %*.2f", col.name.rfind("physical_", 0) == 0 || col.name.rfind("restart_", 0) == 0 || col.name.rfind("handover_", 0) == 0 ? 11 : 9,
                   col.count ? col.sum / col.count : NAN);
     std::printf("\n%8s", "largest");
     for (const Column& col : columns)
-      std::printf(" %*.2f", col.name.rfind("physical_", 0) == 0 || col.name.rfind("restart_", 0) == 0 ? 11 : 9, col.max);
+      std::printf(" %*.2f", col.name.rfind("physical_", 0) == 0 || col.name.rfind("restart_", 0) == 0 || col.name.rfind("handover_", 0) == 0 ? 11 : 9, col.max);
     std::printf("\n");
     return 0;
   }
