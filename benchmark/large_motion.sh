@@ -4,7 +4,9 @@
 # on the modal basis, with modal derivatives and (when the core has it) on the skinning subspace; and
 # the step times on the 100 x 100 held cloth. Writes docs/data/large_motion/ and docs/*large_motion*.png.
 # Uses the modal_compare already built in $MODAL_WS. Usage: benchmark/large_motion.sh [part ...], parts
-# held, grips, release, swing, large (default: all); extra modal_compare options in LARGE_MOTION_ARGS.
+# held, grips, release, swing, large (default: all), and span (not by default: benchmark/skinning_span_error,
+# built by `catkin_make skinning_span_error`, on the shakes and the grips); extra modal_compare options
+# in LARGE_MOTION_ARGS.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/../scripts/env.sh"
 
@@ -81,9 +83,31 @@ for part in "${parts[@]}"; do
             --vary integrator=explicit,implicit --sample 10 --no-snapshots "${extra[@]}"
         fi
         ;;
-      *) echo "large_motion.sh: unknown part '$part': held, grips, release, swing or large" >&2; exit 2 ;;
+      # Span or dynamics: the skinning span's best pose of the converged reference beside `physical`
+      # for 24 to 192 weights, the reference nudged 1 nm out of its plane at 0.4 s, `physical` restarted
+      # from the best pose at 1.2 s, the distance off the start plane (y); then the reference nudged
+      # 1 mm and continued from `physical`'s state at 1.2 s; then the same on a sheet hung 2 degrees
+      # out of the vertical (no mirror symmetry about its plane).
+      span)
+        span_tool="$WS_DIR/devel/lib/modal_mass_spring/skinning_span_error"
+        for scenario in large_motion:shake_x large_motion:shake_y large_motion_grips:corners_together; do
+          config=${scenario%%:*} name=${scenario#*:}
+          for run in sizes nudge tilt; do
+            case $run in
+              sizes) opts=(--weights 24,48,96,192 --perturb 0,1e-9,0 --restart-time 1.2) ;;
+              nudge) opts=(--weights 24 --perturb 0.001,0.001,0 --handover-time 1.2) ;;
+              tilt) opts=(--weights 24,48 --perturb 0,1e-6,0 --set rotation_deg=2) ;;
+            esac
+            echo "# skinning_span_error $name $run: ${opts[*]}"
+            "$span_tool" --config "$configs/$config.yaml" --scenario "$name" --set memory_limit_gb=1000 --every 4 \
+              --perturb-time 0.4 --off-plane 1 "${opts[@]}" 2>&1 | tee "$out/span_error_${name}_$run.txt"
+          done
+        done
+        ;;
+      *) echo "large_motion.sh: unknown part '$part': held, grips, release, swing, large or span" >&2; exit 2 ;;
     esac
     echo "# load average $(cut -d' ' -f1-3 /proc/loadavg) at the end"
   } | tee "$out/summary_$part.txt"
 done
-/usr/bin/python3 "$REPO_DIR/scripts/plot_comparison.py" --data "$out" --out "$REPO_DIR/docs"
+# (span writes text only: no figure to redraw.)
+[ "${parts[*]}" = span ] || /usr/bin/python3 "$REPO_DIR/scripts/plot_comparison.py" --data "$out" --out "$REPO_DIR/docs"
