@@ -9,12 +9,13 @@
 // `physical`'s state at one instant (whether `full` itself would go where `physical` goes from there).
 //   skinning_span_error --config FILE --scenario NAME [--weights 24,48,96,192] [--set key=value ...]
 //     [--sample 10] [--reference-time-step 0.0001] [--perturb-time 0.4 --perturb dx,dy,dz]
-//     [--restart-time 0.4] [--handover-time 1.2] [--off-plane axis] [--every k]
+//     [--restart-time 0.4] [--handover-time 1.2] [--off-plane axis] [--energy 1] [--every k]
 #include "handle_scenarios.h"
 #include "yaml_parameter_source.h"
 
 #include "modal_mass_spring/parameters.h"
 #include "modal_mass_spring/simulation.h"
+#include "modal_mass_spring/spring_forces.h"
 
 #include <cmath>
 #include <cstdio>
@@ -43,6 +44,7 @@ struct Args
   double restart_time = -1.0;
   double handover_time = -1.0;
   int every = 1;  // print every k-th sample
+  bool energy = false;  // also the spring energy of the reference, each best pose and each run (mJ)
   int normal_axis = -1;  // >= 0: also the RMS distance of the reference's and physical's free particles off their start along this axis
 };
 
@@ -99,6 +101,8 @@ Args parse(int argc, char** argv)
       a.restart_time = std::stod(value);
     else if (key == "--handover-time")
       a.handover_time = std::stod(value);
+    else if (key == "--energy")
+      a.energy = value == "1" || value == "true";
     else if (key == "--off-plane")
       a.normal_axis = std::stoi(value);
     else if (key == "--every")
@@ -314,6 +318,17 @@ int main(int argc, char** argv)
         columns.push_back({"off_" + std::to_string(w)});
       }
     }
+    if (args.energy)
+    {
+      std::printf(" %9s", "E_ref");
+      columns.push_back({"E_ref"});
+      for (int w : args.weights)
+        for (const char* kind : {"E_span_", "E_phys_"})
+        {
+          std::printf(" %9s", (kind + std::to_string(w)).c_str());
+          columns.push_back({kind + std::to_string(w)});
+        }
+    }
     std::printf("\n");
 
     const long perturb_step = perturbed ? std::lround(args.perturb_time / dt) : -1;
@@ -381,6 +396,23 @@ int main(int argc, char** argv)
         off(ref);
         for (size_t k = 0; k < num_physical; ++k)
           off(runs[first_modal + k].sim->positions());
+      }
+      if (args.energy)
+      {
+        auto energy = [&](const Eigen::VectorXd& x) {
+          const double v = 1e3 * springEnergy(grid, x);
+          if (print)
+            std::printf(" %9.2f", v);
+          if (step > 0)
+            columns[c].add(v);
+          ++c;
+        };
+        energy(ref);
+        for (size_t k = 0; k < num_physical; ++k)
+        {
+          energy(bestPose(*runs[first_modal + k].sim, ref));
+          energy(runs[first_modal + k].sim->positions());
+        }
       }
       if (print)
         std::printf("\n");
