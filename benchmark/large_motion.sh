@@ -85,18 +85,21 @@ for part in "${parts[@]}"; do
         ;;
       # Span or dynamics: the skinning span's best pose of the converged reference beside `physical`
       # for 24 to 192 weights, the reference nudged 1 nm out of its plane at 0.4 s, `physical` restarted
-      # from the best pose at 1.2 s, the distance off the start plane (y); then the reference nudged
-      # 1 mm and continued from `physical`'s state at 1.2 s; then the same on a sheet hung 2 degrees
-      # out of the vertical (no mirror symmetry about its plane).
+      # from the best pose at 1.2 s, the distance off the start plane (y) and the spring energies; then
+      # the reference nudged 1 mm and continued from `physical`'s state at 1.2 s; then the same on a
+      # sheet hung 2 degrees out of the vertical (no mirror symmetry about its plane), restarted and
+      # handed over at 0.6 s.
       span)
         span_tool="$WS_DIR/devel/lib/modal_mass_spring/skinning_span_error"
         for scenario in large_motion:shake_x large_motion:shake_y large_motion_grips:corners_together; do
           config=${scenario%%:*} name=${scenario#*:}
-          for run in sizes nudge tilt; do
+          for run in sizes nudge tilt tilt_nudge; do
             case $run in
-              sizes) opts=(--weights 24,48,96,192 --perturb 0,1e-9,0 --restart-time 1.2) ;;
+              sizes) opts=(--weights 24,48,96,192 --perturb 0,1e-9,0 --restart-time 1.2 --energy 1) ;;
               nudge) opts=(--weights 24 --perturb 0.001,0.001,0 --handover-time 1.2) ;;
-              tilt) opts=(--weights 24,48 --perturb 0,1e-6,0 --set rotation_deg=2) ;;
+              tilt) opts=(--weights 24,48,192 --perturb 0,1e-6,0 --set rotation_deg=2 --energy 1) ;;
+              tilt_nudge) opts=(--weights 24 --perturb 0.001,0.001,0 --set rotation_deg=2 --restart-time 0.6 \
+                --handover-time 0.6) ;;
             esac
             echo "# skinning_span_error $name $run: ${opts[*]}"
             "$span_tool" --config "$configs/$config.yaml" --scenario "$name" --set memory_limit_gb=1000 --every 4 \
