@@ -10,6 +10,7 @@
 //   skinning_span_error --config FILE --scenario NAME [--weights 24,48,96,192] [--set key=value ...]
 //     [--sample 10] [--reference-time-step 0.0001] [--perturb-time 0.4 --perturb dx,dy,dz]
 //     [--restart-time 0.4] [--handover-time 1.2] [--off-plane axis] [--energy 1] [--every k]
+// (--perturb moves every free dof by its axis' component, in the grid's dof order: x, y, z in 3D.)
 #include "handle_scenarios.h"
 #include "yaml_parameter_source.h"
 
@@ -48,13 +49,39 @@ struct Args
   int normal_axis = -1;  // >= 0: also the RMS distance of the reference's and physical's free particles off their start along this axis
 };
 
-std::vector<double> numbers(const std::string& text)
+// A number of option `key`, the whole text read; throws std::invalid_argument naming the option.
+double number(const std::string& key, const std::string& text)
 {
-  std::vector<double> out;
+  size_t used = 0;
+  double v = 0.0;
+  try
+  {
+    v = std::stod(text, &used);
+  }
+  catch (const std::exception&)
+  {
+    used = 0;
+  }
+  if (used == 0 || used != text.size() || !std::isfinite(v))
+    throw std::invalid_argument(key + " '" + text + "': not a finite number");
+  return v;
+}
+
+int whole(const std::string& key, const std::string& text, int lowest)
+{
+  const double v = number(key, text);
+  if (v != std::floor(v) || v < lowest || v > 1e6)
+    throw std::invalid_argument(key + " '" + text + "': must be a whole number in [" + std::to_string(lowest) + ", 1e6]");
+  return static_cast<int>(v);
+}
+
+std::vector<std::string> items(const std::string& text)
+{
+  std::vector<std::string> out;
   std::stringstream in(text);
   std::string item;
   while (std::getline(in, item, ','))
-    out.push_back(std::stod(item));
+    out.push_back(item);
   return out;
 }
 
@@ -74,8 +101,10 @@ Args parse(int argc, char** argv)
     else if (key == "--weights")
     {
       a.weights.clear();
-      for (double w : numbers(value))
-        a.weights.push_back(static_cast<int>(w));
+      for (const std::string& w : items(value))
+        a.weights.push_back(whole(key, w, 1));
+      if (a.weights.empty())
+        throw std::invalid_argument(key + " '" + value + "': expected numbers of weights, e.g. 24,48");
     }
     else if (key == "--set")
     {
@@ -85,35 +114,53 @@ Args parse(int argc, char** argv)
       a.sets.emplace_back(value.substr(0, eq), value.substr(eq + 1));
     }
     else if (key == "--sample")
-      a.sample = std::stoi(value);
+      a.sample = whole(key, value, 1);
     else if (key == "--reference-time-step")
-      a.reference_time_step = std::stod(value);
+      a.reference_time_step = number(key, value);
     else if (key == "--perturb-time")
-      a.perturb_time = std::stod(value);
+    {
+      a.perturb_time = number(key, value);
+      if (a.perturb_time < 0.0)
+        throw std::invalid_argument(key + " '" + value + "': a time >= 0 (s) of the scenario");
+    }
     else if (key == "--perturb")
     {
-      const std::vector<double> v = numbers(value);
+      const std::vector<std::string> v = items(value);
       if (v.size() != 3)
-        throw std::invalid_argument("--perturb '" + value + "': expected dx,dy,dz (m)");
-      a.perturb = Eigen::Vector3d(v[0], v[1], v[2]);
+        throw std::invalid_argument(key + " '" + value + "': expected dx,dy,dz (m)");
+      a.perturb = Eigen::Vector3d(number(key, v[0]), number(key, v[1]), number(key, v[2]));
     }
     else if (key == "--restart-time")
-      a.restart_time = std::stod(value);
+    {
+      a.restart_time = number(key, value);
+      if (a.restart_time < 0.0)
+        throw std::invalid_argument(key + " '" + value + "': a time >= 0 (s) of the scenario");
+    }
     else if (key == "--handover-time")
-      a.handover_time = std::stod(value);
+    {
+      a.handover_time = number(key, value);
+      if (a.handover_time < 0.0)
+        throw std::invalid_argument(key + " '" + value + "': a time >= 0 (s) of the scenario");
+    }
     else if (key == "--energy")
-      a.energy = value == "1" || value == "true";
+    {
+      if (value != "0" && value != "1")
+        throw std::invalid_argument(key + " '" + value + "': 0 or 1");
+      a.energy = value == "1";
+    }
     else if (key == "--off-plane")
-      a.normal_axis = std::stoi(value);
+      a.normal_axis = whole(key, value, 0);
     else if (key == "--every")
-      a.every = std::stoi(value);
+      a.every = whole(key, value, 1);
     else
       throw std::invalid_argument("unknown option '" + key + "'");
   }
   if (a.config.empty() || a.scenario.empty())
     throw std::invalid_argument("--config and --scenario are required");
-  if (a.sample < 1 || a.every < 1 || !(a.reference_time_step > 0.0))
-    throw std::invalid_argument("--sample and --every must be >= 1, --reference-time-step > 0");
+  if (!(a.reference_time_step > 0.0))
+    throw std::invalid_argument("--reference-time-step must be > 0 (s)");
+  if (a.normal_axis > 2)
+    throw std::invalid_argument("--off-plane " + std::to_string(a.normal_axis) + ": an axis 0, 1 or 2 (x, y, z)");
   return a;
 }
 
@@ -168,7 +215,7 @@ Eigen::VectorXd bestPose(const Simulation& modal, const Eigen::VectorXd& x)
   const Eigen::MatrixXd& phi = modal.physicalBasis().phi;
   Eigen::VectorXd mass(grid.numFreeDofs());
   for (int k = 0; k < mass.size(); ++k)
-    mass[k] = grid.particleMass();
+    mass[k] = grid.particleMass();  // M is the particle mass on every dof
   Eigen::VectorXd carried = Eigen::VectorXd::Zero(grid.numFreeDofs());
   // (The handles' motion is empty while they rest at the linearization point.)
   if (grid.numHandleDofs() > 0 && modal.handleMotion().displacement.size() > 0)
@@ -229,6 +276,16 @@ int main(int argc, char** argv)
     if (substeps < 1 || std::abs(substeps * args.reference_time_step - dt) > 1e-9 * dt)
       throw std::invalid_argument("--reference-time-step must divide time_step");
     const long steps = static_cast<long>(std::ceil(std::ceil(scenario->duration() / dt - 1e-9) / args.sample)) * args.sample;
+    const long perturb_step = args.perturb_time >= 0.0 ? std::lround(args.perturb_time / dt) : -1;
+    const long restart_step = args.restart_time >= 0.0 ? std::lround(args.restart_time / dt) : -1;
+    const long handover_step = args.handover_time >= 0.0 ? std::lround(args.handover_time / dt) : -1;
+    for (const auto& [name, at] : {std::pair<const char*, long>{"--perturb-time", perturb_step},
+                                   {"--restart-time", restart_step}, {"--handover-time", handover_step}})
+      if (at > steps)
+        throw std::invalid_argument(std::string(name) + ": after the scenario's end (" + std::to_string(steps * dt) + " s)");
+    if (args.normal_axis >= grid_params.dimension)
+      throw std::invalid_argument("--off-plane: axis " + std::to_string(args.normal_axis) + " of a " +
+                                  std::to_string(grid_params.dimension) + "D grid");
 
     // The reference as modal_compare's: `full`, explicit, linearized at rest, handles in the world.
     SimulationParams ref_params = sim_params;
@@ -331,9 +388,7 @@ int main(int argc, char** argv)
     }
     std::printf("\n");
 
-    const long perturb_step = perturbed ? std::lround(args.perturb_time / dt) : -1;
-    const long restart_step = args.restart_time >= 0.0 ? std::lround(args.restart_time / dt) : -1;
-    const long handover_step = args.handover_time >= 0.0 ? std::lround(args.handover_time / dt) : -1;
+
     // Every run one setup step at a time, in lockstep: the perturbation and the restart at the step
     // they name, with the reference at that step.
     for (long step = 0; step <= steps; ++step)
