@@ -387,7 +387,9 @@ int main(int argc, char** argv)
         }
     }
     std::printf("\n");
-
+    if (args.normal_axis >= 0 || args.energy)
+      std::printf("# off_*: RMS distance (mm) of the free particles from their start along axis %d; E_*: spring "
+                  "energy (mJ) of the reference, each best pose and each run\n", args.normal_axis);
 
     // Every run one setup step at a time, in lockstep: the perturbation and the restart at the step
     // they name, with the reference at that step.
