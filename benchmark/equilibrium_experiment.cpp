@@ -1,0 +1,237 @@
+// Experiment (not a test): the swinging cloth's static equilibrium from a rotated start by three
+// Newton variants, logged an iteration at a time (docs/benchmarks.md, "Equilibrium100").
+//   equilibrium_experiment SIZE ROTATION_DEG MODE [MAX_ITERATIONS] [SAVE_FILE] [START_FILE]
+// MODE: newton  (solveEquilibrium's direction: exact K where positive definite, else compressed
+//               springs' geometric part dropped; energy line search)
+//       lm      (exact K + mu M, mu halved after a successful step, raised x4 after a failed
+//               factorisation or a rejected step; acceptance on the energy or the unbalanced force)
+//       ptc     (pseudo-transient continuation: exact K + M / h^2, h grown by |r_old| / |r_new|
+//               (switched evolution relaxation), halved when the factorisation fails)
+//       solve   (solveEquilibrium itself)
+// Prints: iteration, largest unbalanced force (N), step accepted, tangent used, springs compressed,
+// CPU seconds so far. SAVE_FILE gets the converged positions (binary doubles); START_FILE starts there.
+#include "modal_mass_spring/equilibrium.h"
+#include "modal_mass_spring/grid.h"
+#include "modal_mass_spring/spring_forces.h"
+#include "modal_mass_spring/tangent_solver.h"
+
+#include "swinging_cloth.h"
+
+#include <ctime>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <string>
+
+using namespace modal_mass_spring;
+
+namespace
+{
+double cpu() { return static_cast<double>(std::clock()) / CLOCKS_PER_SEC; }
+
+double potential(const Grid& grid, const Eigen::VectorXd& x) { return springEnergy(grid, x) + gravityEnergy(grid, x); }
+
+Eigen::VectorXd unbalanced(const Grid& grid, const Eigen::VectorXd& x)
+{
+  Eigen::VectorXd f;
+  springForces(grid, x, f);
+  return grid.gatherFree(f + grid.gravityForce());
+}
+
+// d <- (K + shift I)^-1 r refined; false where not positive definite.
+bool solveShifted(TangentSolver& solver, SparseMatrix& k, double shift, const Eigen::VectorXd& r, Eigen::VectorXd& d)
+{
+  for (int i = 0; i < k.rows(); ++i)
+    k.coeffRef(i, i) += shift;
+  if (!solver.solve(k, r, d, 0.0) || !d.allFinite())
+    return false;
+  for (int pass = 0; pass < 3; ++pass)
+  {
+    const Eigen::VectorXd res = r - k * d;
+    Eigen::VectorXd c;
+    if (!solver.solveWithFactor(res, c))
+      break;
+    if (!((r - k * (d + c)).norm() < 0.5 * res.norm()))
+      break;
+    d += c;
+  }
+  return r.dot(d) > 0.0;
+}
+}  // namespace
+
+int main(int argc, char** argv)
+{
+  if (argc < 4)
+  {
+    std::fprintf(stderr, "usage: %s SIZE ROTATION_DEG newton|lm|ptc|solve [MAX_ITERATIONS] [SAVE_FILE] [START_FILE]\n", argv[0]);
+    return 2;
+  }
+  GridParams g = swingingCloth(std::stoi(argv[1]));
+  g.rotation_deg = std::stod(argv[2]);
+  const std::string mode = argv[3];
+  const int max_iterations = argc > 4 ? std::stoi(argv[4]) : 1000;
+  const Grid grid(g);
+  Eigen::VectorXd x = grid.initialPositions();
+  if (argc > 6)
+  {
+    std::ifstream in(argv[6], std::ios::binary);
+    in.read(reinterpret_cast<char*>(x.data()), static_cast<std::streamsize>(x.size() * sizeof(double)));
+  }
+  const double weight = g.mass * g.gravity.norm();
+  const double target = std::max(kEquilibriumTolerance * weight, 10.0 * springForceRoundoff(grid, x));
+  std::printf("# size %d rotation %g mode %s target %.3g N\n", g.rows, g.rotation_deg, mode.c_str(), target);
+  const double t0 = cpu();
+
+  if (mode == "solve")
+  {
+    const Equilibrium e = solveEquilibrium(grid, x, max_iterations, kEquilibriumTolerance,
+                                           [&](int it, double res, double) { std::printf("%4d %.3e %.1f\n", it, res, cpu() - t0); });
+    x = e.positions;
+  }
+  else
+  {
+    const TangentAssembler assembler(grid);
+    TangentSolver solver(TangentSolverKind::Cholmod);
+    SparseMatrix k;
+    Eigen::VectorXd r = unbalanced(grid, x);
+    const double m = grid.particleMass();
+    // lm: mu in 1/s^2 (the shift is mu M); ptc: h in s (the shift M / h^2).
+    double mu = 0.0, h = 0.0;
+    double old_norm = r.norm();
+    int it = 0;
+    for (; it < max_iterations; ++it)
+    {
+      const double res = r.cwiseAbs().maxCoeff();
+      int dropped = 0;
+      assembler.assemble(x, k, CompressedSprings::Drop, &dropped);
+      if (res <= target)
+        break;
+      const double reg = 1e-8 * k.diagonal().cwiseAbs().maxCoeff();
+      Eigen::VectorXd d;
+      std::string tangent;
+      double step = 0.0;
+      const double energy = potential(grid, x);
+      if (mode == "newton")
+      {
+        for (CompressedSprings c : {CompressedSprings::Keep, CompressedSprings::Drop})
+        {
+          assembler.assemble(x, k, c);
+          if (solveShifted(solver, k, reg, r, d))
+          {
+            tangent = c == CompressedSprings::Keep ? "exact" : "drop";
+            break;
+          }
+        }
+        if (tangent.empty())
+        {
+          std::printf("no direction\n");
+          break;
+        }
+        const double slope = r.dot(d);
+        for (double s = 1.0; s > 1e-10; s *= 0.5)
+        {
+          Eigen::VectorXd trial = x;
+          grid.addFree(s * d, trial);
+          const Eigen::VectorXd tr = unbalanced(grid, trial);
+          if (potential(grid, trial) <= energy - 1e-4 * s * slope || tr.norm() < (1.0 - 1e-4 * s) * r.norm())
+          {
+            x = trial;
+            r = tr;
+            step = s;
+            break;
+          }
+        }
+        if (step == 0.0)
+        {
+          std::printf("line search failed\n");
+          break;
+        }
+      }
+      else if (mode == "lm")
+      {
+        // The exact Hessian shifted by mu M: mu 0 tried first while it has been working.
+        int tries = 0;
+        const double scale = k.diagonal().cwiseAbs().maxCoeff() / m;  // 1/s^2 where mu M matches K
+        for (;; ++tries)
+        {
+          assembler.assemble(x, k, CompressedSprings::Keep);
+          if (!solveShifted(solver, k, reg + mu * m, r, d))
+          {
+            mu = std::max(4.0 * mu, 1e-4 * scale);
+            continue;
+          }
+          // Predicted drop of the quadratic model with the exact K (k now holds K + shift).
+          Eigen::VectorXd kd = k * d;
+          kd -= (reg + mu * m) * d;
+          const double predicted = r.dot(d) - 0.5 * d.dot(kd);
+          Eigen::VectorXd trial = x;
+          grid.addFree(d, trial);
+          const Eigen::VectorXd tr = unbalanced(grid, trial);
+          const double actual = energy - potential(grid, trial);
+          const bool ok = (predicted > 0.0 && actual >= 0.25 * predicted) || tr.norm() < 0.9 * r.norm();
+          if (ok)
+          {
+            x = trial;
+            r = tr;
+            step = 1.0;
+            char buf[64];
+            std::snprintf(buf, sizeof buf, "exact+%.2gM(%d)", mu, tries);
+            tangent = buf;
+            mu = mu < 1e-6 * scale ? 0.0 : 0.3 * mu;
+            break;
+          }
+          mu = std::max(4.0 * mu, 1e-4 * scale);
+          if (mu > 1e3 * scale)
+            break;
+        }
+        if (step == 0.0)
+        {
+          std::printf("lm: no step\n");
+          break;
+        }
+      }
+      else if (mode == "ptc")
+      {
+        if (h == 0.0)
+          h = 1e-2;
+        for (;;)
+        {
+          assembler.assemble(x, k, CompressedSprings::Keep);
+          if (solveShifted(solver, k, reg + m / (h * h), r, d))
+            break;
+          h *= 0.5;
+        }
+        // Full step, but not where it raises the energy and the force both (then h shrinks).
+        Eigen::VectorXd trial = x;
+        grid.addFree(d, trial);
+        const Eigen::VectorXd tr = unbalanced(grid, trial);
+        char buf[64];
+        std::snprintf(buf, sizeof buf, "exact+M/h^2 h=%.3g", h);
+        tangent = buf;
+        if (potential(grid, trial) <= energy || tr.norm() < r.norm())
+        {
+          x = trial;
+          r = tr;
+          step = 1.0;
+          h = std::min(h * std::max(old_norm / r.norm(), 0.5), 1e8);
+          old_norm = r.norm();
+        }
+        else
+          h *= 0.5;
+      }
+      std::printf("%4d %.3e step %.3g %-22s compressed %d cpu %.1f\n", it, res, step, tangent.c_str(), dropped, cpu() - t0);
+      std::fflush(stdout);
+    }
+    std::printf("end: %d iterations, %.3e N, cpu %.1f s, energy %.12g J\n", it, r.cwiseAbs().maxCoeff(), cpu() - t0,
+                potential(grid, x));
+  }
+  if (argc > 5)
+  {
+    std::ofstream out(argv[5], std::ios::binary);
+    out.write(reinterpret_cast<const char*>(x.data()), static_cast<std::streamsize>(x.size() * sizeof(double)));
+  }
+  int dropped = 0;
+  tangentStiffness(grid, x, CompressedSprings::Drop, &dropped);
+  std::printf("final: energy %.12g J, compressed springs %d, cpu %.1f s\n", potential(grid, x), dropped, cpu() - t0);
+  return 0;
+}
