@@ -5,6 +5,8 @@
 //               springs' geometric part dropped; energy line search)
 //       lm      (exact K + mu M, mu halved after a successful step, raised x4 after a failed
 //               factorisation or a rejected step; acceptance on the energy or the unbalanced force)
+//       lme     (lm, and where it balances on a saddle (the exact K indefinite) a step along the
+//               most negative curvature direction, then lm again)
 //       ptc     (pseudo-transient continuation: exact K + M / h^2, h grown by |r_old| / |r_new|
 //               (switched evolution relaxation), halved when the factorisation fails)
 //       solve   (solveEquilibrium itself)
@@ -66,7 +68,16 @@ int main(int argc, char** argv)
     std::fprintf(stderr, "usage: %s SIZE ROTATION_DEG newton|lm|ptc|solve [MAX_ITERATIONS] [SAVE_FILE] [START_FILE]\n", argv[0]);
     return 2;
   }
-  GridParams g = swingingCloth(std::stoi(argv[1]));
+  // SIZE "yaml": config/cloth.yaml's sheet (20 x 20, 0.05 m, 5 g a particle, springs 50/20/5 N/m).
+  GridParams g = swingingCloth(std::string(argv[1]) == "yaml" ? 20 : std::stoi(argv[1]));
+  if (std::string(argv[1]) == "yaml")
+  {
+    g.spacing = 0.05;
+    g.mass = 0.005;
+    g.structural_stiffness = 50.0;
+    g.shear_stiffness = 20.0;
+    g.bending_stiffness = 5.0;
+  }
   g.rotation_deg = std::stod(argv[2]);
   const std::string mode = argv[3];
   const int max_iterations = argc > 4 ? std::stoi(argv[4]) : 1000;
@@ -98,19 +109,82 @@ int main(int argc, char** argv)
     // lm: mu in 1/s^2 (the shift is mu M); ptc: h in s (the shift M / h^2).
     double mu = 0.0, h = 0.0;
     double old_norm = r.norm();
-    int it = 0;
+    int it = 0, escapes = 0;
     for (; it < max_iterations; ++it)
     {
       const double res = r.cwiseAbs().maxCoeff();
       int dropped = 0;
       assembler.assemble(x, k, CompressedSprings::Drop, &dropped);
-      if (res <= target)
-        break;
+      const double energy = potential(grid, x);
       const double reg = 1e-8 * k.diagonal().cwiseAbs().maxCoeff();
+      if (res <= target)
+      {
+        // lme: balanced, but a saddle where the exact K is indefinite. Its most negative curvature
+        // direction by inverse iteration on K + sigma I (sigma raised until that factorises), then a
+        // step along it that lowers the energy, and on again.
+        if (mode != "lme" || escapes >= 10)
+          break;
+        assembler.assemble(x, k, CompressedSprings::Keep);
+        Eigen::VectorXd probe;
+        if (solveShifted(solver, k, reg, r, probe))
+          break;  // stable
+        const double kscale = k.diagonal().cwiseAbs().maxCoeff();
+        double sigma = 1e-6 * kscale;
+        SparseMatrix shifted;
+        for (;;)
+        {
+          assembler.assemble(x, shifted, CompressedSprings::Keep);
+          for (int i = 0; i < shifted.rows(); ++i)
+            shifted.coeffRef(i, i) += sigma;
+          if (solver.solve(shifted, r, probe, 0.0))
+            break;
+          sigma *= 2.0;
+        }
+        assembler.assemble(x, k, CompressedSprings::Keep);
+        std::srand(1);
+        Eigen::VectorXd v = Eigen::VectorXd::Random(k.rows()).normalized();
+        double lambda = 0.0;
+        for (int pass = 0; pass < 100; ++pass)
+        {
+          Eigen::VectorXd w;
+          solver.solveWithFactor(v, w);
+          v = w.normalized();
+          lambda = v.dot(k * v);
+        }
+        std::printf("saddle at %.3e N: lowest curvature %.3e N/m (sigma %.3e), ", res, lambda, sigma);
+        if (lambda >= 0.0)
+        {
+          std::printf("none negative\n");
+          break;
+        }
+        // Along +-v: the quadratic model drops 0.5 |lambda| a^2; the largest a (from 0.1 spacing,
+        // halved) whose energy drop is at least half that.
+        double best = 0.0;
+        Eigen::VectorXd best_x = x;
+        for (double a = 0.1 * g.spacing; a > 1e-9 && best == 0.0; a *= 0.5)
+          for (double sign : {1.0, -1.0})
+          {
+            Eigen::VectorXd trial = x;
+            grid.addFree(sign * a * v, trial);
+            const double drop = energy - potential(grid, trial);
+            if (drop > best && drop >= 0.25 * std::abs(lambda) * a * a)
+            {
+              best = drop;
+              best_x = trial;
+            }
+          }
+        std::printf("step lowers the energy by %.3e J\n", best);
+        if (best == 0.0)
+          break;
+        x = best_x;
+        r = unbalanced(grid, x);
+        mu = sigma / m;
+        ++escapes;
+        continue;
+      }
       Eigen::VectorXd d;
       std::string tangent;
       double step = 0.0;
-      const double energy = potential(grid, x);
       if (mode == "newton")
       {
         for (CompressedSprings c : {CompressedSprings::Keep, CompressedSprings::Drop})
@@ -147,7 +221,7 @@ int main(int argc, char** argv)
           break;
         }
       }
-      else if (mode == "lm")
+      else if (mode == "lm" || mode == "lme")
       {
         // The exact Hessian shifted by mu M: mu 0 tried first while it has been working.
         int tries = 0;
@@ -168,7 +242,7 @@ int main(int argc, char** argv)
           grid.addFree(d, trial);
           const Eigen::VectorXd tr = unbalanced(grid, trial);
           const double actual = energy - potential(grid, trial);
-          const bool ok = (predicted > 0.0 && actual >= 0.25 * predicted) || tr.norm() < 0.9 * r.norm();
+          const bool ok = (predicted > 0.0 && actual >= 0.25 * predicted) || tr.norm() < (1.0 - 1e-4) * r.norm();
           if (ok)
           {
             x = trial;
@@ -232,6 +306,14 @@ int main(int argc, char** argv)
   }
   int dropped = 0;
   tangentStiffness(grid, x, CompressedSprings::Drop, &dropped);
-  std::printf("final: energy %.12g J, compressed springs %d, cpu %.1f s\n", potential(grid, x), dropped, cpu() - t0);
+  // A stable equilibrium: the exact Hessian (plus the 1e-8 relative regularisation) positive definite.
+  SparseMatrix k = tangentStiffness(grid, x, CompressedSprings::Keep);
+  const double reg = 1e-8 * k.diagonal().cwiseAbs().maxCoeff();
+  TangentSolver check(TangentSolverKind::Cholmod);
+  Eigen::VectorXd d;
+  const bool stable = solveShifted(check, k, reg, unbalanced(grid, x), d);
+  std::printf("final: energy %.12g J, compressed springs %d, largest force %.3e N, exact K %s, cpu %.1f s\n",
+              potential(grid, x), dropped, unbalanced(grid, x).cwiseAbs().maxCoeff(),
+              stable ? "positive definite (stable)" : "not positive definite", cpu() - t0);
   return 0;
 }
