@@ -7,6 +7,7 @@
 //               factorisation or a rejected step; acceptance on the energy or the unbalanced force)
 //       lme     (lm, and where it balances on a saddle (the exact K indefinite) a step along the
 //               most negative curvature direction, then lm again)
+//       hyb     (newton while each drop-tangent step at least halves the largest force, then lm)
 //       ptc     (pseudo-transient continuation: exact K + M / h^2, h grown by |r_old| / |r_new|
 //               (switched evolution relaxation), halved when the factorisation fails)
 //       solve   (solveEquilibrium itself)
@@ -110,6 +111,7 @@ int main(int argc, char** argv)
     double mu = 0.0, h = 0.0;
     double old_norm = r.norm();
     int it = 0, escapes = 0;
+    bool creeping = false;
     for (; it < max_iterations; ++it)
     {
       const double res = r.cwiseAbs().maxCoeff();
@@ -221,12 +223,42 @@ int main(int argc, char** argv)
           break;
         }
       }
-      else if (mode == "lm" || mode == "lme")
+      else if (mode == "lm" || mode == "lme" || mode == "hyb")
       {
-        // The exact Hessian shifted by mu M: mu 0 tried first while it has been working.
+        // hyb: solveEquilibrium's direction while it converges fast (each drop-tangent step at
+        // least halves the largest force); once one does not, the shifted exact K for the rest.
+        if (mode == "hyb" && !creeping)
+        {
+          assembler.assemble(x, k, CompressedSprings::Keep);
+          bool ok = solveShifted(solver, k, reg, r, d);
+          tangent = "exact";
+          if (!ok)
+          {
+            assembler.assemble(x, k, CompressedSprings::Drop);
+            ok = solveShifted(solver, k, reg, r, d);
+            tangent = "drop";
+          }
+          const double slope = ok ? r.dot(d) : 0.0;
+          for (double s = 1.0; ok && s > 1e-10; s *= 0.5)
+          {
+            Eigen::VectorXd trial = x;
+            grid.addFree(s * d, trial);
+            const Eigen::VectorXd tr = unbalanced(grid, trial);
+            if (potential(grid, trial) <= energy - 1e-4 * s * slope || tr.norm() < (1.0 - 1e-4 * s) * r.norm())
+            {
+              x = trial;
+              r = tr;
+              step = s;
+              break;
+            }
+          }
+          if (step == 0.0 || (tangent == "drop" && r.cwiseAbs().maxCoeff() > 0.5 * res))
+            creeping = true;
+        }
         int tries = 0;
+        // The exact Hessian shifted by mu M: mu 0 tried first while it has been working.
         const double scale = k.diagonal().cwiseAbs().maxCoeff() / m;  // 1/s^2 where mu M matches K
-        for (;; ++tries)
+        for (; step == 0.0; ++tries)
         {
           assembler.assemble(x, k, CompressedSprings::Keep);
           if (!solveShifted(solver, k, reg + mu * m, r, d))
