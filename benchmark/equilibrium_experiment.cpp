@@ -69,8 +69,9 @@ int main(int argc, char** argv)
     std::fprintf(stderr, "usage: %s SIZE ROTATION_DEG newton|lm|ptc|solve [MAX_ITERATIONS] [SAVE_FILE] [START_FILE]\n", argv[0]);
     return 2;
   }
+  // SIZE "paper3d": config/paper_3d.yaml's (10 x 10, 0.1 m, 10 g, 10/5 N/m, no bending).
   // SIZE "yaml": config/cloth.yaml's sheet (20 x 20, 0.05 m, 5 g a particle, springs 50/20/5 N/m).
-  GridParams g = swingingCloth(std::string(argv[1]) == "yaml" ? 20 : std::stoi(argv[1]));
+  GridParams g = swingingCloth(std::string(argv[1]) == "yaml" || std::string(argv[1]) == "paper3d" ? 20 : std::stoi(argv[1]));
   if (std::string(argv[1]) == "yaml")
   {
     g.spacing = 0.05;
@@ -78,6 +79,16 @@ int main(int argc, char** argv)
     g.structural_stiffness = 50.0;
     g.shear_stiffness = 20.0;
     g.bending_stiffness = 5.0;
+  }
+  if (std::string(argv[1]) == "paper3d")  // config/paper_3d.yaml's sheet
+  {
+    g = GridParams{};
+    g.rows = g.cols = 10;
+    g.dimension = 3;
+    g.spacing = 0.1;
+    g.mass = 0.01;
+    g.structural_stiffness = 10.0;
+    g.shear_stiffness = 5.0;
   }
   g.rotation_deg = std::stod(argv[2]);
   const std::string mode = argv[3];
