@@ -17,6 +17,9 @@ namespace modal_mass_spring
 namespace
 {
 
+// Saddles a solve leaves along negative curvature before it returns the state it is at.
+constexpr int kMaxSaddleEscapes = 10;
+
 double potential(const Grid& grid, const Eigen::VectorXd& x)
 {
   return springEnergy(grid, x) + gravityEnergy(grid, x);
@@ -68,6 +71,44 @@ public:
     predicted = r.dot(d) - 0.5 * (d.dot(k_ * d) - added * d.squaredNorm());
     return true;
   }
+  // Whether x is a saddle: the exact Hessian (+ regularisation) not positive definite there. If so, v <-
+  // its most negative curvature direction (unit; inverse iteration on K + sigma I, sigma raised until
+  // that factorises), lambda <- v^T K v (N/m), sigma <- the shift used (N/m); false where K is positive
+  // definite or no negative curvature is found.
+  bool negativeCurvature(const TangentAssembler& assembler, const Eigen::VectorXd& x, const Eigen::VectorXd& r,
+                         bool simplicial_only, Eigen::VectorXd& v, double& lambda, double& sigma)
+  {
+    TangentSolver& solver = simplicial_only ? simplicial_ : cholmod_;
+    assembler.assemble(x, k_, CompressedSprings::Keep);
+    const SparseMatrix exact = k_;
+    const double largest = k_.diagonal().cwiseAbs().maxCoeff();
+    const double regularisation = 1e-8 * largest;
+    Eigen::VectorXd d;
+    for (sigma = 0.0;; sigma = std::max(2.0 * sigma, 1e-6 * largest))
+    {
+      k_ = exact;
+      for (int i = 0; i < k_.rows(); ++i)
+        k_.coeffRef(i, i) += regularisation + sigma;
+      if (solver.solve(k_, r, d, 0.0) && d.allFinite())
+        break;
+      if (sigma > 10.0 * largest)
+        return false;
+    }
+    if (sigma == 0.0)
+      return false;  // stable
+    // A fixed start (no random state): every component nonzero, so no eigenvector is missed.
+    v = Eigen::VectorXd::LinSpaced(k_.rows(), 1.0, 2.0).normalized();
+    for (int pass = 0; pass < kInverseIterations; ++pass)
+    {
+      Eigen::VectorXd w;
+      if (!solver.solveWithFactor(v, w) || !w.allFinite())
+        return false;
+      v = w.normalized();
+    }
+    lambda = v.dot(exact * v);
+    return lambda < 0.0;
+  }
+
   // Whether the last direction of solve() came from the tangent without compressed springs' geometric part.
   bool dropped() const { return dropped_; }
   // The largest diagonal entry of the last tangent assembled.
@@ -115,6 +156,7 @@ private:
   }
 
   static constexpr int kMaxRefinements = 3;
+  static constexpr int kInverseIterations = 50;
   TangentSolver cholmod_, simplicial_;
   SparseMatrix k_;
   bool dropped_ = false;
@@ -146,13 +188,51 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
   // Once the drop tangent creeps: Levenberg-Marquardt on the exact Hessian with shift mu M (1/s^2).
   bool creeping = false;
   double mu = 0.0;
+  // Levenberg-Marquardt, like Newton, also converges to saddles (mu M keeps K + mu M positive definite
+  // there): a buckled sheet balanced on one is pushed along its most negative curvature, as far
+  // (halving from one spacing) as lowers the energy most, and the solve goes on from there, its steps
+  // no longer accepted for a smaller force alone (that climbs back). True where it moved the sheet.
+  int escapes = 0;
+  const auto leaveSaddle = [&]() {
+    Eigen::VectorXd v;
+    double lambda = 0.0, sigma = 0.0;
+    if (!creeping || escapes >= kMaxSaddleEscapes ||
+        !newton.negativeCurvature(assembler, result.positions, r, simplicial_only, v, lambda, sigma))
+      return false;
+    const double energy = potential(grid, result.positions);
+    double best_drop = 0.0;
+    Eigen::VectorXd best = result.positions;
+    for (double a = p.spacing; a > 1e-6 * p.spacing; a *= 0.5)
+      for (double sign : {1.0, -1.0})
+      {
+        Eigen::VectorXd trial = result.positions;
+        grid.addFree(sign * a * v, trial);
+        const double drop = energy - potential(grid, trial);
+        if (drop > best_drop)
+        {
+          best_drop = drop;
+          best = trial;
+        }
+      }
+    if (best_drop <= 0.0)
+      return false;
+    result.positions = best;
+    r = unbalanced(grid, result.positions);
+    mu = sigma / grid.particleMass();  // K + mu M just positive definite here
+    ++escapes;
+    return true;
+  };
   for (result.iterations = 0; result.iterations < max_iterations; ++result.iterations)
   {
     result.residual = r.cwiseAbs().maxCoeff();
     if (progress)
       progress(result.iterations, result.residual, target);
     if (result.residual <= target)
+    {
+      if (leaveSaddle())
+        continue;
       return result;
+    }
 
     // The exact Hessian where it is positive definite (Newton converges quadratically near a
     // stable equilibrium); where compressed springs make it indefinite, the one without their
@@ -176,8 +256,9 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
           Eigen::VectorXd trial = result.positions;
           grid.addFree(direction, trial);
           const Eigen::VectorXd trial_r = unbalanced(grid, trial);
-          if ((predicted > 0.0 && energy - potential(grid, trial) >= 0.25 * predicted) ||
-              trial_r.norm() < (1.0 - 1e-4) * r.norm())
+          const double drop = energy - potential(grid, trial);
+          if ((predicted > 0.0 && drop >= 0.25 * predicted) ||
+              (trial_r.norm() < (1.0 - 1e-4) * r.norm() && (escapes == 0 || drop >= 0.0)))
           {
             result.positions = trial;
             r = trial_r;
@@ -226,6 +307,8 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
     {
       // No further progress: the unbalanced force is at the round-off of the spring forces.
       // Accept when that is small anyway (the square root of the tolerance).
+      if (leaveSaddle())
+        continue;
       if (r.cwiseAbs().maxCoeff() <= fallback)
       {
         result.residual = r.cwiseAbs().maxCoeff();
