@@ -72,9 +72,12 @@ int main(int argc, char** argv)
     return 2;
   }
   // SIZE "paper3d": config/paper_3d.yaml's (10 x 10, 0.1 m, 10 g, 10/5 N/m, no bending).
-  // SIZE "yaml": config/cloth.yaml's sheet (20 x 20, 0.05 m, 5 g a particle, springs 50/20/5 N/m).
-  GridParams g = swingingCloth(std::string(argv[1]) == "yaml" || std::string(argv[1]) == "paper3d" ? 20 : std::stoi(argv[1]));
-  if (std::string(argv[1]) == "yaml")
+  // SIZE "yaml": config/cloth.yaml's sheet (20 x 20, 0.05 m, 5 g a particle, springs 50/20/5 N/m; also
+  // large_motion_release.yaml's at 60 degrees and cloth_table.yaml's at 90). "cloth50":
+  // config/compare/cloth_50.yaml's (50 x 50, 0.02 m, 0.8 g, 50/20/5 N/m).
+  const std::string size = argv[1];
+  GridParams g = swingingCloth(size == "yaml" || size == "paper3d" || size == "cloth50" ? 20 : std::stoi(size));
+  if (size == "yaml")
   {
     g.spacing = 0.05;
     g.mass = 0.005;
@@ -82,7 +85,16 @@ int main(int argc, char** argv)
     g.shear_stiffness = 20.0;
     g.bending_stiffness = 5.0;
   }
-  if (std::string(argv[1]) == "paper3d")  // config/paper_3d.yaml's sheet
+  if (size == "cloth50")  // config/compare/cloth_50.yaml's sheet
+  {
+    g = swingingCloth(50);
+    g.spacing = 0.02;
+    g.mass = 0.0008;
+    g.structural_stiffness = 50.0;
+    g.shear_stiffness = 20.0;
+    g.bending_stiffness = 5.0;
+  }
+  if (size == "paper3d")  // config/paper_3d.yaml's sheet
   {
     g = GridParams{};
     g.rows = g.cols = 10;

@@ -190,9 +190,12 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
   double mu = 0.0;
   // Levenberg-Marquardt, like Newton, also converges to saddles (mu M keeps K + mu M positive definite
   // there): a buckled sheet balanced on one is pushed along its most negative curvature, as far
-  // (halving from one spacing) as lowers the energy most, and the solve goes on from there, its steps
-  // no longer accepted for a smaller force alone (that climbs back). True where it moved the sheet.
+  // (halving from one spacing) as lowers the energy most, and the solve goes on from there. True where
+  // it moved the sheet.
   int escapes = 0;
+  // Whether a step may be accepted for a smaller force alone: not after an escape until plain Newton
+  // (mu = 0, the exact Hessian positive definite) has taken one.
+  bool in_stable_basin = true;
   const auto leaveSaddle = [&]() {
     Eigen::VectorXd v;
     double lambda = 0.0, sigma = 0.0;
@@ -219,6 +222,7 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
     result.positions = best;
     r = unbalanced(grid, result.positions);
     mu = sigma / grid.particleMass();  // K + mu M just positive definite here
+    in_stable_basin = false;
     ++escapes;
     return true;
   };
@@ -258,11 +262,12 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
           const Eigen::VectorXd trial_r = unbalanced(grid, trial);
           const double drop = energy - potential(grid, trial);
           if ((predicted > 0.0 && drop >= 0.25 * predicted) ||
-              (trial_r.norm() < (1.0 - 1e-4) * r.norm() && (escapes == 0 || drop >= 0.0)))
+              (trial_r.norm() < (1.0 - 1e-4) * r.norm() && (in_stable_basin || drop >= 0.0)))
           {
             result.positions = trial;
             r = trial_r;
             accepted = true;
+            in_stable_basin = in_stable_basin || mu == 0.0;
             mu = mu < 1e-6 * mu_scale ? 0.0 : 0.3 * mu;
             break;
           }
