@@ -24,6 +24,7 @@
 #include <ctime>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <stdexcept>
 #include <string>
@@ -136,6 +137,14 @@ int main(int argc, char** argv)
     double mu = 0.0, h = 0.0;
     double old_norm = r.norm();
     int it = 0, escapes = 0;
+    // lm, hyb: the shift's schedule (relative to the largest diagonal of K / m): the smallest nonzero
+    // mu after a failed factorisation or a rejected step (MU_FLOOR, 1e-4), the mu below which an
+    // accepted step sets it to 0 (MU_ZERO, 1e-6), and its factor after an accepted step (MU_DOWN, 0.3).
+    const auto env = [](const char* name, double fallback) {
+      const char* value = std::getenv(name);
+      return value ? std::stod(value) : fallback;
+    };
+    const double mu_floor = env("MU_FLOOR", 1e-4), mu_zero = env("MU_ZERO", 1e-6), mu_down = env("MU_DOWN", 0.3);
     bool creeping = false;
     for (; it < max_iterations; ++it)
     {
@@ -288,7 +297,7 @@ int main(int argc, char** argv)
           assembler.assemble(x, k, CompressedSprings::Keep);
           if (!solveShifted(solver, k, reg + mu * m, r, d))
           {
-            mu = std::max(4.0 * mu, 1e-4 * scale);
+            mu = std::max(4.0 * mu, mu_floor * scale);
             continue;
           }
           // Predicted drop of the quadratic model with the exact K (k now holds K + shift).
@@ -308,10 +317,10 @@ int main(int argc, char** argv)
             char buf[64];
             std::snprintf(buf, sizeof buf, "exact+%.2gM(%d)", mu, tries);
             tangent = buf;
-            mu = mu < 1e-6 * scale ? 0.0 : 0.3 * mu;
+            mu = mu < mu_zero * scale ? 0.0 : mu_down * mu;
             break;
           }
-          mu = std::max(4.0 * mu, 1e-4 * scale);
+          mu = std::max(4.0 * mu, mu_floor * scale);
           if (mu > 1e3 * scale)
             break;
         }

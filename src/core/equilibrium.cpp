@@ -268,11 +268,11 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
             r = trial_r;
             accepted = true;
             in_stable_basin = in_stable_basin || mu == 0.0;
-            mu = mu < 1e-6 * mu_scale ? 0.0 : 0.3 * mu;
+            mu = mu < 1e-9 * mu_scale ? 0.0 : 0.3 * mu;
             break;
           }
         }
-        mu = std::max(4.0 * mu, 1e-4 * mu_scale);
+        mu = std::max(4.0 * mu, 1e-8 * mu_scale);
       }
     }
     for (; !creeping;)
