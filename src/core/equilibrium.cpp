@@ -272,6 +272,8 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
             break;
           }
         }
+        // From about the regularisation: a larger restart swamps a buckled sheet's small negative
+        // curvature and cycles (docs/benchmarks.md, "Released at 60 degrees").
         mu = std::max(4.0 * mu, 1e-8 * mu_scale);
       }
     }
