@@ -188,14 +188,14 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
   // Once the drop tangent creeps: Levenberg-Marquardt on the exact Hessian with shift mu M (1/s^2).
   bool creeping = false;
   double mu = 0.0;
+  int escapes = 0;  // saddles left so far
+  // Whether a step may be accepted for a smaller force alone: not after an escape until plain Newton
+  // (mu = 0, the exact Hessian positive definite) has taken one.
+  bool in_stable_basin = true;
   // Levenberg-Marquardt, like Newton, also converges to saddles (mu M keeps K + mu M positive definite
   // there): a buckled sheet balanced on one is pushed along its most negative curvature, as far
   // (halving from one spacing) as lowers the energy most, and the solve goes on from there. True where
   // it moved the sheet.
-  int escapes = 0;
-  // Whether a step may be accepted for a smaller force alone: not after an escape until plain Newton
-  // (mu = 0, the exact Hessian positive definite) has taken one.
-  bool in_stable_basin = true;
   const auto leaveSaddle = [&]() {
     Eigen::VectorXd v;
     double lambda = 0.0, sigma = 0.0;
@@ -297,7 +297,7 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
         {
           // A buckling sheet: the tangent without compressed springs' geometric part overestimates
           // the buckling directions' stiffness and the force falls a few percent an iteration
-          // (docs/benchmarks.md, "Equilibrium100"); from the first such step on, the shifted exact
+          // (docs/benchmarks.md, "Released at 60 degrees"); from the first such step on, the shifted exact
           // Hessian. Flat starts, whose drop-tangent steps converge fast, keep this path.
           if (newton.dropped() && trial_r.cwiseAbs().maxCoeff() > 0.5 * r.cwiseAbs().maxCoeff())
             creeping = true;
