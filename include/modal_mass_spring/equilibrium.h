@@ -22,7 +22,13 @@ struct Equilibrium
 // tangent with compressed springs' geometric part dropped (positive semi-definite, so a descent
 // direction of the potential energy) plus a 1e-8 relative regularisation (a flat 3D sheet has no
 // out-of-plane stiffness); a backtracking line search on the energy makes it converge from far away,
-// such as a sheet rotated 45 degrees out of the vertical. Converged when every unbalanced force
+// such as a sheet rotated 45 degrees out of the vertical. Once a step on the tangent without the
+// compressed springs' part leaves more than half the largest force (a buckling sheet, on which that
+// tangent creeps), Levenberg-Marquardt on the exact Hessian for the rest: K + mu M, mu raised until
+// that factorises and the step lowers the energy, lowered after each accepted step down to plain Newton;
+// where it balances on a saddle (the exact Hessian not positive definite), a step along the most
+// negative curvature and on (at most 10 times), so that a buckled sheet hangs in a stable state. A flat
+// start keeps Newton's path, and a flat sheet its flat (saddle) state. Converged when every unbalanced force
 // component is below `tolerance` times one particle's weight, or, once the line search can make no
 // more progress (round-off), below its square root; never below ten times the round-off of the
 // spring forces (about stiffness x coordinates x machine epsilon), which on stiff grids is the

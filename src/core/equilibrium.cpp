@@ -6,6 +6,7 @@
 
 #include <Eigen/SparseCholesky>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -15,6 +16,9 @@ namespace modal_mass_spring
 {
 namespace
 {
+
+// Saddles a solve leaves along negative curvature before it returns the state it is at.
+constexpr int kMaxSaddleEscapes = 10;
 
 double potential(const Grid& grid, const Eigen::VectorXd& x)
 {
@@ -52,6 +56,64 @@ public:
     return solveWith(simplicial_, assembler, x, r, d);
   }
 
+  // d <- (K + regularisation + shift I)^-1 r with the exact Hessian; false where that is not positive
+  // definite. `predicted` <- the energy drop the quadratic model with the exact K predicts along d.
+  bool solveShifted(const TangentAssembler& assembler, const Eigen::VectorXd& x, const Eigen::VectorXd& r,
+                    double shift, bool simplicial_only, Eigen::VectorXd& d, double& predicted)
+  {
+    TangentSolver& solver = simplicial_only ? simplicial_ : cholmod_;
+    assembler.assemble(x, k_, CompressedSprings::Keep);
+    const double added = 1e-8 * k_.diagonal().cwiseAbs().maxCoeff() + shift;
+    for (int i = 0; i < k_.rows(); ++i)
+      k_.coeffRef(i, i) += added;
+    if (!solver.solve(k_, r, d, 0.0) || !refine(solver, r, d))
+      return false;
+    predicted = r.dot(d) - 0.5 * (d.dot(k_ * d) - added * d.squaredNorm());
+    return true;
+  }
+  // Whether x is a saddle: the exact Hessian (+ regularisation) not positive definite there. If so, v <-
+  // its most negative curvature direction (unit; inverse iteration on K + sigma I, sigma raised until
+  // that factorises), lambda <- v^T K v (N/m), sigma <- the shift used (N/m); false where K is positive
+  // definite or no negative curvature is found.
+  bool negativeCurvature(const TangentAssembler& assembler, const Eigen::VectorXd& x, const Eigen::VectorXd& r,
+                         bool simplicial_only, Eigen::VectorXd& v, double& lambda, double& sigma)
+  {
+    TangentSolver& solver = simplicial_only ? simplicial_ : cholmod_;
+    assembler.assemble(x, k_, CompressedSprings::Keep);
+    const SparseMatrix exact = k_;
+    const double largest = k_.diagonal().cwiseAbs().maxCoeff();
+    const double regularisation = 1e-8 * largest;
+    Eigen::VectorXd d;
+    for (sigma = 0.0;; sigma = std::max(2.0 * sigma, 1e-6 * largest))
+    {
+      k_ = exact;
+      for (int i = 0; i < k_.rows(); ++i)
+        k_.coeffRef(i, i) += regularisation + sigma;
+      if (solver.solve(k_, r, d, 0.0) && d.allFinite())
+        break;
+      if (sigma > 10.0 * largest)
+        return false;
+    }
+    if (sigma == 0.0)
+      return false;  // stable
+    // A fixed start (no random state): every component nonzero, so no eigenvector is missed.
+    v = Eigen::VectorXd::LinSpaced(k_.rows(), 1.0, 2.0).normalized();
+    for (int pass = 0; pass < kInverseIterations; ++pass)
+    {
+      Eigen::VectorXd w;
+      if (!solver.solveWithFactor(v, w) || !w.allFinite())
+        return false;
+      v = w.normalized();
+    }
+    lambda = v.dot(exact * v);
+    return lambda < 0.0;
+  }
+
+  // Whether the last direction of solve() came from the tangent without compressed springs' geometric part.
+  bool dropped() const { return dropped_; }
+  // The largest diagonal entry of the last tangent assembled.
+  double largestDiagonal() const { return k_.diagonal().cwiseAbs().maxCoeff(); }
+
 private:
   bool solveWith(TangentSolver& solver, const TangentAssembler& assembler, const Eigen::VectorXd& x,
                  const Eigen::VectorXd& r, Eigen::VectorXd& d)
@@ -62,6 +124,7 @@ private:
       const double regularisation = 1e-8 * k_.diagonal().cwiseAbs().maxCoeff();
       for (int i = 0; i < k_.rows(); ++i)
         k_.coeffRef(i, i) += regularisation;
+      dropped_ = compressed == CompressedSprings::Drop;
       if (solver.solve(k_, r, d, 0.0) && refine(solver, r, d))
         return true;
     }
@@ -93,8 +156,10 @@ private:
   }
 
   static constexpr int kMaxRefinements = 3;
+  static constexpr int kInverseIterations = 50;
   TangentSolver cholmod_, simplicial_;
   SparseMatrix k_;
+  bool dropped_ = false;
 };
 
 }  // namespace
@@ -120,19 +185,99 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
   NewtonDirection newton;
   // Once a CHOLMOD direction made no progress, the simplicial LDL^T for the rest.
   bool simplicial_only = solver == EquilibriumSolver::SimplicialLdlt;
+  // Once the drop tangent creeps: Levenberg-Marquardt on the exact Hessian with shift mu M (1/s^2).
+  bool creeping = false;
+  double mu = 0.0;
+  int escapes = 0;  // saddles left so far
+  // Whether a step may be accepted for a smaller force alone: not after an escape until plain Newton
+  // (mu = 0, the exact Hessian positive definite) has taken one.
+  bool in_stable_basin = true;
+  // Levenberg-Marquardt, like Newton, also converges to saddles (mu M keeps K + mu M positive definite
+  // there): a buckled sheet balanced on one is pushed along its most negative curvature, as far
+  // (halving from one spacing) as lowers the energy most, and the solve goes on from there. True where
+  // it moved the sheet.
+  const auto leaveSaddle = [&]() {
+    Eigen::VectorXd v;
+    double lambda = 0.0, sigma = 0.0;
+    if (!creeping || escapes >= kMaxSaddleEscapes ||
+        !newton.negativeCurvature(assembler, result.positions, r, simplicial_only, v, lambda, sigma))
+      return false;
+    const double energy = potential(grid, result.positions);
+    double best_drop = 0.0;
+    Eigen::VectorXd best = result.positions;
+    for (double a = p.spacing; a > 1e-6 * p.spacing; a *= 0.5)
+      for (double sign : {1.0, -1.0})
+      {
+        Eigen::VectorXd trial = result.positions;
+        grid.addFree(sign * a * v, trial);
+        const double drop = energy - potential(grid, trial);
+        if (drop > best_drop)
+        {
+          best_drop = drop;
+          best = trial;
+        }
+      }
+    if (best_drop <= 0.0)
+      return false;
+    result.positions = best;
+    r = unbalanced(grid, result.positions);
+    mu = sigma / grid.particleMass();  // K + mu M just positive definite here
+    in_stable_basin = false;
+    ++escapes;
+    return true;
+  };
   for (result.iterations = 0; result.iterations < max_iterations; ++result.iterations)
   {
     result.residual = r.cwiseAbs().maxCoeff();
     if (progress)
       progress(result.iterations, result.residual, target);
     if (result.residual <= target)
+    {
+      if (leaveSaddle())
+        continue;
       return result;
+    }
 
     // The exact Hessian where it is positive definite (Newton converges quadratically near a
     // stable equilibrium); where compressed springs make it indefinite, the one without their
     // geometric part, which is semi-definite and so gives a descent direction.
     bool accepted = false;
-    for (;;)
+    if (creeping)
+    {
+      // Levenberg-Marquardt on the exact Hessian: K + mu M, mu raised until K + mu M factorises and
+      // the step lowers the energy by a quarter of the model's prediction (or, where energy
+      // differences are round-off, the unbalanced force); lowered after each accepted step, to 0
+      // (plain Newton) once the sheet sits in a stable state's basin.
+      const double mass = grid.particleMass();
+      const double mu_scale = newton.largestDiagonal() / mass;  // where mu M is as stiff as K
+      const double energy = potential(grid, result.positions);
+      while (!accepted && mu <= 1e3 * mu_scale)
+      {
+        Eigen::VectorXd direction;
+        double predicted = 0.0;
+        if (newton.solveShifted(assembler, result.positions, r, mu * mass, simplicial_only, direction, predicted))
+        {
+          Eigen::VectorXd trial = result.positions;
+          grid.addFree(direction, trial);
+          const Eigen::VectorXd trial_r = unbalanced(grid, trial);
+          const double drop = energy - potential(grid, trial);
+          if ((predicted > 0.0 && drop >= 0.25 * predicted) ||
+              (trial_r.norm() < (1.0 - 1e-4) * r.norm() && (in_stable_basin || drop >= 0.0)))
+          {
+            result.positions = trial;
+            r = trial_r;
+            accepted = true;
+            in_stable_basin = in_stable_basin || mu == 0.0;
+            mu = mu < 1e-9 * mu_scale ? 0.0 : 0.3 * mu;
+            break;
+          }
+        }
+        // From about the regularisation: a larger restart swamps a buckled sheet's small negative
+        // curvature and cycles (docs/benchmarks.md, "Released at 60 degrees").
+        mu = std::max(4.0 * mu, 1e-8 * mu_scale);
+      }
+    }
+    for (; !creeping;)
     {
       Eigen::VectorXd direction;
       if (!newton.solve(assembler, result.positions, r, simplicial_only, direction))
@@ -150,6 +295,12 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
         const double trial_energy = potential(grid, trial);
         if (trial_energy <= energy - 1e-4 * s * slope || trial_r.norm() < (1.0 - 1e-4 * s) * r.norm())
         {
+          // A buckling sheet: the tangent without compressed springs' geometric part overestimates
+          // the buckling directions' stiffness and the force falls a few percent an iteration
+          // (docs/benchmarks.md, "Released at 60 degrees"); from the first such step on, the shifted exact
+          // Hessian. Flat starts, whose drop-tangent steps converge fast, keep this path.
+          if (newton.dropped() && trial_r.cwiseAbs().maxCoeff() > 0.5 * r.cwiseAbs().maxCoeff())
+            creeping = true;
           result.positions = trial;
           r = trial_r;
           accepted = true;
@@ -163,6 +314,8 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
     {
       // No further progress: the unbalanced force is at the round-off of the spring forces.
       // Accept when that is small anyway (the square root of the tolerance).
+      if (leaveSaddle())
+        continue;
       if (r.cwiseAbs().maxCoeff() <= fallback)
       {
         result.residual = r.cwiseAbs().maxCoeff();

@@ -1,11 +1,13 @@
 // The static equilibrium under gravity and the linearization there: the force balance, closed forms
 // (a hanging chain's modes), a stiff grid's round-off, and what a failed solve says.
 #include "modal_mass_spring/equilibrium.h"
+#include "modal_mass_spring/modal_basis.h"
 #include "modal_mass_spring/simulation.h"
 #include "modal_mass_spring/spring_forces.h"
 
 #include "test_support.h"
 
+#include <Eigen/SparseCholesky>
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -157,6 +159,57 @@ TEST(Equilibrium, CholmodConvergesOnClothYaml)
   const Grid grid(clothYaml());
   const Equilibrium eq = solveEquilibrium(grid, grid.initialPositions());
   EXPECT_LE(largestUnbalancedForce(grid, eq.positions), 1e-9 * grid.particleMass() * 9.81);
+}
+
+namespace
+{
+
+// The inertia of the free dofs' exact Hessian K: its negative eigenvalues counted by the signs of the
+// pivots of an LDL^T (Sylvester's law of inertia: K = P^T L D L^T P is a congruence).
+int negativeEigenvalues(const Grid& grid, const Eigen::VectorXd& x)
+{
+  Eigen::SimplicialLDLT<SparseMatrix> ldlt(tangentStiffness(grid, x, CompressedSprings::Keep));
+  EXPECT_EQ(ldlt.info(), Eigen::Success);
+  return static_cast<int>((ldlt.vectorD().array() < 0.0).count());
+}
+
+}  // namespace
+
+TEST(Equilibrium, RotatedSheetsHangInStableStates)
+{
+  // A buckling sheet's solve switches to Levenberg-Marquardt on the exact Hessian, which converges to
+  // saddles too: the states reached must be stable, the lowest eigenvalue of K u = lambda M u positive.
+  for (const GridParams& g : {clothYaml(), paper3D()})
+  {
+    const Grid grid(g);
+    const Equilibrium eq = solveEquilibrium(grid, grid.initialPositions());
+    EXPECT_EQ(negativeEigenvalues(grid, eq.positions), 0) << g.rows << " x " << g.cols;
+    const SparseMatrix k = tangentStiffness(grid, eq.positions, CompressedSprings::Keep);
+    const ModalBasis lowest = computeModalBasis(k, Eigen::VectorXd::Constant(k.rows(), g.mass), 1);
+    EXPECT_GT(lowest.eigenvalues(0), 0.1) << g.rows << " x " << g.cols;  // 1/s^2 (2.5 and 0.57 measured)
+  }
+}
+
+TEST(Equilibrium, LeavesASaddleItConvergesTo)
+{
+  // cloth.yaml's hanging sheet bulged slightly out of its plane: the flat state is a saddle (compressed
+  // springs buckle it) and the solve from just beside it is drawn to it; it must go on to a
+  // stable buckled state below it.
+  GridParams flat_params = clothYaml();
+  flat_params.rotation_deg = 0.0;
+  const Grid grid(flat_params);
+  const Equilibrium flat = solveEquilibrium(grid, grid.initialPositions());
+  ASSERT_GT(negativeEigenvalues(grid, flat.positions), 0) << "the premise: the flat hanging sheet is a saddle";
+  Eigen::VectorXd start = flat.positions;
+  for (int row = 0; row < flat_params.rows; ++row)
+    for (int col = 0; col < flat_params.cols; ++col)
+      start(3 * grid.particleIndex(row, col) + 1) +=
+          1e-4 * std::sin(M_PI * col / (flat_params.cols - 1)) * row / (flat_params.rows - 1);
+  const Equilibrium eq = solveEquilibrium(grid, start);
+  EXPECT_LE(largestUnbalancedForce(grid, eq.positions), 1e-9 * grid.particleMass() * 9.81);
+  EXPECT_EQ(negativeEigenvalues(grid, eq.positions), 0);
+  const auto energy = [&](const Eigen::VectorXd& x) { return springEnergy(grid, x) + gravityEnergy(grid, x); };
+  EXPECT_LT(energy(eq.positions), energy(flat.positions) - 1e-9);
 }
 
 TEST(Equilibrium, CholmodFindsTheSimplicialLdltsEquilibrium)
