@@ -96,23 +96,19 @@ std::vector<int> farthestPointSamples(const Grid& grid, const Eigen::VectorXd& x
   std::vector<double> distance(static_cast<size_t>(particles), std::numeric_limits<double>::infinity());
   for (int particle : held)
     relaxDistances(graph, particle, distance);
-  if (held.empty())
+  std::vector<int> samples;
+  if (held.empty() && count > 0)
   {
-    relaxDistances(graph, 0, distance);
     // Start from the particle farthest from particle 0 (a corner of a grid), not particle 0 itself.
-    const int first = static_cast<int>(std::max_element(distance.begin(), distance.end()) - distance.begin());
+    relaxDistances(graph, 0, distance);
+    int first = 0;
+    for (int i = 0; i < particles; ++i)
+      if (std::isfinite(distance[static_cast<size_t>(i)]) && distance[static_cast<size_t>(i)] > distance[static_cast<size_t>(first)])
+        first = i;
     std::fill(distance.begin(), distance.end(), std::numeric_limits<double>::infinity());
     relaxDistances(graph, first, distance);
-    std::vector<int> samples{first};
-    while (static_cast<int>(samples.size()) < count)
-    {
-      samples.push_back(static_cast<int>(std::max_element(distance.begin(), distance.end()) - distance.begin()));
-      relaxDistances(graph, samples.back(), distance);
-    }
-    samples.resize(static_cast<size_t>(std::min(count, static_cast<int>(samples.size()))));
-    return samples;
+    samples.push_back(first);
   }
-  std::vector<int> samples;
   while (static_cast<int>(samples.size()) < count)
   {
     // Unreachable particles (infinite distance) are left to the caller's connectivity check.

@@ -282,6 +282,11 @@ TEST(Skinning, SampledWeightsAreAPartitionOfUnityHarmonicOrBiharmonicBetweenThei
   EXPECT_TRUE(contains(refusal([&] { skinningWeights(grid, x, 1, SkinningWeightKind::Sampled); }),
                        "'num_skinning_weights' = 1: must be in [2, 94]"));
   EXPECT_NO_THROW(skinningWeights(grid, x, 94, SkinningWeightKind::Sampled));
+  // As many samples as particles not held (the top row fixed, 4 x 4): every weight an indicator.
+  const Grid small(heldCloth({}, 4));
+  const Eigen::MatrixXd w_small = skinningWeights(small, small.initialPositions(), 13, SkinningWeightKind::Sampled);
+  EXPECT_EQ((w_small.array() == 1.0).count(), 16);
+  EXPECT_EQ((w_small.array() == 0.0).count(), 16 * 13 - 16);
 }
 
 TEST(Skinning, BasisIsMassOrthonormalAndDiagonalisesTheStiffness)
