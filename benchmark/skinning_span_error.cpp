@@ -295,7 +295,6 @@ int main(int argc, char** argv)
     ref_params.handle_formulation = HandleFormulation::ConstraintModes;
     ref_params.basis = BasisKind::LinearModes;
     ref_params.num_skinning_weights = 0;
-    ref_params.skinning_weights = SkinningWeightKind::Eigenvectors;
     ref_params.time_step = args.reference_time_step;
 
     std::vector<Run> runs;
@@ -310,9 +309,6 @@ int main(int argc, char** argv)
     add("reference", ref_params, substeps);
     SimulationParams full_params = sim_params;
     full_params.method = Method::Full;
-    full_params.basis = BasisKind::LinearModes;
-    full_params.num_skinning_weights = 0;
-    full_params.skinning_weights = SkinningWeightKind::Eigenvectors;
     add("full", full_params, 1);
     const bool perturbed = args.perturb_time >= 0.0;
     if (perturbed)

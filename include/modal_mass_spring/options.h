@@ -44,15 +44,6 @@ enum class BasisKind
   Skinning,          // linear-blend skinning: a few affine transforms blended by stiffness-derived weights
 };
 
-// The skinning subspace's weights past the held groups' (see skinningWeights). The local ones
-// measured no better than the eigenvectors at 24 weights (docs/results.md, "Large motions").
-enum class SkinningWeightKind
-{
-  Eigenvectors,  // the lowest Laplacian eigenvectors with the held particles as a Dirichlet boundary
-  Sampled,       // harmonic between farthest-point samples, each 1 on its own and 0 on the others
-  SampledBiharmonic,  // the same samples, biharmonic (L M^-1 L) between them: smooth through a sample
-};
-
 // How the modal methods follow moving handles.
 enum class HandleFormulation
 {
@@ -77,9 +68,6 @@ InitialState parseInitialState(const std::string& name);
 // "linear_modes", "modal_derivatives", "skinning"
 std::string toString(BasisKind basis);
 BasisKind parseBasis(const std::string& name);
-// "eigenvectors", "sampled", "sampled_biharmonic"
-std::string toString(SkinningWeightKind kind);
-SkinningWeightKind parseSkinningWeights(const std::string& name);
 // "auto", "constraint_modes", "moving_frame"
 std::string toString(HandleFormulation formulation);
 HandleFormulation parseHandleFormulation(const std::string& name);

@@ -32,8 +32,8 @@ public:
 //   bending_stiffness, fixed, gravity, rotation_deg, method, num_modes, alpha, beta, time_step,
 //   divergence_limit, linearization, integrator, initial_state, newton_max_iterations,
 //   equilibrium_max_iterations, hht_alpha, energy_tolerance,
-//   memory_limit_gb, basis, num_derivative_modes, num_skinning_weights, skinning_weights, cubature_tolerance,
-//   cubature_max_springs, cubature_training_poses, cubature_max_training_poses, cubature_pose_size, cubature_seed
+//   memory_limit_gb, basis, num_derivative_modes, num_skinning_weights, cubature_tolerance, cubature_max_springs,
+//   cubature_training_poses, cubature_max_training_poses, cubature_pose_size, cubature_seed
 GridParams loadGridParams(const ParameterSource& source);
 SimulationParams loadSimulationParams(const ParameterSource& source);
 

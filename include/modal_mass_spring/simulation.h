@@ -57,9 +57,6 @@ struct SimulationParams
   BasisKind basis = BasisKind::LinearModes;
   int num_derivative_modes = 0;
   int num_skinning_weights = 0;
-  // The skinning weights past the held groups': Laplacian eigenvectors, or harmonic between
-  // farthest-point samples (local; see skinningWeights).
-  SkinningWeightKind skinning_weights = SkinningWeightKind::Eigenvectors;
   // `cubature`'s training (see CubatureParams): the relative force error to reach, in (0, 1); the
   // most springs (0: min(number of springs, 1000)); the random poses, and the most they may grow to
   // (0: 8 times as many); the largest particle displacement of a pose (m); the seed of the poses and

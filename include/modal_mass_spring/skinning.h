@@ -7,7 +7,6 @@
 
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/modal_basis.h"
-#include "modal_mass_spring/options.h"
 #include "modal_mass_spring/spring_forces.h"
 
 #include <Eigen/Core>
@@ -34,23 +33,10 @@ std::vector<std::vector<int>> skinningHandleGroups(const Grid& grid);
 // and a group's transform moves its particles alone); then the m - g lowest eigenvectors of L with
 // every held particle as a Dirichlet boundary, zero there, so that the handles' constraints take
 // the groups' coordinates only and every further weight's coordinates move the cloth between them.
-// kind Sampled: the m - g further weights (m when nothing is held) are local instead: m - g particles
-// neither held nor fixed picked by farthest-point sampling (distance along the springs at x, from the
-// held particles), and all m weights solved together, harmonic (L w = 0) at every particle that is
-// neither held nor a sample, each 1 on its own group or sample and 0 on the others (a partition of
-// unity, each weight falling off between its sample and the next); SampledBiharmonic the same with
-// L M^-1 L w = 0 (smooth through a sample, where the harmonic weight has a spike).
 // Throws std::invalid_argument naming num_skinning_weights outside [1, particles] (nothing held) or
 // [g, g + particles neither held nor fixed], and naming handles and fixed when a part of the cloth is
 // connected to no held particle.
-Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int m,
-                                SkinningWeightKind kind = SkinningWeightKind::Eigenvectors);
-
-// The particles of the Sampled weights, in order: farthest-point sampling over the spring graph
-// (edge length the spring's length at x) of `count` particles outside `held` (from particle 0's
-// farthest when `held` is empty).
-std::vector<int> farthestPointSamples(const Grid& grid, const Eigen::VectorXd& x, const std::vector<int>& held,
-                                      int count);
+Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int m);
 
 // B over all dofs (numDofs x (dim + 1) dim m): column (j, a, b) moves dof a of particle i by
 // w_ij (xbar_i,b - c_b) for b < dim (the entry A_j(a, b)) and by w_ij for b = dim (t_j(a)), with c the
@@ -92,8 +78,7 @@ struct SkinningBasis
 // P = Phi^T M B_i (basis size x coordinates): the M-orthogonal projection of a skinning pose z onto
 // the basis' coordinates, X = P z (handles at rest).
 Eigen::MatrixXd skinningProjection(const Grid& grid, const Eigen::VectorXd& x_ref, const ModalBasis& basis,
-                                   const Eigen::VectorXd& mass, int num_weights,
-                                   SkinningWeightKind kind = SkinningWeightKind::Eigenvectors);
+                                   const Eigen::VectorXd& mass, int num_weights);
 
 // `count` cubature training poses (columns of X) that turn the cloth: the first weight's region (the
 // whole cloth when it is constant: nothing held, one handle, or only fixed particles) by a random
@@ -109,7 +94,6 @@ Eigen::MatrixXd skinningTrainingPoses(const Grid& grid, const ModalBasis& basis,
 // num_skinning_weights when the span leaves the free particles nothing to move.
 SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref, const SparseMatrix& stiffness,
                                  const Eigen::VectorXd& mass, int num_weights,
-                                 const Eigen::MatrixXd& modes = Eigen::MatrixXd(),
-                                 SkinningWeightKind kind = SkinningWeightKind::Eigenvectors);
+                                 const Eigen::MatrixXd& modes = Eigen::MatrixXd());
 
 }  // namespace modal_mass_spring

@@ -337,12 +337,7 @@ std::string basisKey(const GridParams& g, const SimulationParams& p)
   // Its weights are harmonic between the held particles and vanish on them past one per group
   // (entries stored with the global Laplacian's eigenvectors must not be read for them).
   if (p.basis == BasisKind::Skinning)
-  {
     key << "skinning_handle_extension=affine\nskinning_weights=held_groups\n";
-    // (eigenvectors keeps the key it had before there was a choice.)
-    if (p.skinning_weights != SkinningWeightKind::Eigenvectors)
-      key << "skinning_weight_kind=" << toString(p.skinning_weights) << '\n';
-  }
   return key.str();
 }
 

@@ -24,7 +24,6 @@ const std::vector<std::string> kLinearizations{"rest", "equilibrium"};
 const std::vector<std::string> kIntegrators{"explicit", "implicit"};
 const std::vector<std::string> kInitialStates{"initial", "equilibrium"};
 const std::vector<std::string> kBases{"linear_modes", "modal_derivatives", "skinning"};
-const std::vector<std::string> kSkinningWeights{"eigenvectors", "sampled", "sampled_biharmonic"};
 const std::vector<std::string> kHandleFormulations{"auto", "constraint_modes", "moving_frame"};
 
 }  // namespace
@@ -55,12 +54,6 @@ InitialState parseInitialState(const std::string& name)
 
 std::string toString(BasisKind value) { return kBases[static_cast<int>(value)]; }
 BasisKind parseBasis(const std::string& name) { return static_cast<BasisKind>(parseName("basis", name, kBases)); }
-
-std::string toString(SkinningWeightKind value) { return kSkinningWeights[static_cast<int>(value)]; }
-SkinningWeightKind parseSkinningWeights(const std::string& name)
-{
-  return static_cast<SkinningWeightKind>(parseName("skinning_weights", name, kSkinningWeights));
-}
 
 std::string toString(HandleFormulation value) { return kHandleFormulations[static_cast<int>(value)]; }
 HandleFormulation parseHandleFormulation(const std::string& name)

@@ -61,8 +61,6 @@ SimulationParams loadSimulationParams(const ParameterSource& s)
     p.basis = parseBasis(*name);
   p.num_derivative_modes = s.getInt("num_derivative_modes").value_or(p.num_derivative_modes);
   p.num_skinning_weights = s.getInt("num_skinning_weights").value_or(p.num_skinning_weights);
-  if (const auto name = s.getString("skinning_weights"))
-    p.skinning_weights = parseSkinningWeights(*name);
   p.cubature_tolerance = s.getDouble("cubature_tolerance").value_or(p.cubature_tolerance);
   p.cubature_max_springs = s.getInt("cubature_max_springs").value_or(p.cubature_max_springs);
   p.cubature_training_poses = s.getInt("cubature_training_poses").value_or(p.cubature_training_poses);

@@ -172,8 +172,7 @@ void Simulation::buildBasis(const StageFn& on_stage, const IterationFn& on_itera
     {
       stage("skinning");
       SkinningBasis skinning =
-          buildSkinningBasis(grid_, x_ref_, stiffness_, mass_, params_.num_skinning_weights, data.basis.phi,
-                             params_.skinning_weights);
+          buildSkinningBasis(grid_, x_ref_, stiffness_, mass_, params_.num_skinning_weights, data.basis.phi);
       if (!skinning.basis.phi.allFinite() || !skinning.constraint_modes.allFinite())
         throw std::runtime_error("skinning: the subspace is not finite");
       data.physical_basis = std::move(skinning.basis);
@@ -233,8 +232,7 @@ void Simulation::prepareCubature()
   if (params_.basis == BasisKind::Skinning)
   {
     const Eigen::MatrixXd projection =
-        skinningProjection(grid_, x_ref_, physical_basis_, mass_, params_.num_skinning_weights,
-                           params_.skinning_weights);
+        skinningProjection(grid_, x_ref_, physical_basis_, mass_, params_.num_skinning_weights);
     sampler = [this, projection](int count, std::mt19937_64& rng) {
       return skinningTrainingPoses(grid_, physical_basis_, x_ref_, projection, count, params_.cubature_pose_size, rng);
     };

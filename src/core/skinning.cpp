@@ -12,10 +12,7 @@
 #include <Eigen/SVD>
 #include <Eigen/SparseCholesky>
 
-#include <algorithm>
 #include <chrono>
-#include <functional>
-#include <queue>
 #include <sstream>
 #include <cmath>
 #include <limits>
@@ -56,74 +53,7 @@ SparseMatrix springLaplacian(const Grid& grid, const Eigen::VectorXd& x)
   return laplacian;
 }
 
-// Lowers `distance` (along the graph's edges, Dijkstra) to the distance from `source` wherever that is shorter.
-void relaxDistances(const std::vector<std::vector<std::pair<int, double>>>& graph, int source,
-                    std::vector<double>& distance)
-{
-  using Entry = std::pair<double, int>;
-  std::priority_queue<Entry, std::vector<Entry>, std::greater<Entry>> queue;
-  distance[static_cast<size_t>(source)] = 0.0;
-  queue.emplace(0.0, source);
-  while (!queue.empty())
-  {
-    const auto [d, i] = queue.top();
-    queue.pop();
-    if (d > distance[static_cast<size_t>(i)])
-      continue;
-    for (const auto& [j, length] : graph[static_cast<size_t>(i)])
-      if (d + length < distance[static_cast<size_t>(j)])
-      {
-        distance[static_cast<size_t>(j)] = d + length;
-        queue.emplace(d + length, j);
-      }
-  }
-}
-
 }  // namespace
-
-std::vector<int> farthestPointSamples(const Grid& grid, const Eigen::VectorXd& x, const std::vector<int>& held,
-                                      int count)
-{
-  const int dim = grid.dimension();
-  const int particles = grid.numParticles();
-  std::vector<std::vector<std::pair<int, double>>> graph(static_cast<size_t>(particles));
-  for (const Spring& s : grid.springs())
-  {
-    const double length = (x.segment(dim * s.j, dim) - x.segment(dim * s.i, dim)).norm();
-    graph[static_cast<size_t>(s.i)].emplace_back(s.j, length);
-    graph[static_cast<size_t>(s.j)].emplace_back(s.i, length);
-  }
-  std::vector<double> distance(static_cast<size_t>(particles), std::numeric_limits<double>::infinity());
-  for (int particle : held)
-    relaxDistances(graph, particle, distance);
-  std::vector<int> samples;
-  if (held.empty() && count > 0)
-  {
-    // Start from the particle farthest from particle 0 (a corner of a grid), not particle 0 itself.
-    relaxDistances(graph, 0, distance);
-    int first = 0;
-    for (int i = 0; i < particles; ++i)
-      if (std::isfinite(distance[static_cast<size_t>(i)]) && distance[static_cast<size_t>(i)] > distance[static_cast<size_t>(first)])
-        first = i;
-    std::fill(distance.begin(), distance.end(), std::numeric_limits<double>::infinity());
-    relaxDistances(graph, first, distance);
-    samples.push_back(first);
-  }
-  while (static_cast<int>(samples.size()) < count)
-  {
-    // Unreachable particles (infinite distance) are left to the caller's connectivity check.
-    int farthest = -1;
-    for (int i = 0; i < particles; ++i)
-      if (distance[static_cast<size_t>(i)] > 0.0 && std::isfinite(distance[static_cast<size_t>(i)]) &&
-          (farthest < 0 || distance[static_cast<size_t>(i)] > distance[static_cast<size_t>(farthest)]))
-        farthest = i;
-    if (farthest < 0)
-      break;
-    samples.push_back(farthest);
-    relaxDistances(graph, farthest, distance);
-  }
-  return samples;
-}
 
 std::vector<std::vector<int>> skinningHandleGroups(const Grid& grid)
 {
@@ -133,55 +63,7 @@ std::vector<std::vector<int>> skinningHandleGroups(const Grid& grid)
   return groups;
 }
 
-namespace
-{
-
-// Every weight at once: 1 on its own Dirichlet set (`set_of`, -1 outside every set), 0 on the
-// others, and operator w = 0 (operator L or L M^-1 L) at every other particle.
-Eigen::MatrixXd dirichletWeights(const SparseMatrix& op, const std::vector<int>& set_of, int m)
-{
-  const int particles = static_cast<int>(set_of.size());
-  std::vector<int> unknown_index(static_cast<size_t>(particles), -1);
-  int unknowns = 0;
-  for (int i = 0; i < particles; ++i)
-    if (set_of[static_cast<size_t>(i)] < 0)
-      unknown_index[static_cast<size_t>(i)] = unknowns++;
-  Eigen::MatrixXd weights = Eigen::MatrixXd::Zero(particles, m);
-  for (int i = 0; i < particles; ++i)
-    if (set_of[static_cast<size_t>(i)] >= 0)
-      weights(i, set_of[static_cast<size_t>(i)]) = 1.0;
-  if (unknowns == 0)
-    return weights;
-  std::vector<Eigen::Triplet<double>> entries;
-  Eigen::MatrixXd rhs = Eigen::MatrixXd::Zero(unknowns, m);
-  for (int col = 0; col < op.outerSize(); ++col)
-    for (SparseMatrix::InnerIterator it(op, col); it; ++it)
-    {
-      const int row = unknown_index[static_cast<size_t>(it.row())];
-      if (row < 0)
-        continue;
-      if (unknown_index[static_cast<size_t>(col)] >= 0)
-        entries.emplace_back(row, unknown_index[static_cast<size_t>(col)], it.value());
-      else
-        rhs(row, set_of[static_cast<size_t>(col)]) -= it.value();
-    }
-  SparseMatrix op_uu(unknowns, unknowns);
-  op_uu.setFromTriplets(entries.begin(), entries.end());
-  const Eigen::SimplicialLDLT<SparseMatrix> ldlt(op_uu);
-  const Eigen::MatrixXd solved = ldlt.solve(rhs);
-  if (ldlt.info() != Eigen::Success || !solved.allFinite() || ldlt.vectorD().minCoeff() <= 0.0)
-    rejectParameter("handles, fixed", "(as given)",
-                    "must hold every connected part of the cloth: the skinning weights are harmonic between the "
-                    "held particles, and a part connected to none has none");
-  for (int i = 0; i < particles; ++i)
-    if (unknown_index[static_cast<size_t>(i)] >= 0)
-      weights.row(i) = solved.row(unknown_index[static_cast<size_t>(i)]);
-  return weights;
-}
-
-}  // namespace
-
-Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int m, SkinningWeightKind kind)
+Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int m)
 {
   const int particles = grid.numParticles();
   const std::vector<std::vector<int>> groups = skinningHandleGroups(grid);
@@ -208,26 +90,6 @@ Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int 
                         "neither held nor fixed");
   const SparseMatrix laplacian = springLaplacian(grid, x);
   const double particle_mass = grid.particleMass();
-  if (kind != SkinningWeightKind::Eigenvectors)
-  {
-    // Local weights: the groups', then one per farthest-point sample, all from one Dirichlet problem.
-    std::vector<int> held;
-    for (const std::vector<int>& group : groups)
-      held.insert(held.end(), group.begin(), group.end());
-    const std::vector<int> samples = farthestPointSamples(grid, x, held, m - num_groups);
-    if (static_cast<int>(samples.size()) < m - num_groups)
-      rejectParameter("handles, fixed", "(as given)",
-                      "must hold every connected part of the cloth: the skinning weights are harmonic between the "
-                      "held particles, and a part connected to none has none");
-    std::vector<int> set_of = group_of;
-    for (size_t s = 0; s < samples.size(); ++s)
-      set_of[static_cast<size_t>(samples[s])] = num_groups + static_cast<int>(s);
-    if (kind == SkinningWeightKind::Sampled)
-      return dirichletWeights(laplacian, set_of, m);
-    // L M^-1 L, M = particle_mass I: the scale does not change the weights.
-    const SparseMatrix bilaplacian = (laplacian * laplacian).pruned();
-    return dirichletWeights(bilaplacian, set_of, m);
-  }
   if (num_groups == 0)
   {
     // Nothing held: the lowest eigenvectors of the Laplacian against the masses (the first constant).
@@ -326,9 +188,9 @@ std::string describeSkinning(const SkinningInfo& info)
 }
 
 Eigen::MatrixXd skinningProjection(const Grid& grid, const Eigen::VectorXd& x_ref, const ModalBasis& basis,
-                                   const Eigen::VectorXd& mass, int num_weights, SkinningWeightKind kind)
+                                   const Eigen::VectorXd& mass, int num_weights)
 {
-  const Eigen::MatrixXd b = skinningMap(grid, x_ref, skinningWeights(grid, x_ref, num_weights, kind));
+  const Eigen::MatrixXd b = skinningMap(grid, x_ref, skinningWeights(grid, x_ref, num_weights));
   return basis.phi.transpose() * mass.asDiagonal() * b(grid.freeDofs(), Eigen::all);
 }
 
@@ -457,11 +319,10 @@ Eigen::MatrixXd skinningTrainingPoses(const Grid& grid, const ModalBasis& basis,
 }
 
 SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref, const SparseMatrix& stiffness,
-                                 const Eigen::VectorXd& mass, int num_weights, const Eigen::MatrixXd& modes,
-                                 SkinningWeightKind kind)
+                                 const Eigen::VectorXd& mass, int num_weights, const Eigen::MatrixXd& modes)
 {
   const auto start = std::chrono::steady_clock::now();
-  const Eigen::MatrixXd b = skinningMap(grid, x_ref, skinningWeights(grid, x_ref, num_weights, kind));
+  const Eigen::MatrixXd b = skinningMap(grid, x_ref, skinningWeights(grid, x_ref, num_weights));
   const Eigen::Index p = b.cols();
   const int dim = grid.dimension();
 

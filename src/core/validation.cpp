@@ -97,9 +97,6 @@ void validateBasis(const GridParams& grid, const SimulationParams& p, long long 
       rejectParameter("num_derivative_modes", d, "must be 0 with basis: skinning");
     return;
   }
-  if (p.skinning_weights != SkinningWeightKind::Eigenvectors)
-    rejectParameter("skinning_weights", toString(p.skinning_weights),
-                    "must be eigenvectors unless basis is skinning (weights are used only by the skinning subspace)");
   if (w != 0)
     rejectParameter("num_skinning_weights", w,
                     "must be 0 unless basis is skinning (weights are used only by the skinning subspace)");

@@ -282,7 +282,6 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
     p.basis = BasisKind::LinearModes;
     p.num_derivative_modes = 0;
     p.num_skinning_weights = 0;
-    p.skinning_weights = SkinningWeightKind::Eigenvectors;
     p.time_step = setup.sim.time_step / divide;
     return p;
   };

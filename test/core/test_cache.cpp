@@ -320,11 +320,6 @@ TEST(CacheKey, EveryParameterOfThePrecomputationChangesTheKey)
       {"num_modes", [](GridParams&, SimulationParams& s) { ++s.num_modes; }},
       {"num_derivative_modes", [](GridParams&, SimulationParams& s) { ++s.num_derivative_modes; }},
       {"num_skinning_weights", [](GridParams&, SimulationParams& s) { ++s.num_skinning_weights; }},
-      {"skinning_weights",
-       [](GridParams&, SimulationParams& s) {
-         s.basis = BasisKind::Skinning;
-         s.skinning_weights = SkinningWeightKind::Sampled;
-       }},
   };
   for (const auto& [name, change] : changes)
   {
@@ -333,13 +328,6 @@ TEST(CacheKey, EveryParameterOfThePrecomputationChangesTheKey)
     change(g2, s2);
     EXPECT_NE(basisKey(g2, s2), key) << name;
   }
-  // On the skinning subspace every kind of weights has a key of its own.
-  SimulationParams eigen = s, sampled = s, biharmonic = s;
-  eigen.basis = sampled.basis = biharmonic.basis = BasisKind::Skinning;
-  sampled.skinning_weights = SkinningWeightKind::Sampled;
-  biharmonic.skinning_weights = SkinningWeightKind::SampledBiharmonic;
-  EXPECT_NE(basisKey(g, eigen), basisKey(g, sampled));
-  EXPECT_NE(basisKey(g, sampled), basisKey(g, biharmonic));
   // What does not change the precomputation does not change the key.
   SimulationParams s2 = s;
   s2.time_step = 0.01;

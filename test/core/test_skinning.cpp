@@ -214,81 +214,6 @@ TEST(Skinning, WeightsAreHarmonicBetweenTheHandlesAndVanishOnThemPastOnePerHandl
   EXPECT_NO_THROW(skinningWeights(grid, x, 94));
 }
 
-TEST(Skinning, SampledWeightsAreAPartitionOfUnityHarmonicOrBiharmonicBetweenTheirSamples)
-{
-  // Two corner grips and 6 samples: weight j is 1 on its own grip or sample and 0 on every other
-  // held particle and sample, L w = 0 (sampled) or L L w = 0 (sampled_biharmonic) at every other
-  // particle, the L built here from the springs; they sum to one everywhere.
-  const int n = 10;
-  const Grid grid(heldCloth(cornerGrips(n), n));
-  const Eigen::VectorXd& x = grid.initialPositions();
-  const int m = 8;
-  Eigen::MatrixXd laplacian = Eigen::MatrixXd::Zero(grid.numParticles(), grid.numParticles());
-  for (const Spring& s : grid.springs())
-  {
-    const double e = s.stiffness / (x.segment<3>(3 * s.j) - x.segment<3>(3 * s.i)).squaredNorm();
-    laplacian(s.i, s.i) += e;
-    laplacian(s.j, s.j) += e;
-    laplacian(s.i, s.j) -= e;
-    laplacian(s.j, s.i) -= e;
-  }
-  std::vector<int> held;
-  for (const std::vector<int>& grip : cornerGrips(n))
-    held.insert(held.end(), grip.begin(), grip.end());
-  const std::vector<int> samples = farthestPointSamples(grid, x, held, m - 2);
-  ASSERT_EQ(samples.size(), static_cast<size_t>(m - 2));
-  // The first sample is the particle farthest from both top-corner grips: the bottom row's middle.
-  EXPECT_TRUE(samples[0] == n * (n - 1) + n / 2 - 1 || samples[0] == n * (n - 1) + n / 2) << samples[0];
-  std::vector<int> own(static_cast<size_t>(grid.numParticles()), -1);
-  for (int i = 0; i < grid.numParticles(); ++i)
-    if (grid.isHandle(i))
-      own[static_cast<size_t>(i)] = i % n < n / 2 ? 0 : 1;
-  for (int k = 0; k < m - 2; ++k)
-  {
-    EXPECT_FALSE(grid.isHandle(samples[static_cast<size_t>(k)]));
-    EXPECT_EQ(own[static_cast<size_t>(samples[static_cast<size_t>(k)])], -1) << "sample " << k << " repeated";
-    own[static_cast<size_t>(samples[static_cast<size_t>(k)])] = 2 + k;
-  }
-  for (SkinningWeightKind kind : {SkinningWeightKind::Sampled, SkinningWeightKind::SampledBiharmonic})
-  {
-    const Eigen::MatrixXd w = skinningWeights(grid, x, m, kind);
-    ASSERT_EQ(w.rows(), grid.numParticles());
-    ASSERT_EQ(w.cols(), m);
-    const Eigen::MatrixXd op = kind == SkinningWeightKind::Sampled ? laplacian : Eigen::MatrixXd(laplacian * laplacian);
-    const Eigen::MatrixXd residual = op * w;
-    const double scale = op.cwiseAbs().maxCoeff();
-    for (int i = 0; i < grid.numParticles(); ++i)
-    {
-      EXPECT_NEAR(w.row(i).sum(), 1.0, 1e-10) << toString(kind) << ", particle " << i;
-      for (int j = 0; j < m; ++j)
-      {
-        if (own[static_cast<size_t>(i)] >= 0)
-        {
-          EXPECT_EQ(w(i, j), own[static_cast<size_t>(i)] == j ? 1.0 : 0.0) << toString(kind) << ", particle " << i;
-        }
-        else
-        {
-          EXPECT_NEAR(residual(i, j), 0.0, 1e-10 * scale) << toString(kind) << ", particle " << i << ", weight " << j;
-        }
-      }
-    }
-    // Harmonic weights keep to [0, 1] (the maximum principle); biharmonic ones need not.
-    if (kind == SkinningWeightKind::Sampled)
-    {
-      EXPECT_GE(w.minCoeff(), 0.0);
-      EXPECT_LE(w.maxCoeff(), 1.0);
-    }
-  }
-  EXPECT_TRUE(contains(refusal([&] { skinningWeights(grid, x, 1, SkinningWeightKind::Sampled); }),
-                       "'num_skinning_weights' = 1: must be in [2, 94]"));
-  EXPECT_NO_THROW(skinningWeights(grid, x, 94, SkinningWeightKind::Sampled));
-  // As many samples as particles not held (the top row fixed, 4 x 4): every weight an indicator.
-  const Grid small(heldCloth({}, 4));
-  const Eigen::MatrixXd w_small = skinningWeights(small, small.initialPositions(), 13, SkinningWeightKind::Sampled);
-  EXPECT_EQ((w_small.array() == 1.0).count(), 16);
-  EXPECT_EQ((w_small.array() == 0.0).count(), 16 * 13 - 16);
-}
-
 TEST(Skinning, BasisIsMassOrthonormalAndDiagonalisesTheStiffness)
 {
   const GridParams g = heldCloth(cornerGrips(10), 10);
@@ -544,12 +469,6 @@ TEST(Skinning, BadSizesAreRefusedByName)
   modes.num_skinning_weights = 4;
   EXPECT_TRUE(contains(refusal([&] { validateParameters(g, modes); }), "'num_skinning_weights' = 4: must be 0 unless basis is skinning"));
   EXPECT_TRUE(contains(refusal([&] { parseBasis("skin"); }), "skinning"));
-  modes.num_skinning_weights = 0;
-  modes.skinning_weights = SkinningWeightKind::Sampled;
-  EXPECT_TRUE(contains(refusal([&] { validateParameters(g, modes); }),
-                       "'skinning_weights' = sampled: must be eigenvectors unless basis is skinning"));
-  EXPECT_TRUE(contains(refusal([&] { parseSkinningWeights("local"); }),
-                       "'skinning_weights' = 'local': must be one of eigenvectors, sampled, sampled_biharmonic"));
   // Memory: a big grid with many weights is refused before anything is built.
   GridParams big = heldCloth({{0}}, 1000);
   SimulationParams heavy = heldParams(Method::Physical, BasisKind::Skinning, 2000);

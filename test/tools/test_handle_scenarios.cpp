@@ -474,14 +474,4 @@ TEST(HandleScenarios, TheConvergedReferenceRunsWhateverTheMethodsBasis)
   EXPECT_EQ(result.errors.back().method, "physical");
   EXPECT_FALSE(result.errors.back().diverged);
   EXPECT_EQ(result.reference_check.size(), result.errors.size() / 2);
-  // The skinning subspace with local weights: the reference drops them with the basis.
-  setup.sim.basis = BasisKind::Skinning;
-  setup.sim.num_derivative_modes = 0;
-  setup.sim.num_skinning_weights = 3;
-  setup.sim.skinning_weights = SkinningWeightKind::Sampled;
-  const AccuracyResult local = runAccuracy(setup, options);
-  EXPECT_TRUE(local.not_built.empty());
-  ASSERT_FALSE(local.errors.empty());
-  EXPECT_EQ(local.errors.back().method, "physical");
-  EXPECT_FALSE(local.errors.back().diverged);
 }
