@@ -249,6 +249,8 @@ class Skinning(unittest.TestCase):
         pulled = max(tick[MIDDLE][1] - start[MIDDLE][1] for tick in rec.since(first))
         print("drag: particle %d pulled %.3g m along y" % (MIDDLE, pulled))
         self.assertGreater(pulled, 0.01, "the dragged particle follows the pull")
+        reply = reset()  # at rest again before the frames move
+        self.assertTrue(reply.success, reply.message)
 
         def follows(method, ticks, poses, carried):
             """The held particles on the frame's motion, the corners finite and (carried) moved with it."""
@@ -286,6 +288,7 @@ class Skinning(unittest.TestCase):
         gripper.go(START + [0.0, 0.0, 0.05], 0.0, 2.0)
         time.sleep(1.0)
         self.assertEqual(rec.status.method, "cubature")
+        self.assertGreater(rec.status.cubature_springs, 0, "the cubature was trained at the switch")
         follows("cubature", rec.since(first + 1), gripper.recorded(), 0.2)
 
         reply = set_method("linear")
