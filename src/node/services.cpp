@@ -51,7 +51,16 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   {
     if (method != Method::Full)
       buildBasis(simulation, "building the modal basis");  // once, with its progress logged
-    simulation.setMethod(method);  // trains before it replaces anything: a failure keeps the run
+    if (trains)
+    {
+      // Training holds the simulation (up to minutes on the skinning span): say so, and how it goes.
+      ROS_INFO("switching to cubature: training it first on basis %s (%s); the simulation waits",
+               toString(simulation.params().basis).c_str(),
+               config_.node.cache_dir.empty() ? "no cache_dir: trained again at every start" : "cached for the next start");
+      withProgress("switching to cubature", "cubature", [&] { simulation.setMethod(method); });
+    }
+    else
+      simulation.setMethod(method);  // trains before it replaces anything: a failure keeps the run
   }
   catch (const std::exception& error)
   {
@@ -71,6 +80,10 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   response.success = true;
   response.message = "switched from " + previous + " to " + request.method + " at step " +
                      std::to_string(steps(primary())) + (was_diverged ? ", recovering from the divergence" : "");
+  // `linear` never runs on a richer basis (its force is the modes' own -Lambda q): say what it runs on.
+  if (method == Method::Linear && simulation.params().basis != BasisKind::LinearModes)
+    response.message += "; linear keeps the " + std::to_string(simulation.params().num_modes) +
+                        " lowest modes, not basis " + toString(simulation.params().basis);
   if (was_diverged)  // forces that caused it act on, as after a reset
     response.message += forcesActingNote();
   ROS_INFO("%s", response.message.c_str());

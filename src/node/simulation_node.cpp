@@ -189,6 +189,17 @@ void SimulationNode::buildBasis(Simulation& simulation, const std::string& activ
            describeModes(simulation.basis().frequencies, simulation.basis().num_zero_modes).c_str());
 }
 
+void SimulationNode::withProgress(const std::string& activity, const std::string& stage,
+                                  const std::function<void()>& work) const
+{
+  const auto start = Clock::now();
+  StartupProgress progress([](const std::string& line) { ROS_INFO("%s", line.c_str()); },
+                           [start] { return secondsSince(start); }, 1.0, 10.0, activity);
+  progress.onStage(stage);
+  ProgressWatcher watcher(progress);
+  work();
+}
+
 std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& grid_params,
                                                             const SimulationParams& sim_params, bool report,
                                                             const std::string& activity, bool with_basis) const

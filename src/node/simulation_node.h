@@ -34,6 +34,7 @@
 #include <visualization_msgs/MarkerArray.h>
 
 #include <atomic>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -90,6 +91,9 @@ private:
   // Builds a `full` simulation's modal basis (Simulation::buildBasis) unless built, logging its
   // stages and iterations when slow, then the modes.
   void buildBasis(Simulation& simulation, const std::string& activity) const;
+  // Runs work that the core does not report stage by stage (the cubature's training at the first switch
+  // to cubature), saying "<activity> for N s: <stage>" when slow, as a start-up does.
+  void withProgress(const std::string& activity, const std::string& stage, const std::function<void()>& work) const;
   void buildTracks();
   // Puts every full track at the state of the first reduced one (the same state, the same time), so
   // that the distances measure the methods, not their start.
