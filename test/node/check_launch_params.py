@@ -4,7 +4,8 @@ simulation.launch on the cloth config, stops it, runs it on the default config a
 node's parameters are exactly the default config's (before clear_params, the cloth's linearization,
 integrator, bending springs ... stayed and were used). Also: every node of every launch file clears
 its parameters; rviz is started only where it is installed and a display exists, and the default
-launch runs headless without an error, saying why rviz is left out."""
+launch runs headless without an error, saying why rviz is left out; the basis argument starts the
+skinning span with its default weights."""
 import glob
 import os
 import signal
@@ -142,6 +143,17 @@ class LaunchParameters(unittest.TestCase):
             self.assertNotIn("cannot launch node", output)
         finally:
             stop(default)
+
+    def test_the_basis_argument_starts_the_skinning_span_with_24_weights(self):
+        package = rospkg.RosPack().get_path("modal_mass_spring")
+        held = launch("rviz:=false", "basis:=skinning", "config:=" + os.path.join(package, "config", "held_cloth.yaml"))
+        try:
+            output = read_until(held, lambda out: "basis skinning" in out or "FATAL" in out)
+            self.assertIsNotNone(output, "no basis line")
+            self.assertNotIn("FATAL", output)
+            self.assertIn("basis skinning (skinning: 24 weights, 288 coordinates", output)
+        finally:
+            stop(held)
 
 
 if __name__ == "__main__":
