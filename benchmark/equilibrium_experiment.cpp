@@ -221,6 +221,24 @@ int main(int argc, char** argv)
       Eigen::VectorXd d;
       std::string tangent;
       double step = 0.0;
+      // solveEquilibrium's line search along d: halved from 1 until the energy falls by 1e-4 of the
+      // slope's prediction or the force's norm falls; moves x and r there, returns the step (0: none).
+      const auto backtrack = [&] {
+        const double slope = r.dot(d);
+        for (double s = 1.0; s > 1e-10; s *= 0.5)
+        {
+          Eigen::VectorXd trial = x;
+          grid.addFree(s * d, trial);
+          const Eigen::VectorXd tr = unbalanced(grid, trial);
+          if (potential(grid, trial) <= energy - 1e-4 * s * slope || tr.norm() < (1.0 - 1e-4 * s) * r.norm())
+          {
+            x = trial;
+            r = tr;
+            return s;
+          }
+        }
+        return 0.0;
+      };
       if (mode == "newton")
       {
         for (CompressedSprings c : {CompressedSprings::Keep, CompressedSprings::Drop})
@@ -237,20 +255,7 @@ int main(int argc, char** argv)
           std::printf("no direction\n");
           break;
         }
-        const double slope = r.dot(d);
-        for (double s = 1.0; s > 1e-10; s *= 0.5)
-        {
-          Eigen::VectorXd trial = x;
-          grid.addFree(s * d, trial);
-          const Eigen::VectorXd tr = unbalanced(grid, trial);
-          if (potential(grid, trial) <= energy - 1e-4 * s * slope || tr.norm() < (1.0 - 1e-4 * s) * r.norm())
-          {
-            x = trial;
-            r = tr;
-            step = s;
-            break;
-          }
-        }
+        step = backtrack();
         if (step == 0.0)
         {
           std::printf("line search failed\n");
@@ -272,20 +277,8 @@ int main(int argc, char** argv)
             ok = solveShifted(solver, k, reg, r, d);
             tangent = "drop";
           }
-          const double slope = ok ? r.dot(d) : 0.0;
-          for (double s = 1.0; ok && s > 1e-10; s *= 0.5)
-          {
-            Eigen::VectorXd trial = x;
-            grid.addFree(s * d, trial);
-            const Eigen::VectorXd tr = unbalanced(grid, trial);
-            if (potential(grid, trial) <= energy - 1e-4 * s * slope || tr.norm() < (1.0 - 1e-4 * s) * r.norm())
-            {
-              x = trial;
-              r = tr;
-              step = s;
-              break;
-            }
-          }
+          if (ok)
+            step = backtrack();
           if (step == 0.0 || (tangent == "drop" && r.cwiseAbs().maxCoeff() > 0.5 * res))
             creeping = true;
         }
