@@ -57,7 +57,10 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
       ROS_INFO("switching to cubature: training it first on basis %s (%s); the simulation waits",
                toString(simulation.params().basis).c_str(),
                config_.node.cache_dir.empty() ? "no cache_dir: trained again at every start" : "cached for the next start");
-      withProgress("switching to cubature", "cubature", [&] { simulation.setMethod(method); });
+      withProgress("switching to cubature", [&](const StageFn& on_stage, const IterationFn&) {
+        on_stage("cubature");
+        simulation.setMethod(method);
+      });
     }
     else
       simulation.setMethod(method);  // trains before it replaces anything: a failure keeps the run

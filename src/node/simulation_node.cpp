@@ -176,28 +176,24 @@ void SimulationNode::buildBasis(Simulation& simulation, const std::string& activ
   if (simulation.basisBuilt())
     return;
   const auto start = Clock::now();
-  StartupProgress progress([](const std::string& line) { ROS_INFO("%s", line.c_str()); },
-                           [start] { return secondsSince(start); }, 1.0, 10.0, activity);
-  {
-    ProgressWatcher watcher(progress);
-    simulation.buildBasis([&progress](const std::string& stage) { progress.onStage(stage); },
-                          [&progress](const std::string& stage, int iteration, double residual, double target) {
-                            progress.onIteration(stage, iteration, residual, target);
-                          });
-  }
+  withProgress(activity, [&simulation](const StageFn& on_stage, const IterationFn& on_iteration) {
+    simulation.buildBasis(on_stage, on_iteration);
+  });
   ROS_INFO("modal basis built in %.3f s: %s", secondsSince(start),
            describeModes(simulation.basis().frequencies, simulation.basis().num_zero_modes).c_str());
 }
 
-void SimulationNode::withProgress(const std::string& activity, const std::string& stage,
-                                  const std::function<void()>& work) const
+void SimulationNode::withProgress(const std::string& activity,
+                                  const std::function<void(const StageFn&, const IterationFn&)>& work) const
 {
   const auto start = Clock::now();
   StartupProgress progress([](const std::string& line) { ROS_INFO("%s", line.c_str()); },
                            [start] { return secondsSince(start); }, 1.0, 10.0, activity);
-  progress.onStage(stage);
   ProgressWatcher watcher(progress);
-  work();
+  work([&progress](const std::string& stage) { progress.onStage(stage); },
+       [&progress](const std::string& stage, int iteration, double residual, double target) {
+         progress.onIteration(stage, iteration, residual, target);
+       });
 }
 
 std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& grid_params,
@@ -205,21 +201,13 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
                                                             const std::string& activity, bool with_basis) const
 {
   const auto start = Clock::now();
-  StartupProgress progress([](const std::string& line) { ROS_INFO("%s", line.c_str()); },
-                           [start] { return secondsSince(start); }, 1.0, 10.0, activity);
   std::unique_ptr<Simulation> simulation;
-  {
-    ProgressWatcher watcher(progress);
+  withProgress(activity, [&](const StageFn& on_stage, const IterationFn& on_iteration) {
     CacheOptions cache{config_.node.cache_dir, [](const std::string& warning) { ROS_WARN("%s", warning.c_str()); }};
-    const StageFn on_stage = [&progress](const std::string& stage) { progress.onStage(stage); };
-    const IterationFn on_iteration = [&progress](const std::string& stage, int iteration, double residual,
-                                                 double target) {
-      progress.onIteration(stage, iteration, residual, target);
-    };
     simulation = std::make_unique<Simulation>(grid_params, sim_params, on_stage, cache, on_iteration);
     if (with_basis)
       simulation->buildBasis(on_stage, on_iteration);
-  }
+  });
   if (!report)
     return simulation;
   const double total_seconds = secondsSince(start);

@@ -91,9 +91,10 @@ private:
   // Builds a `full` simulation's modal basis (Simulation::buildBasis) unless built, logging its
   // stages and iterations when slow, then the modes.
   void buildBasis(Simulation& simulation, const std::string& activity) const;
-  // Runs work that the core does not report stage by stage (the cubature's training at the first switch
-  // to cubature), saying "<activity> for N s: <stage>" when slow, as a start-up does.
-  void withProgress(const std::string& activity, const std::string& stage, const std::function<void()>& work) const;
+  // Runs work with the callbacks it reports its stages and iterations through, logged by a
+  // StartupProgress once it has taken a second (start-up, the basis, the cubature's training).
+  void withProgress(const std::string& activity,
+                    const std::function<void(const StageFn&, const IterationFn&)>& work) const;
   void buildTracks();
   // Puts every full track at the state of the first reduced one (the same state, the same time), so
   // that the distances measure the methods, not their start.
