@@ -64,8 +64,7 @@ public:
     TangentSolver& solver = simplicial_only ? simplicial_ : cholmod_;
     assembler.assemble(x, k_, CompressedSprings::Keep);
     const double added = 1e-8 * k_.diagonal().cwiseAbs().maxCoeff() + shift;
-    for (int i = 0; i < k_.rows(); ++i)
-      k_.coeffRef(i, i) += added;
+    addToDiagonal(added);
     if (!solver.solve(k_, r, d, 0.0) || !refine(solver, r, d))
       return false;
     predicted = r.dot(d) - 0.5 * (d.dot(k_ * d) - added * d.squaredNorm());
@@ -87,8 +86,7 @@ public:
     for (sigma = 0.0;; sigma = std::max(2.0 * sigma, 1e-6 * largest))
     {
       k_ = exact;
-      for (int i = 0; i < k_.rows(); ++i)
-        k_.coeffRef(i, i) += regularisation + sigma;
+      addToDiagonal(regularisation + sigma);
       if (solver.solve(k_, r, d, 0.0) && d.allFinite())
         break;
       if (sigma > 10.0 * largest)
@@ -122,8 +120,7 @@ private:
     {
       assembler.assemble(x, k_, compressed);
       const double regularisation = 1e-8 * k_.diagonal().cwiseAbs().maxCoeff();
-      for (int i = 0; i < k_.rows(); ++i)
-        k_.coeffRef(i, i) += regularisation;
+      addToDiagonal(regularisation);
       dropped_ = compressed == CompressedSprings::Drop;
       if (solver.solve(k_, r, d, 0.0) && refine(solver, r, d))
         return true;
@@ -153,6 +150,12 @@ private:
       norm = residual.norm();
     }
     return r.dot(d) > 0.0;
+  }
+
+  void addToDiagonal(double value)
+  {
+    for (int i = 0; i < k_.rows(); ++i)
+      k_.coeffRef(i, i) += value;
   }
 
   static constexpr int kMaxRefinements = 3;
