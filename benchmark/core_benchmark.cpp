@@ -1,11 +1,11 @@
 // Google Benchmark of the core: basis construction (with and without modal derivatives), one step of each method, the
 // extra cost of moving handles, position reconstruction and one evaluation of all spring forces.
-#include "modal_mass_spring/equilibrium.h"
 #include "modal_mass_spring/force_model.h"
-#include "modal_mass_spring/integrator.h"
 #include "modal_mass_spring/modal_derivatives.h"
 #include "modal_mass_spring/simulation.h"
 #include "modal_mass_spring/spring_forces.h"
+#include "dynamics/integrator.h"
+#include "solvers/equilibrium.h"
 #include "swinging_cloth.h"
 
 #include <Eigen/Geometry>

@@ -13,11 +13,11 @@
 //       solve   (solveEquilibrium itself)
 // Prints: iteration, largest unbalanced force (N), step accepted, tangent used, springs compressed,
 // CPU seconds so far. SAVE_FILE gets the converged positions (binary doubles); START_FILE starts there.
-#include "modal_mass_spring/equilibrium.h"
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/modal_basis.h"
 #include "modal_mass_spring/spring_forces.h"
-#include "modal_mass_spring/tangent_solver.h"
+#include "solvers/equilibrium.h"
+#include "solvers/tangent_solver.h"
 
 #include "swinging_cloth.h"
 

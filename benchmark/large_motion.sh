@@ -19,7 +19,7 @@ parts=("$@")
 read -r -a extra <<<"${LARGE_MOTION_ARGS:---quiet}"
 # The skinning subspace when the core has it (a core without it refuses basis: skinning).
 skinning=0
-grep -q '"skinning"' "$REPO_DIR/src/core/options.cpp" && skinning=1
+grep -q '"skinning"' "$REPO_DIR/src/core/simulation/options.cpp" && skinning=1
 
 # Every method on the modal basis, physical and cubature with modal derivatives (10 linear modes + 20
 # derivative directions, as many coordinates as the 30 modes) and on the skinning subspace.

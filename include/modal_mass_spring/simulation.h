@@ -5,11 +5,11 @@
 #include "modal_mass_spring/contact.h"
 #include "modal_mass_spring/cubature.h"
 #include "modal_mass_spring/grid.h"
-#include "modal_mass_spring/method_model.h"
 #include "modal_mass_spring/modal_basis.h"
 #include "modal_mass_spring/modal_derivatives.h"
 #include "modal_mass_spring/options.h"
 #include "modal_mass_spring/skinning.h"
+#include "modal_mass_spring/state.h"
 #include "modal_mass_spring/validation.h"  // validateParameters, estimateMemoryBytes
 
 #include <memory>
@@ -19,6 +19,11 @@
 
 namespace modal_mass_spring
 {
+
+// The method objects and what builds them are internal (src/core/dynamics/method_model.h).
+class MethodModel;
+struct IntegratorSettings;
+enum class Remainder;
 
 struct SimulationParams
 {
@@ -132,6 +137,7 @@ public:
   Simulation& operator=(const Simulation&) = delete;
   Simulation(Simulation&&) = delete;
   Simulation& operator=(Simulation&&) = delete;
+  ~Simulation();
 
   const Grid& grid() const { return grid_; }
   // Builds the bases (and stores them in the cache) unless they are built: what the first switch to
@@ -151,7 +157,7 @@ public:
   // What building the skinning subspace did (all zero unless basis: skinning).
   const SkinningInfo& skinningInfo() const { return skinning_info_; }
   const SimulationParams& params() const { return params_; }
-  Method method() const { return model_->method(); }
+  Method method() const;
 
   // Switches method, carrying the motion over without moving a particle: going to a modal method,
   // X = Phi^T M u and the rest of u, which the modes cannot carry, stays frozen as an offset of the
@@ -238,8 +244,8 @@ public:
   const Eigen::VectorXd& startPositions() const { return x_start_; }
   // Newton iterations of the last implicit solve, and the solves the last step took (1 unless
   // Newton failed and the step was split); both 0 under the explicit integrator.
-  int lastNewtonIterations() const { return model_->integrator().lastIterations(); }
-  int lastImplicitSubsteps() const { return model_->integrator().lastSubsteps(); }
+  int lastNewtonIterations() const;
+  int lastImplicitSubsteps() const;
 
   // Takes up to `steps` steps; stops at the first that diverges and keeps the state before it.
   StepResult step(int steps = 1);
@@ -266,7 +272,7 @@ public:
   double time() const { return step_count_ * params_.time_step; }
 
   // The generalized state of the current method (u for full, X for the modal methods).
-  const State& state() const { return model_->state(); }
+  const State& state() const;
   // Free-dof displacement (from the linearization point) and velocity, whatever the method, in the
   // grid's (world) coordinates also in a moving frame.
   Eigen::VectorXd displacement() const;
@@ -311,8 +317,8 @@ private:
   bool frameMoved() const { return formulation_ == HandleFormulation::MovingFrame && !frame_current_.atRest(); }
   // In a moving frame: a world free-dof displacement and velocity in B and back (identity else).
   void toBody(Eigen::VectorXd& u, Eigen::VectorXd& v) const;
-  Eigen::VectorXd bodyDisplacement() const { return model_->displacement(model_->state()); }
-  Eigen::VectorXd bodyVelocity() const { return model_->velocity(model_->state()); }
+  Eigen::VectorXd bodyDisplacement() const;
+  Eigen::VectorXd bodyVelocity() const;
   FrameForces frameForcesOf(const FrameMotion& motion) const;
   // Throws std::invalid_argument for a frame motion setHandleFrameMotion refuses.
   void checkFrameMotion(const FrameMotion& motion) const;

@@ -1,7 +1,9 @@
-// Spring forces (paper eq. 13), energy and the analytic tangent stiffness K(x) = -df/dx.
+// The whole grid's spring forces, energy and tangent stiffness K(x) = -df/dx, summed over its springs
+// from the spring law (spring_law.h).
 #pragma once
 
 #include "modal_mass_spring/grid.h"
+#include "modal_mass_spring/spring_law.h"
 
 #include <Eigen/SparseCore>
 
@@ -26,13 +28,6 @@ double springEnergy(const Grid& grid, const Eigen::VectorXd& x);
 
 // Potential energy of gravity, -f_g . x.
 double gravityEnergy(const Grid& grid, const Eigen::VectorXd& x);
-
-// How the geometric part (1 - l0/l)(I - u u^T) of a compressed spring (l < l0) enters K.
-enum class CompressedSprings
-{
-  Keep,  // the exact Hessian
-  Drop,  // keep only k u u^T: K stays positive semi-definite (used at a hanging equilibrium)
-};
 
 // The Hessian of the spring energy restricted to the free dofs (free-dof numbering of the grid).
 SparseMatrix tangentStiffness(const Grid& grid, const Eigen::VectorXd& x,

@@ -11,10 +11,9 @@ namespace modal_mass_spring
 
 // Sparse Cholesky factorisation P (A - sigma I) P^T = L L^T of a symmetric positive definite A - sigma I
 // (P an AMD ordering), by supernodes: runs of columns of L with the same rows below them, each kept
-// as one dense block, factorised and updated with dense matrix products. Written here because Eigen's
-// sparse Cholesky is simplicial (one column at a time: 1.8x slower on a 100 x 100 grid) and
-// SuiteSparse's supernodal CHOLMOD needs an optimised BLAS to gain, which Debian does not install by
-// default. The solves, memory-bound, read each supernode's row list once and its entries in order.
+// as one dense block, factorised and updated with dense matrix products; why it is the package's own
+// rather than Eigen's simplicial one or CHOLMOD's: docs/design.md, "The modal basis". The solves,
+// memory-bound, read each supernode's row list once and its entries in order.
 class SupernodalCholesky
 {
 public:

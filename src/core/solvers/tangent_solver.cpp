@@ -1,8 +1,8 @@
 // Sparse symmetric solves for Newton's method: three sparse Cholesky factorisations and conjugate
 // gradients preconditioned by a diagonal or by the factor of an earlier tangent.
-#include "modal_mass_spring/tangent_solver.h"
+#include "solvers/tangent_solver.h"
 
-#include "modal_mass_spring/supernodal_cholesky.h"
+#include "solvers/supernodal_cholesky.h"
 
 #include <Eigen/CholmodSupport>
 #include <Eigen/Cholesky>
@@ -62,10 +62,9 @@ private:
   SparsityPattern pattern_;
 };
 
-// CHOLMOD's supernodes run on the BLAS, and OpenBLAS starts a spinning worker thread per core: on the
-// node, whose rebuild runs beside the timer that publishes, those threads took both cores and the
-// markers fell from 30 to 9 Hz during a rebuild. One BLAS thread (as every figure in the docs was
-// measured with); looked up at run time, so that any other BLAS is left as it is.
+// CHOLMOD's supernodes run on the BLAS, and OpenBLAS starts a spinning worker thread per core, which
+// starves the node's publishing timer during a rebuild (docs/benchmarks.md). One BLAS thread; looked up
+// at run time, so that any other BLAS is left as it is.
 void useOneBlasThread()
 {
   static std::once_flag once;

@@ -15,39 +15,29 @@ void springForcesDim(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd
 {
   using Vec = Eigen::Matrix<double, Dim, 1>;
   f.setZero(x.size());
-  double twice_energy = 0.0;
+  double total_energy = 0.0;
   for (const Spring& s : grid.springs())
   {
-    const Vec d = x.segment<Dim>(Dim * s.j) - x.segment<Dim>(Dim * s.i);
-    const double l = d.norm();
-    const double stretch = l - s.rest_length;
-    const Vec fi = s.stiffness * stretch / l * d;
+    double e = 0.0;
+    const Vec fi = springForce(s.stiffness, s.rest_length, Vec(x.segment<Dim>(Dim * s.j) - x.segment<Dim>(Dim * s.i)), &e);
     f.segment<Dim>(Dim * s.i) += fi;
     f.segment<Dim>(Dim * s.j) -= fi;
-    twice_energy += s.stiffness * stretch * stretch;
+    total_energy += e;
   }
   if (energy)
-    *energy = 0.5 * twice_energy;
+    *energy = total_energy;
 }
 
-// The spring's Hessian block Ke = k u u^T + k (1 - l0 / l) (I - u u^T); with Drop, a compressed
-// spring's second term is left out and counted in `dropped`.
+// A spring's Hessian block at x (spring_law.h), counting in `dropped` the geometric terms Drop leaves out.
 template <int Dim>
 Eigen::Matrix<double, Dim, Dim> springHessian(const Spring& s, const Eigen::VectorXd& x, CompressedSprings compressed,
                                               int& dropped)
 {
   using Vec = Eigen::Matrix<double, Dim, 1>;
-  using Mat = Eigen::Matrix<double, Dim, Dim>;
   const Vec d = x.segment<Dim>(Dim * s.j) - x.segment<Dim>(Dim * s.i);
-  const double l = d.norm();
-  const Vec u = d / l;
-  const Mat uu = u * u.transpose();
-  Mat ke = s.stiffness * uu;
-  if (l >= s.rest_length || compressed == CompressedSprings::Keep)
-    ke += s.stiffness * (1.0 - s.rest_length / l) * (Mat::Identity() - uu);
-  else
+  if (geometricStiffnessDropped(s.rest_length, d.norm(), compressed))
     ++dropped;
-  return ke;
+  return modal_mass_spring::springHessian(s.stiffness, s.rest_length, d, compressed);
 }
 
 template <int Dim>
@@ -111,14 +101,8 @@ SparseMatrix tangentStiffnessDerivativeDim(const Grid& grid, const Eigen::Vector
   for (const Spring& s : grid.springs())
   {
     const Vec d = x.segment<Dim>(Dim * s.j) - x.segment<Dim>(Dim * s.i);
-    const double l = d.norm();
-    const Vec u = d / l;
     const Vec delta = at(s.j) - at(s.i);
-    // Ke = k (I - l0 (I / l - d d^T / l^3)); its derivative along delta:
-    // k l0 / l^2 ((u.delta) I + delta u^T + u delta^T - 3 (u.delta) u u^T).
-    const double ud = u.dot(delta);
-    const Mat dke = s.stiffness * s.rest_length / (l * l) *
-                    (ud * Mat::Identity() + delta * u.transpose() + u * delta.transpose() - 3.0 * ud * u * u.transpose());
+    const Mat dke = springHessianDerivative(s.stiffness, s.rest_length, d, delta);
     for (int r = 0; r < Dim; ++r)
       for (int c = 0; c < Dim; ++c)
       {
@@ -151,10 +135,7 @@ void tangentTimesBasisDim(const Grid& grid, const Eigen::VectorXd& x, const Eige
   for (const Spring& s : grid.springs())
   {
     const Vec e = x.segment<Dim>(Dim * s.j) - x.segment<Dim>(Dim * s.i);
-    const double l = e.norm();
-    const Vec u = e / l;
-    const Mat uu = u * u.transpose();
-    const Mat ke = s.stiffness * (uu + (1.0 - s.rest_length / l) * (Mat::Identity() - uu));
+    const Mat ke = modal_mass_spring::springHessian(s.stiffness, s.rest_length, e);
     for (int a = 0; a < Dim; ++a)
     {
       const int fi = grid.freeIndex(Dim * s.i + a), fj = grid.freeIndex(Dim * s.j + a);
@@ -368,8 +349,8 @@ double springEnergy(const Grid& grid, const Eigen::VectorXd& x)
   double energy = 0.0;
   for (const Spring& s : grid.springs())
   {
-    const double l = (x.segment(dim * s.j, dim) - x.segment(dim * s.i, dim)).norm();
-    energy += 0.5 * s.stiffness * (l - s.rest_length) * (l - s.rest_length);
+    energy += modal_mass_spring::springEnergy(s.stiffness, s.rest_length,
+                                              (x.segment(dim * s.j, dim) - x.segment(dim * s.i, dim)).norm());
   }
   return energy;
 }

@@ -1,7 +1,7 @@
 // Shift-invert Lanczos with partial reorthogonalisation (Spectra as a fallback) over a supernodal
 // Cholesky factorisation.
 #include "modal_mass_spring/modal_basis.h"
-#include "modal_mass_spring/supernodal_cholesky.h"
+#include "solvers/supernodal_cholesky.h"
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
@@ -86,42 +86,133 @@ private:
 // reorthogonalised only when it passes sqrt(eps) (every third step there), which keeps them
 // semi-orthogonal: enough for Ritz values to working precision. The Ritz vectors are orthonormalised
 // afterwards.
-bool partialLanczos(const ShiftInvert& op, int nev, int max_steps, Eigen::MatrixXd& vectors,
-                    const IterationFn& on_iteration)
+class PartialLanczos
 {
-  const int n = static_cast<int>(op.rows());
-  const int m = std::min(n, max_steps);
-  const double eps = std::numeric_limits<double>::epsilon();
-  const double limit = std::sqrt(eps);
-  Eigen::MatrixXd v(n, m + 1);
-  adviseHugePages(v.data(), sizeof(double) * static_cast<std::size_t>(v.size()));
-  Eigen::VectorXd alpha = Eigen::VectorXd::Zero(m), beta = Eigen::VectorXd::Zero(m);
-  // omega[k] estimates v_j . v_k for the newest vector j, omega_previous for j - 1.
-  Eigen::VectorXd omega = Eigen::VectorXd::Zero(m + 1), omega_previous = Eigen::VectorXd::Zero(m + 1);
-  std::mt19937_64 random(1);  // fixed: the same basis for the same matrices
-  std::normal_distribution<double> normal;
+public:
+  PartialLanczos(const ShiftInvert& op, int max_steps)
+    : op_(op), n_(static_cast<int>(op.rows())), m_(std::min(n_, max_steps)), v_(n_, m_ + 1),
+      alpha_(Eigen::VectorXd::Zero(m_)), beta_(Eigen::VectorXd::Zero(m_)), omega_(Eigen::VectorXd::Zero(m_ + 1)),
+      omega_previous_(Eigen::VectorXd::Zero(m_ + 1))
+  {
+    adviseHugePages(v_.data(), sizeof(double) * static_cast<std::size_t>(v_.size()));
+  }
+
+  bool run(int nev, Eigen::MatrixXd& vectors, const IterationFn& on_iteration)
+  {
+    if (!fresh(0))
+      return false;
+    omega_[0] = 1.0;
+    int next_check = nev;
+    Eigen::VectorXd w(n_);
+    for (int j = 0; j < m_; ++j)
+    {
+      lanczosStep(j, w);
+      keepSemiOrthogonal(j, w);
+
+      // A breakdown (an invariant subspace) goes on from a new direction, uncoupled (beta_j = 0): one
+      // more copy of a repeated eigenvalue each time. When none is left, the Ritz pairs are exact.
+      const bool breakdown = beta_[j] <= 1e-12 * norm_estimate_;
+      const bool exhausted = j + 1 == n_ || (breakdown && !fresh(j + 1));
+      const bool last = j + 1 == m_ || exhausted;
+      // When the steps may fill the whole space, only the end is looked at: stopping early could miss
+      // copies of a repeated eigenvalue that later breakdowns would find.
+      if (j + 1 >= nev && (last || (m_ < n_ && !breakdown && j + 1 >= next_check)))
+      {
+        // Every second step on a 100 x 100 grid; on a 20 x 20 one checking that often would cost more
+        // than the steps.
+        const double check_per_step = kCheckCost * std::pow(j + 1.0, 3) / op_.solveCost();
+        next_check = j + 1 + std::max(2, static_cast<int>(std::ceil(check_per_step)));
+        if (breakdown)
+          beta_[j] = 0.0;
+        if (converged(j, nev, exhausted, vectors, on_iteration))
+          return true;
+      }
+      if (last)
+        return false;
+      if (breakdown)
+      {
+        beta_[j] = 0.0;  // v.col(j + 1) is the fresh direction
+        omega_.head(j + 1).setConstant(kEps);
+        continue;
+      }
+      v_.col(j + 1) = w / beta_[j];
+    }
+    return false;
+  }
+
+private:
+  static constexpr double kEps = std::numeric_limits<double>::epsilon();
 
   // A random unit vector in the operator's complement, orthogonal to v.leftCols(cols), into
   // v.col(cols); false when nothing is left (the Krylov spaces so far fill the complement).
-  auto fresh = [&](int cols) {
-    Eigen::VectorXd x(n);
-    for (int i = 0; i < n; ++i)
-      x[i] = normal(random);
-    op.project(x);
+  bool fresh(int cols)
+  {
+    Eigen::VectorXd x(n_);
+    for (int i = 0; i < n_; ++i)
+      x[i] = normal_(random_);
+    op_.project(x);
     const double before = x.norm();
     for (int pass = 0; pass < 2 && cols > 0; ++pass)
-      x -= v.leftCols(cols) * (v.leftCols(cols).transpose() * x);
+      x -= v_.leftCols(cols) * (v_.leftCols(cols).transpose() * x);
     if (x.norm() <= 1e-8 * before)
       return false;
-    v.col(cols) = x / x.norm();
+    v_.col(cols) = x / x.norm();
     return true;
-  };
-  // Against the runs of earlier vectors whose estimated overlap passed eps^(3/4) (Larsen's refinement
-  // of Simon's scheme: the rest are orthogonal enough already), widened by one on each side.
-  std::vector<std::pair<int, int>> runs;  // [first, last)
-  const double eta = std::pow(eps, 0.75);
-  auto findRuns = [&](const Eigen::VectorXd& overlap, int cols) {
-    runs.clear();
+  }
+
+  // w <- B v_j made orthogonal to v_j and v_{j-1}: alpha_j, beta_j and the estimate of |B|.
+  void lanczosStep(int j, Eigen::VectorXd& w)
+  {
+    op_.perform_op(v_.col(j).data(), w.data());
+    if (j > 0)
+      w -= beta_[j - 1] * v_.col(j - 1);
+    alpha_[j] = v_.col(j).dot(w);
+    w -= alpha_[j] * v_.col(j);
+    const double local = v_.col(j).dot(w);  // once more against v_j: the recurrence assumes it exact
+    w -= local * v_.col(j);
+    alpha_[j] += local;
+    beta_[j] = w.norm();
+    norm_estimate_ = std::max(norm_estimate_, std::abs(alpha_[j]) + beta_[j] + (j > 0 ? beta_[j - 1] : 0.0));
+  }
+
+  // Simon's recurrence for omega_{j+1, k}, with a rounding term of the size of eps ||B||; where the
+  // estimated loss passes sqrt(eps), w is reorthogonalised (and the next vector too).
+  void keepSemiOrthogonal(int j, Eigen::VectorXd& w)
+  {
+    Eigen::VectorXd omega_next = Eigen::VectorXd::Zero(m_ + 1);
+    if (beta_[j] > 0.0)
+      for (int k = 0; k < j; ++k)
+      {
+        double next = beta_[k] * omega_[k + 1] + (alpha_[k] - alpha_[j]) * omega_[k] +
+                      (k > 0 ? beta_[k - 1] * omega_[k - 1] : 0.0) - beta_[j - 1] * omega_previous_[k];
+        next += std::copysign(kEps * norm_estimate_, next);
+        omega_next[k] = next / beta_[j];
+      }
+    omega_next[j] = kEps * norm_estimate_ / std::max(beta_[j], kEps * norm_estimate_);
+    omega_next[j + 1] = 1.0;
+    const bool lost = j > 0 && omega_next.head(j).cwiseAbs().maxCoeff() > std::sqrt(kEps);
+    if ((lost || reorthogonalise_next_) && j + 1 < n_)
+    {
+      // Both this vector and the next, as Simon prescribes: the next inherits the error otherwise,
+      // against the same runs (and the newest vector).
+      if (lost)
+        findRuns(omega_next, j + 1);
+      else
+        runs_.emplace_back(j, j + 1);
+      reorthogonalise(w, omega_next);
+      beta_[j] = w.norm();
+      reorthogonalise_next_ = lost;
+    }
+    omega_previous_ = omega_;
+    omega_ = omega_next;
+  }
+
+  // The runs of earlier vectors whose estimated overlap passed eps^(3/4) (Larsen's refinement of
+  // Simon's scheme: the rest are orthogonal enough already), widened by one on each side.
+  void findRuns(const Eigen::VectorXd& overlap, int cols)
+  {
+    const double eta = std::pow(kEps, 0.75);
+    runs_.clear();
     for (int k = 0; k < cols;)
     {
       if (std::abs(overlap[k]) <= eta)
@@ -132,110 +223,57 @@ bool partialLanczos(const ShiftInvert& op, int nev, int max_steps, Eigen::Matrix
       int last = k;
       while (last < cols && std::abs(overlap[last]) > eta)
         ++last;
-      runs.emplace_back(std::max(0, k - 1), std::min(cols, last + 1));
+      runs_.emplace_back(std::max(0, k - 1), std::min(cols, last + 1));
       k = last;
     }
-  };
-  auto reorthogonalise = [&](Eigen::VectorXd& w, Eigen::VectorXd& overlap) {
-    for (const auto& run : runs)
-    {
-      const auto block = v.middleCols(run.first, run.second - run.first);
-      w -= block * (block.transpose() * w);
-      overlap.segment(run.first, run.second - run.first).setConstant(eps);
-    }
-  };
-
-  if (!fresh(0))
-    return false;
-  omega[0] = 1.0;
-  bool reorthogonalise_next = false;
-  int next_check = nev;
-
-  double norm_estimate = 0.0;  // of B, from the tridiagonal matrix so far
-  Eigen::VectorXd w(n);
-  for (int j = 0; j < m; ++j)
-  {
-    op.perform_op(v.col(j).data(), w.data());
-    if (j > 0)
-      w -= beta[j - 1] * v.col(j - 1);
-    alpha[j] = v.col(j).dot(w);
-    w -= alpha[j] * v.col(j);
-    const double local = v.col(j).dot(w);  // once more against v_j: the recurrence assumes it exact
-    w -= local * v.col(j);
-    alpha[j] += local;
-    beta[j] = w.norm();
-    norm_estimate = std::max(norm_estimate, std::abs(alpha[j]) + beta[j] + (j > 0 ? beta[j - 1] : 0.0));
-
-    // Simon's recurrence for omega_{j+1, k}, with a rounding term of the size of eps ||B||.
-    Eigen::VectorXd omega_next = Eigen::VectorXd::Zero(m + 1);
-    if (beta[j] > 0.0)
-      for (int k = 0; k < j; ++k)
-      {
-        double next = beta[k] * omega[k + 1] + (alpha[k] - alpha[j]) * omega[k] +
-                      (k > 0 ? beta[k - 1] * omega[k - 1] : 0.0) - beta[j - 1] * omega_previous[k];
-        next += std::copysign(eps * norm_estimate, next);
-        omega_next[k] = next / beta[j];
-      }
-    omega_next[j] = eps * norm_estimate / std::max(beta[j], eps * norm_estimate);
-    omega_next[j + 1] = 1.0;
-    const bool lost = j > 0 && omega_next.head(j).cwiseAbs().maxCoeff() > limit;
-    if ((lost || reorthogonalise_next) && j + 1 < n)
-    {
-      // Both this vector and the next, as Simon prescribes: the next inherits the error otherwise,
-      // against the same runs (and the newest vector).
-      if (lost)
-        findRuns(omega_next, j + 1);
-      else
-        runs.emplace_back(j, j + 1);
-      reorthogonalise(w, omega_next);
-      beta[j] = w.norm();
-      reorthogonalise_next = lost;
-    }
-    omega_previous = omega;
-    omega = omega_next;
-
-    // A breakdown (an invariant subspace) goes on from a new direction, uncoupled (beta_j = 0): one
-    // more copy of a repeated eigenvalue each time. When none is left, the Ritz pairs are exact.
-    const bool breakdown = beta[j] <= 1e-12 * norm_estimate;
-    const bool exhausted = j + 1 == n || (breakdown && !fresh(j + 1));
-    const bool last = j + 1 == m || exhausted;
-    // When the steps may fill the whole space, only the end is looked at: stopping early could miss
-    // copies of a repeated eigenvalue that later breakdowns would find.
-    if (j + 1 >= nev && (last || (m < n && !breakdown && j + 1 >= next_check)))
-    {
-      // Every second step on a 100 x 100 grid; on a 20 x 20 one checking that often would cost more
-      // than the steps.
-      const double check_per_step = kCheckCost * std::pow(j + 1.0, 3) / op.solveCost();
-      next_check = j + 1 + std::max(2, static_cast<int>(std::ceil(check_per_step)));
-      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> ritz;
-      if (breakdown)
-        beta[j] = 0.0;
-      ritz.computeFromTridiagonal(alpha.head(j + 1), beta.head(j), Eigen::ComputeEigenvectors);
-      // Ascending: the wanted (largest) ones are the last columns; residual beta_j |last entry|.
-      double worst = 0.0;  // the largest residual estimate relative to its Ritz value
-      for (int i = j + 1 - nev; i <= j && !exhausted; ++i)
-        worst = std::max(worst, beta[j] * std::abs(ritz.eigenvectors()(j, i)) /
-                                    std::max(std::abs(ritz.eigenvalues()[i]), 1e-11));
-      const bool converged = worst <= kTolerance;
-      if (on_iteration)
-        on_iteration("eigensolver", j + 1, worst, kTolerance);
-      if (converged)
-      {
-        vectors = v.leftCols(j + 1) * ritz.eigenvectors().rightCols(nev);
-        return true;
-      }
-    }
-    if (last)
-      return false;
-    if (breakdown)
-    {
-      beta[j] = 0.0;  // v.col(j + 1) is the fresh direction
-      omega.head(j + 1).setConstant(eps);
-      continue;
-    }
-    v.col(j + 1) = w / beta[j];
   }
-  return false;
+
+  void reorthogonalise(Eigen::VectorXd& w, Eigen::VectorXd& overlap)
+  {
+    for (const auto& run : runs_)
+    {
+      const auto block = v_.middleCols(run.first, run.second - run.first);
+      w -= block * (block.transpose() * w);
+      overlap.segment(run.first, run.second - run.first).setConstant(kEps);
+    }
+  }
+
+  // Whether the nev largest Ritz values of the tridiagonal matrix after step j have converged (a
+  // residual estimate beta_j |last entry| below kTolerance of the value); if so, their Ritz vectors.
+  bool converged(int j, int nev, bool exhausted, Eigen::MatrixXd& vectors, const IterationFn& on_iteration)
+  {
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> ritz;
+    ritz.computeFromTridiagonal(alpha_.head(j + 1), beta_.head(j), Eigen::ComputeEigenvectors);
+    // Ascending: the wanted (largest) ones are the last columns.
+    double worst = 0.0;  // the largest residual estimate relative to its Ritz value
+    for (int i = j + 1 - nev; i <= j && !exhausted; ++i)
+      worst = std::max(worst, beta_[j] * std::abs(ritz.eigenvectors()(j, i)) /
+                                  std::max(std::abs(ritz.eigenvalues()[i]), 1e-11));
+    if (on_iteration)
+      on_iteration("eigensolver", j + 1, worst, kTolerance);
+    if (worst > kTolerance)
+      return false;
+    vectors = v_.leftCols(j + 1) * ritz.eigenvectors().rightCols(nev);
+    return true;
+  }
+
+  const ShiftInvert& op_;
+  const int n_, m_;
+  Eigen::MatrixXd v_;  // the Lanczos vectors
+  Eigen::VectorXd alpha_, beta_;
+  // omega_[k] estimates v_j . v_k for the newest vector j, omega_previous_ for j - 1.
+  Eigen::VectorXd omega_, omega_previous_;
+  double norm_estimate_ = 0.0;  // of B, from the tridiagonal matrix so far
+  std::vector<std::pair<int, int>> runs_;  // [first, last)
+  bool reorthogonalise_next_ = false;
+  std::mt19937_64 random_{1};  // fixed: the same basis for the same matrices
+  std::normal_distribution<double> normal_;
+};
+
+bool partialLanczos(const ShiftInvert& op, int nev, int max_steps, Eigen::MatrixXd& vectors,
+                    const IterationFn& on_iteration)
+{
+  return PartialLanczos(op, max_steps).run(nev, vectors, on_iteration);
 }
 
 // Rayleigh-Ritz: the r lowest eigenpairs of A within the span of `vectors`.

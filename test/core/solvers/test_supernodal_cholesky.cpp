@@ -1,5 +1,5 @@
 // The supernodal Cholesky's solves against a dense factorisation of the same matrix.
-#include "modal_mass_spring/supernodal_cholesky.h"
+#include "solvers/supernodal_cholesky.h"
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>

@@ -1,10 +1,10 @@
 // The cubature method and its NNLS solver: known answers, agreement with `physical`, derivatives
 // by central differences, the training's held-out error, and its parameters' errors.
 #include "modal_mass_spring/cubature.h"
-#include "modal_mass_spring/method_model.h"
-#include "modal_mass_spring/nnls.h"
 #include "modal_mass_spring/simulation.h"
 #include "modal_mass_spring/spring_forces.h"
+#include "dynamics/method_model.h"
+#include "solvers/nnls.h"
 
 #include "test_support.h"
 

@@ -1,8 +1,8 @@
 // Static equilibrium by damped Newton with an energy line search.
-#include "modal_mass_spring/equilibrium.h"
+#include "solvers/equilibrium.h"
 
 #include "modal_mass_spring/spring_forces.h"
-#include "modal_mass_spring/tangent_solver.h"
+#include "solvers/tangent_solver.h"
 
 #include <Eigen/SparseCholesky>
 
@@ -165,6 +165,159 @@ private:
   bool dropped_ = false;
 };
 
+// One solve's state and its steps: Newton with a backtracking line search, Levenberg-Marquardt on the
+// exact Hessian once the drop tangent creeps, and the escape from a saddle (equilibrium.h says when each).
+class EquilibriumSolve
+{
+public:
+  EquilibriumSolve(const Grid& grid, const Eigen::VectorXd& start, EquilibriumSolver solver)
+    : grid_(grid), assembler_(grid), simplicial_only_(solver == EquilibriumSolver::SimplicialLdlt)
+  {
+    result_.positions = start;
+    r_ = unbalanced(grid, start);
+  }
+
+  Equilibrium& result() { return result_; }
+  double largestForce() const { return r_.cwiseAbs().maxCoeff(); }
+
+  // One iteration's step: true where one was accepted.
+  bool step() { return creeping_ ? levenbergMarquardtStep() : newtonStep(); }
+
+  // Levenberg-Marquardt, like Newton, also converges to saddles (mu M keeps K + mu M positive definite
+  // there): a buckled sheet balanced on one is pushed along its most negative curvature, as far
+  // (halving from one spacing) as lowers the energy most, and the solve goes on from there. True where
+  // it moved the sheet.
+  bool leaveSaddle()
+  {
+    Eigen::VectorXd v;
+    double lambda = 0.0, sigma = 0.0;
+    if (!creeping_ || escapes_ >= kMaxSaddleEscapes ||
+        !newton_.negativeCurvature(assembler_, result_.positions, r_, simplicial_only_, v, lambda, sigma))
+      return false;
+    const double spacing = grid_.params().spacing;
+    const double energy = potential(grid_, result_.positions);
+    double best_drop = 0.0;
+    Eigen::VectorXd best = result_.positions;
+    for (double a = spacing; a > 1e-6 * spacing; a *= 0.5)
+      for (double sign : {1.0, -1.0})
+      {
+        Eigen::VectorXd trial = result_.positions;
+        grid_.addFree(sign * a * v, trial);
+        const double drop = energy - potential(grid_, trial);
+        if (drop > best_drop)
+        {
+          best_drop = drop;
+          best = trial;
+        }
+      }
+    if (best_drop <= 0.0)
+      return false;
+    result_.positions = best;
+    r_ = unbalanced(grid_, result_.positions);
+    mu_ = sigma / grid_.particleMass();  // K + mu M just positive definite here
+    in_stable_basin_ = false;
+    ++escapes_;
+    return true;
+  }
+
+private:
+  // Levenberg-Marquardt on the exact Hessian: K + mu M, mu raised until K + mu M factorises and the
+  // step lowers the energy by a quarter of the model's prediction (or, where energy differences are
+  // round-off, the unbalanced force); lowered after each accepted step, to 0 (plain Newton) once the
+  // sheet sits in a stable state's basin.
+  bool levenbergMarquardtStep()
+  {
+    const double mass = grid_.particleMass();
+    const double mu_scale = newton_.largestDiagonal() / mass;  // where mu M is as stiff as K
+    const double energy = potential(grid_, result_.positions);
+    while (mu_ <= 1e3 * mu_scale)
+    {
+      Eigen::VectorXd direction;
+      double predicted = 0.0;
+      if (newton_.solveShifted(assembler_, result_.positions, r_, mu_ * mass, simplicial_only_, direction, predicted))
+      {
+        Eigen::VectorXd trial = result_.positions;
+        grid_.addFree(direction, trial);
+        const Eigen::VectorXd trial_r = unbalanced(grid_, trial);
+        const double drop = energy - potential(grid_, trial);
+        if ((predicted > 0.0 && drop >= 0.25 * predicted) ||
+            (trial_r.norm() < (1.0 - 1e-4) * r_.norm() && (in_stable_basin_ || drop >= 0.0)))
+        {
+          result_.positions = trial;
+          r_ = trial_r;
+          in_stable_basin_ = in_stable_basin_ || mu_ == 0.0;
+          mu_ = mu_ < 1e-9 * mu_scale ? 0.0 : 0.3 * mu_;
+          return true;
+        }
+      }
+      // From about the regularisation: a larger restart swamps a buckled sheet's small negative
+      // curvature and cycles (docs/benchmarks.md, "Released at 60 degrees").
+      mu_ = std::max(4.0 * mu_, 1e-8 * mu_scale);
+    }
+    return false;
+  }
+
+  // Newton: the exact Hessian where it is positive definite (quadratic convergence near a stable
+  // equilibrium); where compressed springs make it indefinite, the one without their geometric part,
+  // which is semi-definite and so gives a descent direction. On CHOLMOD, then once more on the
+  // simplicial LDL^T where CHOLMOD's direction made no progress.
+  bool newtonStep()
+  {
+    for (;;)
+    {
+      Eigen::VectorXd direction;
+      if (!newton_.solve(assembler_, result_.positions, r_, simplicial_only_, direction))
+        return false;
+      if (backtrack(direction))
+        return true;
+      if (simplicial_only_)
+        return false;
+      simplicial_only_ = true;  // the same iteration again on the simplicial LDL^T
+    }
+  }
+
+  // Backtrack along a Newton direction until the energy drops (Armijo) or, where energy differences
+  // are lost in round-off near the solution, the unbalanced force shrinks.
+  bool backtrack(const Eigen::VectorXd& direction)
+  {
+    const double energy = potential(grid_, result_.positions);
+    const double slope = r_.dot(direction);  // -dE/ds along the direction, > 0
+    for (double s = 1.0; s > 1e-10; s *= 0.5)
+    {
+      Eigen::VectorXd trial = result_.positions;
+      grid_.addFree(s * direction, trial);
+      const Eigen::VectorXd trial_r = unbalanced(grid_, trial);
+      const double trial_energy = potential(grid_, trial);
+      if (trial_energy <= energy - 1e-4 * s * slope || trial_r.norm() < (1.0 - 1e-4 * s) * r_.norm())
+      {
+        // A buckling sheet: the tangent without compressed springs' geometric part overestimates
+        // the buckling directions' stiffness and the force falls a few percent an iteration
+        // (docs/benchmarks.md, "Released at 60 degrees"); from the first such step on, the shifted exact
+        // Hessian. Flat starts, whose drop-tangent steps converge fast, keep this path.
+        if (newton_.dropped() && trial_r.cwiseAbs().maxCoeff() > 0.5 * r_.cwiseAbs().maxCoeff())
+          creeping_ = true;
+        result_.positions = trial;
+        r_ = trial_r;
+        return true;
+      }
+    }
+    return false;
+  }
+
+  const Grid& grid_;
+  Equilibrium result_;
+  Eigen::VectorXd r_;                  // the unbalanced force at result_.positions
+  const TangentAssembler assembler_;  // K's pattern never changes: assembled in place, analysed once
+  NewtonDirection newton_;
+  bool simplicial_only_;  // once a CHOLMOD direction made no progress, the simplicial LDL^T for the rest
+  bool creeping_ = false;  // once the drop tangent creeps: Levenberg-Marquardt with shift mu M (1/s^2)
+  double mu_ = 0.0;
+  int escapes_ = 0;  // saddles left so far
+  // Whether a step may be accepted for a smaller force alone: not after an escape until plain Newton
+  // (mu = 0, the exact Hessian positive definite) has taken one.
+  bool in_stable_basin_ = true;
+};
+
 }  // namespace
 
 Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int max_iterations, double tolerance,
@@ -180,154 +333,34 @@ Equilibrium solveEquilibrium(const Grid& grid, const Eigen::VectorXd& start, int
   const double target = std::max(tolerance * scale, 10.0 * roundoff);
   const double fallback = std::max(std::sqrt(tolerance) * scale, 1000.0 * roundoff);
 
-  Equilibrium result;
-  result.positions = start;
-  Eigen::VectorXd r = unbalanced(grid, start);
-  // K's pattern never changes: assembled in place, analysed once by each factorisation.
-  const TangentAssembler assembler(grid);
-  NewtonDirection newton;
-  // Once a CHOLMOD direction made no progress, the simplicial LDL^T for the rest.
-  bool simplicial_only = solver == EquilibriumSolver::SimplicialLdlt;
-  // Once the drop tangent creeps: Levenberg-Marquardt on the exact Hessian with shift mu M (1/s^2).
-  bool creeping = false;
-  double mu = 0.0;
-  int escapes = 0;  // saddles left so far
-  // Whether a step may be accepted for a smaller force alone: not after an escape until plain Newton
-  // (mu = 0, the exact Hessian positive definite) has taken one.
-  bool in_stable_basin = true;
-  // Levenberg-Marquardt, like Newton, also converges to saddles (mu M keeps K + mu M positive definite
-  // there): a buckled sheet balanced on one is pushed along its most negative curvature, as far
-  // (halving from one spacing) as lowers the energy most, and the solve goes on from there. True where
-  // it moved the sheet.
-  const auto leaveSaddle = [&]() {
-    Eigen::VectorXd v;
-    double lambda = 0.0, sigma = 0.0;
-    if (!creeping || escapes >= kMaxSaddleEscapes ||
-        !newton.negativeCurvature(assembler, result.positions, r, simplicial_only, v, lambda, sigma))
-      return false;
-    const double energy = potential(grid, result.positions);
-    double best_drop = 0.0;
-    Eigen::VectorXd best = result.positions;
-    for (double a = p.spacing; a > 1e-6 * p.spacing; a *= 0.5)
-      for (double sign : {1.0, -1.0})
-      {
-        Eigen::VectorXd trial = result.positions;
-        grid.addFree(sign * a * v, trial);
-        const double drop = energy - potential(grid, trial);
-        if (drop > best_drop)
-        {
-          best_drop = drop;
-          best = trial;
-        }
-      }
-    if (best_drop <= 0.0)
-      return false;
-    result.positions = best;
-    r = unbalanced(grid, result.positions);
-    mu = sigma / grid.particleMass();  // K + mu M just positive definite here
-    in_stable_basin = false;
-    ++escapes;
-    return true;
-  };
+  EquilibriumSolve solve(grid, start, solver);
+  Equilibrium& result = solve.result();
   for (result.iterations = 0; result.iterations < max_iterations; ++result.iterations)
   {
-    result.residual = r.cwiseAbs().maxCoeff();
+    result.residual = solve.largestForce();
     if (progress)
       progress(result.iterations, result.residual, target);
     if (result.residual <= target)
     {
-      if (leaveSaddle())
+      if (solve.leaveSaddle())
         continue;
       return result;
     }
-
-    // The exact Hessian where it is positive definite (Newton converges quadratically near a
-    // stable equilibrium); where compressed springs make it indefinite, the one without their
-    // geometric part, which is semi-definite and so gives a descent direction.
-    bool accepted = false;
-    if (creeping)
-    {
-      // Levenberg-Marquardt on the exact Hessian: K + mu M, mu raised until K + mu M factorises and
-      // the step lowers the energy by a quarter of the model's prediction (or, where energy
-      // differences are round-off, the unbalanced force); lowered after each accepted step, to 0
-      // (plain Newton) once the sheet sits in a stable state's basin.
-      const double mass = grid.particleMass();
-      const double mu_scale = newton.largestDiagonal() / mass;  // where mu M is as stiff as K
-      const double energy = potential(grid, result.positions);
-      while (!accepted && mu <= 1e3 * mu_scale)
-      {
-        Eigen::VectorXd direction;
-        double predicted = 0.0;
-        if (newton.solveShifted(assembler, result.positions, r, mu * mass, simplicial_only, direction, predicted))
-        {
-          Eigen::VectorXd trial = result.positions;
-          grid.addFree(direction, trial);
-          const Eigen::VectorXd trial_r = unbalanced(grid, trial);
-          const double drop = energy - potential(grid, trial);
-          if ((predicted > 0.0 && drop >= 0.25 * predicted) ||
-              (trial_r.norm() < (1.0 - 1e-4) * r.norm() && (in_stable_basin || drop >= 0.0)))
-          {
-            result.positions = trial;
-            r = trial_r;
-            accepted = true;
-            in_stable_basin = in_stable_basin || mu == 0.0;
-            mu = mu < 1e-9 * mu_scale ? 0.0 : 0.3 * mu;
-            break;
-          }
-        }
-        // From about the regularisation: a larger restart swamps a buckled sheet's small negative
-        // curvature and cycles (docs/benchmarks.md, "Released at 60 degrees").
-        mu = std::max(4.0 * mu, 1e-8 * mu_scale);
-      }
-    }
-    for (; !creeping;)
-    {
-      Eigen::VectorXd direction;
-      if (!newton.solve(assembler, result.positions, r, simplicial_only, direction))
-        break;
-
-      // Backtrack until the energy drops (Armijo) or, where energy differences are lost in
-      // round-off near the solution, the unbalanced force shrinks.
-      const double energy = potential(grid, result.positions);
-      const double slope = r.dot(direction);  // -dE/ds along the direction, > 0
-      for (double s = 1.0; s > 1e-10 && !accepted; s *= 0.5)
-      {
-        Eigen::VectorXd trial = result.positions;
-        grid.addFree(s * direction, trial);
-        const Eigen::VectorXd trial_r = unbalanced(grid, trial);
-        const double trial_energy = potential(grid, trial);
-        if (trial_energy <= energy - 1e-4 * s * slope || trial_r.norm() < (1.0 - 1e-4 * s) * r.norm())
-        {
-          // A buckling sheet: the tangent without compressed springs' geometric part overestimates
-          // the buckling directions' stiffness and the force falls a few percent an iteration
-          // (docs/benchmarks.md, "Released at 60 degrees"); from the first such step on, the shifted exact
-          // Hessian. Flat starts, whose drop-tangent steps converge fast, keep this path.
-          if (newton.dropped() && trial_r.cwiseAbs().maxCoeff() > 0.5 * r.cwiseAbs().maxCoeff())
-            creeping = true;
-          result.positions = trial;
-          r = trial_r;
-          accepted = true;
-        }
-      }
-      if (accepted || simplicial_only)
-        break;
-      simplicial_only = true;  // the same iteration again on the simplicial LDL^T
-    }
-    if (!accepted)
+    if (!solve.step())
     {
       // No further progress: the unbalanced force is at the round-off of the spring forces.
       // Accept when that is small anyway (the square root of the tolerance).
-      if (leaveSaddle())
+      if (solve.leaveSaddle())
         continue;
-      if (r.cwiseAbs().maxCoeff() <= fallback)
+      if (solve.largestForce() <= fallback)
       {
-        result.residual = r.cwiseAbs().maxCoeff();
+        result.residual = solve.largestForce();
         return result;
       }
       break;
     }
   }
-  result.residual = r.cwiseAbs().maxCoeff();
+  result.residual = solve.largestForce();
   if (result.residual <= target)
     return result;
   std::ostringstream msg;

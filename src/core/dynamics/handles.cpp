@@ -32,13 +32,9 @@ SparseMatrix handleCoupling(const Grid& grid, const Eigen::VectorXd& x)
       std::swap(interior, handle);
     if (!grid.isHandle(handle) || grid.freeIndex(dim * interior) < 0)
       continue;
+    // As K at the linearization point, which leaves compressed springs' geometric stiffness out.
     const Eigen::VectorXd d = x.segment(dim * s.j, dim) - x.segment(dim * s.i, dim);
-    const double l = d.norm();
-    const Eigen::VectorXd u = d / l;
-    const Eigen::MatrixXd uu = u * u.transpose();
-    Eigen::MatrixXd ke = s.stiffness * uu;
-    if (l >= s.rest_length)
-      ke += s.stiffness * (1.0 - s.rest_length / l) * (Eigen::MatrixXd::Identity(dim, dim) - uu);
+    const Eigen::MatrixXd ke = springHessian(s.stiffness, s.rest_length, d, CompressedSprings::Drop);
     // The off-diagonal block of the spring's Hessian is -Ke.
     for (int r = 0; r < dim; ++r)
       for (int c = 0; c < dim; ++c)

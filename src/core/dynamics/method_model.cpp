@@ -1,5 +1,5 @@
 // The methods' coordinates and the maps between them and physical displacements.
-#include "modal_mass_spring/method_model.h"
+#include "dynamics/method_model.h"
 
 #include <algorithm>
 #include <stdexcept>

@@ -1,8 +1,8 @@
 // Cubature training (greedy selection, NNLS refits) and the cubature force model.
 #include "modal_mass_spring/cubature.h"
 
-#include "modal_mass_spring/nnls.h"
 #include "modal_mass_spring/spring_forces.h"
+#include "solvers/nnls.h"
 
 #include <algorithm>
 #include <chrono>
@@ -38,14 +38,10 @@ Eigen::MatrixXd springRows(const Grid& grid, const Eigen::MatrixXd& phi_t, const
   return rows;
 }
 
-// The force on particle i of a spring whose vector from i to j is d; its energy in `energy`.
-SmallVector springForce(const Spring& s, const SmallVector& d, double* energy = nullptr)
+// The force on particle i of a spring whose vector from i to j is d.
+SmallVector springForce(const Spring& s, const SmallVector& d)
 {
-  const double l = d.norm();
-  const double stretch = l - s.rest_length;
-  if (energy)
-    *energy = 0.5 * s.stiffness * stretch * stretch;
-  return s.stiffness * stretch / l * d;
+  return modal_mass_spring::springForce(s.stiffness, s.rest_length, d);
 }
 
 Eigen::VectorXd restDiff(const Grid& grid, const Eigen::VectorXd& x, const Spring& s)
@@ -513,15 +509,13 @@ double CubatureForceModel::weightedSpringForces(const Eigen::VectorXd& modal, Ei
         d[c] = block.col(c).dot(modal) + rest_diff_[row + c];
       d_.segment<Dim>(row) = d;
     }
-    const double l = d.norm();
-    const double stretch = l - s.rest_length;
-    const double tension = weights_[static_cast<Eigen::Index>(t)] * s.stiffness * stretch;  // w_s k_s (l - L)
-    energy += 0.5 * tension * stretch;
+    // The weighted spring is a spring of stiffness w_s k_s.
+    double spring_energy = 0.0;
+    const Vector force = springForce(weights_[static_cast<Eigen::Index>(t)] * s.stiffness, s.rest_length, d,
+                                     &spring_energy);
+    energy += spring_energy;
     if (f)
-    {
-      const Vector force = (tension / l) * d;  // w_s times the force on particle i
-      f->noalias() -= block * force;             // dE_s/dX = D_s^T f_i, in one pass over f
-    }
+      f->noalias() -= block * force;  // dE_s/dX = D_s^T f_i, in one pass over f
   }
   d_modal_ = modal;
   return energy;
@@ -571,7 +565,7 @@ void CubatureForceModel::weightedTangentBlocks()
     const double l = d.norm();
     const Vector u = d / l;
     const double wk = weights_[static_cast<Eigen::Index>(t)] * s.stiffness;
-    const double a = wk * (1.0 - s.rest_length / l);
+    const double a = geometricStiffness(wk, s.rest_length, l);
     const double b = wk - a;
     const auto block = diff_t_.middleCols<Dim>(row);  // D_s^T
     d_rows_.noalias() = block * u;                    // D_s^T u

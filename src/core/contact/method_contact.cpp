@@ -1,6 +1,6 @@
 // How each method hands its step's end state to the contact correction (contact.h): `full` its
 // particles' dofs, the modal methods their coordinates through the basis.
-#include "modal_mass_spring/method_model.h"
+#include "dynamics/method_model.h"
 
 namespace modal_mass_spring
 {

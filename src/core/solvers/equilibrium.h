@@ -37,8 +37,8 @@ struct Equilibrium
 // target (N) before the iteration, so that a slow solve can be reported.
 // The limit, when it stops Newton, is named in the refusal as the parameter equilibrium_max_iterations.
 using EquilibriumProgress = std::function<void(int iteration, double residual, double target)>;
-// `solver` SimplicialLdlt keeps to the simplicial LDL^T throughout (as before CHOLMOD was used here):
-// for tests and the benchmark's side-by-side comparison.
+// `solver` SimplicialLdlt keeps to the simplicial LDL^T throughout: for tests and the benchmark's
+// side-by-side comparison.
 enum class EquilibriumSolver
 {
   Cholmod,

@@ -1,7 +1,7 @@
 // The modal basis against closed-form frequencies and its defining properties.
 #include "modal_mass_spring/modal_basis.h"
 
-#include "modal_mass_spring/equilibrium.h"
+#include "solvers/equilibrium.h"
 
 #include <Eigen/Eigenvalues>
 #include <gtest/gtest.h>

@@ -1,5 +1,5 @@
 // The explicit Newmark scheme of the paper.
-#include "modal_mass_spring/integrator.h"
+#include "dynamics/integrator.h"
 
 #include <algorithm>
 #include <limits>

@@ -1,5 +1,5 @@
 // Lawson-Hanson non-negative least squares on the normal equations, with a growing Cholesky factor.
-#include "modal_mass_spring/nnls.h"
+#include "solvers/nnls.h"
 
 #include <Eigen/Cholesky>
 

@@ -1,9 +1,9 @@
 // The static equilibrium under gravity and the linearization there: the force balance, closed forms
 // (a hanging chain's modes), a stiff grid's round-off, and what a failed solve says.
-#include "modal_mass_spring/equilibrium.h"
 #include "modal_mass_spring/modal_basis.h"
 #include "modal_mass_spring/simulation.h"
 #include "modal_mass_spring/spring_forces.h"
+#include "solvers/equilibrium.h"
 
 #include "test_support.h"
 

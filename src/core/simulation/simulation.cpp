@@ -2,9 +2,10 @@
 // checks (its parameters are checked in validation.cpp).
 #include "modal_mass_spring/simulation.h"
 
-#include "modal_mass_spring/equilibrium.h"
 #include "modal_mass_spring/spring_forces.h"
 #include "modal_mass_spring/validation.h"
+#include "dynamics/method_model.h"
+#include "solvers/equilibrium.h"
 
 #include <chrono>
 #include <time.h>
@@ -146,6 +147,15 @@ void Simulation::precompute(const StageFn& on_stage, const IterationFn& on_itera
   else if (params_.method != Method::Full)
     buildBasis(on_stage, on_iteration);
 }
+
+Simulation::~Simulation() = default;
+
+Method Simulation::method() const { return model_->method(); }
+int Simulation::lastNewtonIterations() const { return model_->integrator().lastIterations(); }
+int Simulation::lastImplicitSubsteps() const { return model_->integrator().lastSubsteps(); }
+const State& Simulation::state() const { return model_->state(); }
+Eigen::VectorXd Simulation::bodyDisplacement() const { return model_->displacement(model_->state()); }
+Eigen::VectorXd Simulation::bodyVelocity() const { return model_->velocity(model_->state()); }
 
 void Simulation::buildBasis(const StageFn& on_stage, const IterationFn& on_iteration)
 {
@@ -805,7 +815,7 @@ std::vector<Eigen::Vector3d> Simulation::handleForces() const
     const double length = d.norm();
     if (length <= 0.0)
       continue;
-    const Eigen::VectorXd f = s.stiffness * (length - s.rest_length) / length * d;  // on i, towards j
+    const Eigen::VectorXd f = springForce(s.stiffness, s.rest_length, d);  // on i, towards j
     add(s.i, f);
     add(s.j, -f);
   }

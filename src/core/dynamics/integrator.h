@@ -4,7 +4,8 @@
 
 #include "modal_mass_spring/force_model.h"
 #include "modal_mass_spring/spring_forces.h"
-#include "modal_mass_spring/tangent_solver.h"
+#include "modal_mass_spring/state.h"
+#include "solvers/tangent_solver.h"
 
 #include <Eigen/Core>
 #include <Eigen/SparseCholesky>
@@ -15,12 +16,6 @@
 
 namespace modal_mass_spring
 {
-
-// Generalized state: displacement, velocity, acceleration.
-struct State
-{
-  Eigen::VectorXd q, v, a;
-};
 
 // The linear part of a method's equation of motion: diagonal mass, sparse damping (diagonal in modal
 // coordinates, alpha M + beta K in physical ones).

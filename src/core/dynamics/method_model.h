@@ -8,9 +8,9 @@
 #include "modal_mass_spring/force_model.h"
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/handles.h"
-#include "modal_mass_spring/integrator.h"
 #include "modal_mass_spring/modal_basis.h"
 #include "modal_mass_spring/options.h"
+#include "dynamics/integrator.h"
 
 #include <Eigen/Core>
 

@@ -2,11 +2,11 @@
 // implicit step used before them), on single solves and on whole implicit steps of grids with slack and
 // compressed springs and with handles; and the pattern-keeping tangent assembly against the one from
 // triplets.
-#include "modal_mass_spring/equilibrium.h"
 #include "modal_mass_spring/force_model.h"
-#include "modal_mass_spring/integrator.h"
 #include "modal_mass_spring/spring_forces.h"
-#include "modal_mass_spring/tangent_solver.h"
+#include "dynamics/integrator.h"
+#include "solvers/equilibrium.h"
+#include "solvers/tangent_solver.h"
 
 #include <gtest/gtest.h>
 
