@@ -1,26 +1,10 @@
-// The one form of a refused parameter, shared by the core, the node and the tools, and the checks of
-// a simulation's parameters with the memory estimate they hold against memory_limit_gb.
+// The checks of a simulation's parameters, with the memory estimate they hold against memory_limit_gb.
 #pragma once
 
-#include <sstream>
-#include <stdexcept>
-#include <string>
-#include <vector>
+#include "modal_mass_spring/parameter_error.h"
 
 namespace modal_mass_spring
 {
-
-// Throws std::invalid_argument "invalid parameter 'NAME' = VALUE: ALLOWED".
-template <typename T>
-[[noreturn]] void rejectParameter(const std::string& name, const T& value, const std::string& allowed)
-{
-  std::ostringstream msg;
-  msg << "invalid parameter '" << name << "' = " << value << ": " << allowed;
-  throw std::invalid_argument(msg.str());
-}
-
-// Refuses a particle index outside [0, num_particles - 1] or listed twice.
-void checkParticleIndices(const std::string& name, const std::vector<int>& indices, int num_particles);
 
 struct GridParams;
 struct SimulationParams;

@@ -1,7 +1,7 @@
 // Colliders, their signed distances, and the Coulomb correction of a step's end state (contact.h).
 #include "modal_mass_spring/contact.h"
 
-#include "modal_mass_spring/validation.h"
+#include "modal_mass_spring/parameter_error.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,7 +1,7 @@
 // Builds and validates the particle grid and its springs.
 #include "modal_mass_spring/grid.h"
 
-#include "modal_mass_spring/validation.h"
+#include "modal_mass_spring/parameter_error.h"
 
 #include <cmath>
 #include <stdexcept>
@@ -235,6 +235,20 @@ Eigen::Matrix3Xd Grid::toPoints(const Eigen::VectorXd& x) const
       points.col(p) = x.segment<3>(3 * p);
   }
   return points;
+}
+
+void checkParticleIndices(const std::string& name, const std::vector<int>& indices, int num_particles)
+{
+  std::vector<bool> seen(num_particles > 0 ? num_particles : 0, false);
+  for (int index : indices)
+  {
+    if (index < 0 || index >= num_particles)
+      rejectParameter(name, index,
+                      "particle indices must be in [0, " + std::to_string(num_particles - 1) + "] (row * cols + col)");
+    if (seen[index])
+      rejectParameter(name, index, "each particle index must be listed once");
+    seen[index] = true;
+  }
 }
 
 }  // namespace modal_mass_spring

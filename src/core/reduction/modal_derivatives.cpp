@@ -1,7 +1,7 @@
 // Modal derivatives by one sparse factorisation of K, and their mass-PCA into the basis.
 #include "modal_mass_spring/modal_derivatives.h"
 
-#include "modal_mass_spring/validation.h"
+#include "modal_mass_spring/parameter_error.h"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/SparseCholesky>

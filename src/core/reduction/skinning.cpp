@@ -3,7 +3,7 @@
 #include "modal_mass_spring/skinning.h"
 
 #include "modal_mass_spring/cubature.h"
-#include "modal_mass_spring/validation.h"
+#include "modal_mass_spring/parameter_error.h"
 
 #include <Eigen/Geometry>
 

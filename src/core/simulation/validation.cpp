@@ -125,20 +125,6 @@ void validateBasis(const GridParams& grid, const SimulationParams& p, long long 
 }  // namespace
 
 // Refuses a particle index outside [0, num_particles - 1] or listed twice.
-void checkParticleIndices(const std::string& name, const std::vector<int>& indices, int num_particles)
-{
-  std::vector<bool> seen(num_particles > 0 ? num_particles : 0, false);
-  for (int index : indices)
-  {
-    if (index < 0 || index >= num_particles)
-      rejectParameter(name, index,
-                      "particle indices must be in [0, " + std::to_string(num_particles - 1) + "] (row * cols + col)");
-    if (seen[index])
-      rejectParameter(name, index, "each particle index must be listed once");
-    seen[index] = true;
-  }
-}
-
 void validateParameters(const GridParams& grid, const SimulationParams& p)
 {
   validateGridParams(grid);

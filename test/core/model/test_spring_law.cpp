@@ -61,13 +61,13 @@ TYPED_TEST(SpringLaw, HessianIsTheForceJacobianAndDropLeavesOnlyTheAxialTerm)
   {
     const auto ke = springHessian(kStiffness, kRestLength, d);
     EXPECT_TRUE(ke.isApprox(ke.transpose(), 1e-14));
-    // d^2E/dx_j^2 = -d f_i / d x_j, and d changes with x_j one to one.
+    // Ke = -d^2E/(dx_i dx_j) = d f_i / d x_j, and d changes with x_j one to one.
     for (int b = 0; b < d.size(); ++b)
     {
       TypeParam dp = d, dm = d;
       dp[b] += h;
       dm[b] -= h;
-      const TypeParam column = -(springForce(kStiffness, kRestLength, dp) - springForce(kStiffness, kRestLength, dm)) / (2.0 * h);
+      const TypeParam column = (springForce(kStiffness, kRestLength, dp) - springForce(kStiffness, kRestLength, dm)) / (2.0 * h);
       EXPECT_TRUE(ke.col(b).isApprox(column, 1e-6)) << ke.col(b).transpose() << " vs " << column.transpose();
     }
     const TypeParam u = d.normalized();
