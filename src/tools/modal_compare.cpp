@@ -661,7 +661,7 @@ void buildEverySetup(const Options& o, const std::vector<ExperimentSetup>& setup
                     << (stage == "equilibrium" ? " N (target " : " (target ") << target
                     << (stage == "equilibrium" ? " N), " : "), ");
         std::cerr << std::fixed << std::setprecision(1) << std::chrono::duration<double>(now - start).count() << " s"
-                  << std::defaultfloat << "\n";
+                  << std::defaultfloat << std::setprecision(6) << "\n";
       };
     try
     {
