@@ -524,8 +524,8 @@ void SimulationNode::onTick()
   std::optional<Eigen::Vector3d> drag_marker;
   {
     std::unique_lock<std::mutex> lock(mutex_);
+    adoptTrainedCubature();  // before a rebuild's swap: it was trained on the running model
     swapRebuilt();
-    adoptTrainedCubature();
     updateExternalForces();
     updateHandleTargets();
     updateColliderTargets();
