@@ -224,7 +224,10 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
     else
     {
       value << grid.rows << " x " << grid.cols << " grid (" << grid.dimension << "D), num_modes = " << p.num_modes;
-      allowed << "needs about " << needed_gb << " GB, ";
+      allowed << "needs about " << needed_gb << " GB";
+      if (training_gb > 0.0)
+        allowed << " (the cubature's training about " << training_gb << " GB of it)";
+      allowed << ", ";
     }
     allowed << "above memory_limit_gb = " << p.memory_limit_gb << " GB; "
             << (training ? "use fewer cubature_training_poses or a smaller cubature_max_training_poses or cubature_max_springs"
