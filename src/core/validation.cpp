@@ -246,9 +246,9 @@ static double physicalBasisSize(const GridParams& g, const SimulationParams& p)
   return static_cast<double>(p.num_modes) + (p.basis == BasisKind::ModalDerivatives ? p.num_derivative_modes : 0);
 }
 
-// The training and validation sets (poses, targets, residual and fits: basis size x poses each), the
-// selected springs' factors (D_s^T: basis size x dim per spring; F_s: dim x poses per spring, on
-// the training set, the validation set and in the fit's and the Gram update's products), the NNLS
+// The training and validation sets (poses and targets), the residual and the fit (basis size x poses
+// each), the selected springs' factors (D_s^T: basis size x dim per spring; F_s: dim x poses per
+// spring, on the training set, the validation set and in the fit's and the Gram update's products), the NNLS
 // Gram matrix and factor (with the Gram's spare capacity), and Phi^T (with basis: skinning, the
 // skinning map B the pose sampler's projection is made from, as large).
 double cubatureTrainingBytes(const GridParams& g, const SimulationParams& p)
@@ -258,7 +258,7 @@ double cubatureTrainingBytes(const GridParams& g, const SimulationParams& p)
   const double coordinates = physicalBasisSize(g, p);
   const double dim = g.dimension;
   const double dofs = static_cast<double>(g.rows) * g.cols * dim;
-  return 8.0 * (8.0 * coordinates * poses + 5.0 * dim * springs * poses + coordinates * dim * springs +
+  return 8.0 * (6.0 * coordinates * poses + 4.0 * dim * springs * poses + coordinates * dim * springs +
                 3.0 * springs * springs + (p.basis == BasisKind::Skinning ? 2.0 : 1.0) * dofs * coordinates);
 }
 
