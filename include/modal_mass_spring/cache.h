@@ -23,7 +23,7 @@ struct SimulationParams;
 
 // Bumped whenever the file layout or anything that changes the computed result (the eigensolver, the
 // derivative basis, the training, the equilibrium solve) changes: a file of another version is rebuilt.
-constexpr std::uint32_t kCacheFormatVersion = 5;
+constexpr std::uint32_t kCacheFormatVersion = 6;
 
 // Where a Simulation keeps its cache. Not a SimulationParams: it changes no result, only whether the
 // start-up recomputes it, and its default is the caller's ($ROS_HOME for the node).

@@ -74,15 +74,19 @@ Eigen::MatrixXd trainingPoses(const Grid& grid, const ModalBasis& basis, const E
 // Greedy selection with NNLS refits on random poses X around x_ref (each mode's amplitude scaled by
 // omega_1 / omega_i, the largest particle displacement uniform in (0, pose_size], no spring shorter
 // than kShortestTrainingSpring of its length at x_ref). The target of a pose is
-// Phi^T (f(x_ref + Phi X) - f(x_ref)); spring columns are computed when needed, never the whole
-// training matrix. Once the training error is below params.tolerance, the fit is measured on as many
+// Phi^T (f(x_ref + Phi X) - f(x_ref)). The training matrix is never stored: a spring's column is
+// -D_s^T F_s pose by pose (D_s its rows of Phi, F_s its force change over the poses, dim x poses), and
+// only the selected springs' D_s and F_s are kept, so memory grows as |T| dim (r + poses), not
+// |T| r poses. Once the training error is below params.tolerance, the fit is measured on as many
 // fresh poses: above the tolerance there, they join the training set and the selection goes on, while
 // the set may double within max_training_poses. Stops there, at max_springs, or when no candidate helps.
 // `sampler` draws the poses instead of trainingPoses (a subspace whose poses follow another law, as
-// the skinning span's rotations); empty: trainingPoses.
+// the skinning span's rotations); empty: trainingPoses. `on_iteration` is told each spring selected
+// ("cubature", springs selected, training error, tolerance); it may throw to stop the training.
 using PoseSampler = std::function<Eigen::MatrixXd(int count, std::mt19937_64& rng)>;
 Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref,
-                       const CubatureParams& params, const PoseSampler& sampler = {});
+                       const CubatureParams& params, const PoseSampler& sampler = {},
+                       const IterationFn& on_iteration = {});
 
 // `cubature`: F(X) = Phi^T f_g + F_exact(ref) + sum over T of w_s (g_s(X) - g_s(0)), g_s the force of
 // spring s projected onto its particles' rows of Phi. Exact at the reference (an equilibrium stays

@@ -12,6 +12,7 @@
 #include "modal_mass_spring/state.h"
 #include "modal_mass_spring/validation.h"  // validateParameters, estimateMemoryBytes
 
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -168,6 +169,19 @@ public:
   void setMethod(Method method);
   // The trained cubature (springs, weights, training report), or null before `cubature` was first used.
   const Cubature* cubature() const { return cubature_ ? &*cubature_ : nullptr; }
+  // The cubature's training apart from the switch, for a caller that steps on meanwhile (the node):
+  // loadCachedCubature() takes it from the cache when it holds it (true: cubature() is set);
+  // cubatureTraining() checks the training's memory against memory_limit_gb as validateParameters
+  // does for `cubature` (std::invalid_argument) and returns the training as a job to run on another
+  // thread (on_iteration as trainCubature's, which may throw to stop it). The job copies the
+  // parameters and reads the grid, the physical basis and the linearization point, which stepping,
+  // reset(), setMethod() and setTimeStep() never change: this simulation must outlive it and not
+  // build its basis meanwhile (buildBasis first: std::logic_error otherwise). setCubature() then
+  // takes the result (and stores it in the cache) for the next setMethod(Method::Cubature).
+  using CubatureTraining = std::function<Cubature(const IterationFn& on_iteration)>;
+  bool loadCachedCubature();
+  CubatureTraining cubatureTraining() const;
+  void setCubature(Cubature cubature);
   // What the cache did: whether the basis and the cubature were loaded or stored, and where.
   const CacheReport& cacheReport() const { return cache_report_; }
   // Rebuilds the integrators for a new time step (validated as at construction); keeps the state.
@@ -312,7 +326,7 @@ private:
   // Takes the bases and what they report, loaded or built.
   void adoptBasis(Precomputed&& data);
   // Loads, or trains and stores, the cubature on the physical basis.
-  void prepareCubature();
+  void prepareCubature(const IterationFn& on_iteration = {});
   // The grid is simulated in a moving frame that has left its start: B's coordinates are not the world's.
   bool frameMoved() const { return formulation_ == HandleFormulation::MovingFrame && !frame_current_.atRest(); }
   // In a moving frame: a world free-dof displacement and velocity in B and back (identity else).

@@ -18,10 +18,10 @@ void validateParameters(const GridParams& grid, const SimulationParams& params);
 
 // Peak memory (bytes) a Simulation with these (valid) parameters needs: the stiffness matrix, its
 // sparse factorisations (basis, equilibrium, implicit full), the basis with the eigensolver's
-// vectors and the force models' copies, and the per-dof vectors. An estimate, within a factor of
-// about 1.5 of what was measured.
+// vectors and the force models' copies, the per-dof vectors, and with method `cubature` its
+// training. An estimate, within a factor of about 1.5 of what was measured.
 double estimateMemoryBytes(const GridParams& grid, const SimulationParams& params);
-// The part of it the cubature training takes, with its training set grown to the most.
+// What the cubature's training adds (whatever params.method), with its training set grown to the most.
 double cubatureTrainingBytes(const GridParams& grid, const SimulationParams& params);
 
 }  // namespace modal_mass_spring

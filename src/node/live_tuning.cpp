@@ -196,7 +196,8 @@ void SimulationNode::rebuildLoop()
 
 void SimulationNode::swapRebuilt()
 {
-  if (rebuilt_.empty())
+  // A cubature trained in the background reads the running simulation: the swap waits for it.
+  if (rebuilt_.empty() || training_)
     return;
   for (size_t k = 0; k < tracks_.size() && k < rebuilt_.size(); ++k)
   {

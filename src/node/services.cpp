@@ -6,6 +6,8 @@
 #include <geometry_msgs/TransformStamped.h>
 
 #include <algorithm>
+#include <chrono>
+#include <cstdio>
 #include <string>
 
 namespace modal_mass_spring
@@ -28,6 +30,7 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
                        "single-method node";
     return true;
   }
+  adoptTrainedCubature();  // a training done since the last tick
   Simulation& simulation = *primary().simulation;
   Method method;
   try
@@ -46,24 +49,32 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   }
   const std::string previous = toString(simulation.method());
   const bool was_diverged = simulation.diverged();
-  const bool trains = method == Method::Cubature && !simulation.cubature();
+  if (training_ && method == Method::Cubature)
+  {
+    switch_after_training_ = true;
+    response.success = true;
+    response.message = "the cubature is being trained in the background (" + trainingProgress() + "); still running '" +
+                       previous + "', switched to cubature when the training is done";
+    return true;
+  }
   try
   {
     if (method != Method::Full)
       buildBasis(simulation, "building the modal basis");  // once, with its progress logged
-    if (trains)
+    if (method == Method::Cubature && !simulation.loadCachedCubature())
     {
-      // Training holds the simulation (up to minutes on the skinning span): say so, and how it goes.
-      ROS_INFO("switching to cubature: training it first on basis %s (%s); the simulation waits",
-               toString(simulation.params().basis).c_str(),
-               config_.node.cache_dir.empty() ? "no cache_dir: trained again at every start" : "cached for the next start");
-      withProgress("switching to cubature", [&](const StageFn& on_stage, const IterationFn&) {
-        on_stage("cubature");
-        simulation.setMethod(method);
-      });
+      // Training takes up to minutes on the skinning span: the current method steps on meanwhile.
+      trainInBackground(simulation.cubatureTraining());  // refuses a training beyond memory_limit_gb
+      switch_after_training_ = true;
+      response.success = true;
+      response.message = "training the cubature in the background on basis " + toString(simulation.params().basis) +
+                         "; still running '" + previous +
+                         "' (~status state REBUILDING, its message the training's progress), switched to cubature "
+                         "when the training is done";
+      ROS_INFO("%s", response.message.c_str());
+      return true;
     }
-    else
-      simulation.setMethod(method);  // trains before it replaces anything: a failure keeps the run
+    simulation.setMethod(method);  // builds before it replaces anything: a failure keeps the run
   }
   catch (const std::exception& error)
   {
@@ -72,25 +83,123 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
     ROS_ERROR("%s", response.message.c_str());
     return true;
   }
-  if (trains)
-    ROS_INFO("%s", describeCubature(*simulation.cubature(), static_cast<int>(simulation.grid().springs().size()),
-                                    simulation.params().cubature_tolerance)
-                       .c_str());
+  // A later choice cancels the switch a training was to end with (the training goes on and is kept).
+  if (training_ && switch_after_training_)
+  {
+    switch_after_training_ = false;
+    ROS_INFO("~set_method %s: the switch to cubature after its training is cancelled (the training goes on, "
+             "kept for a later switch)",
+             request.method.c_str());
+  }
+  response.success = true;
+  response.message = finishSwitch(previous, method, was_diverged);
+  return true;
+}
+
+std::string SimulationNode::finishSwitch(const std::string& previous, Method method, bool was_diverged)
+{
+  const Simulation& simulation = *primary().simulation;
   primary().name = toString(method);
   primary().divergence_message.clear();
   synchronise();  // the shadow full starts again from the state carried over
   ++state_changes_;
-  response.success = true;
-  response.message = "switched from " + previous + " to " + request.method + " at step " +
-                     std::to_string(steps(primary())) + (was_diverged ? ", recovering from the divergence" : "");
+  std::string message = "switched from " + previous + " to " + toString(method) + " at step " +
+                        std::to_string(steps(primary())) + (was_diverged ? ", recovering from the divergence" : "");
   // `linear` never runs on a richer basis (its force is the modes' own -Lambda q): say what it runs on.
   if (method == Method::Linear && simulation.params().basis != BasisKind::LinearModes)
-    response.message += "; linear keeps the " + std::to_string(simulation.params().num_modes) +
-                        " lowest modes, not basis " + toString(simulation.params().basis);
+    message += "; linear keeps the " + std::to_string(simulation.params().num_modes) + " lowest modes, not basis " +
+               toString(simulation.params().basis);
   if (was_diverged)  // forces that caused it act on, as after a reset
-    response.message += forcesActingNote();
-  ROS_INFO("%s", response.message.c_str());
-  return true;
+    message += forcesActingNote();
+  ROS_INFO("%s", message.c_str());
+  return message;
+}
+
+void SimulationNode::trainInBackground(Simulation::CubatureTraining training)
+{
+  if (training_thread_.joinable())
+    training_thread_.join();  // finished: it cleared training_ on its way out
+  training_ = true;
+  trained_.reset();
+  training_failure_.clear();
+  {
+    std::lock_guard<std::mutex> lock(progress_mutex_);
+    training_progress_ = "training the cubature: drawing the training poses";
+  }
+  ROS_INFO("training the cubature in the background on basis %s (%s); the current method steps on",
+           toString(primary().simulation->params().basis).c_str(),
+           config_.node.cache_dir.empty() ? "no cache_dir: trained again at every start" : "cached for the next start");
+  training_thread_ = std::thread([this, training = std::move(training)] {
+    std::optional<Cubature> cubature;
+    std::string failure;
+    const auto start = std::chrono::steady_clock::now();
+    try
+    {
+      withProgress("training the cubature", [&](const StageFn& on_stage, const IterationFn& on_iteration) {
+        on_stage("cubature");
+        cubature = training([&](const std::string& stage, int springs, double error, double tolerance) {
+          if (cancel_training_)
+            throw std::runtime_error("cancelled: the node is shutting down");
+          on_iteration(stage, springs, error, tolerance);
+          char text[160];
+          std::snprintf(text, sizeof text,
+                        "training the cubature: %d springs, training error %.3g%% (cubature_tolerance %.3g%%), %.0f s",
+                        springs, 100.0 * error, 100.0 * tolerance,
+                        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+          std::lock_guard<std::mutex> lock(progress_mutex_);
+          training_progress_ = text;
+        });
+      });
+    }
+    catch (const std::exception& error)
+    {
+      failure = error.what();
+    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    trained_ = std::move(cubature);
+    training_failure_ = failure;
+    training_ = false;
+  });
+}
+
+void SimulationNode::adoptTrainedCubature()
+{
+  if (training_ || (!trained_ && training_failure_.empty()))
+    return;
+  Simulation& simulation = *primary().simulation;
+  const std::string previous = toString(simulation.method());
+  if (!trained_)
+  {
+    ROS_ERROR("cannot switch to cubature: its training failed: %s; still running '%s'", training_failure_.c_str(),
+              previous.c_str());
+    training_failure_.clear();
+    return;
+  }
+  simulation.setCubature(std::move(*trained_));
+  trained_.reset();
+  ROS_INFO("%s", describeCubature(*simulation.cubature(), static_cast<int>(simulation.grid().springs().size()),
+                                  simulation.params().cubature_tolerance)
+                     .c_str());
+  if (!switch_after_training_)
+    return;
+  switch_after_training_ = false;
+  const bool was_diverged = simulation.diverged();
+  try
+  {
+    simulation.setMethod(Method::Cubature);
+  }
+  catch (const std::exception& error)
+  {
+    ROS_ERROR("cannot switch to cubature: %s; still running '%s'", error.what(), previous.c_str());
+    return;
+  }
+  finishSwitch(previous, Method::Cubature, was_diverged);
+}
+
+std::string SimulationNode::trainingProgress() const
+{
+  std::lock_guard<std::mutex> lock(progress_mutex_);
+  return training_progress_;
 }
 
 bool SimulationNode::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Response& response)

@@ -169,6 +169,9 @@ SimulationNode::~SimulationNode()
   }
   if (rebuild_thread_.joinable())
     rebuild_thread_.join();  // a basis being built is finished and dropped
+  cancel_training_ = true;     // a cubature being trained stops at its next spring
+  if (training_thread_.joinable())
+    training_thread_.join();
 }
 
 void SimulationNode::buildBasis(Simulation& simulation, const std::string& activity) const
@@ -521,6 +524,7 @@ void SimulationNode::onTick()
   std::optional<Eigen::Vector3d> drag_marker;
   {
     std::unique_lock<std::mutex> lock(mutex_);
+    adoptTrainedCubature();  // before a rebuild's swap: it was trained on the running model
     swapRebuilt();
     updateExternalForces();
     updateHandleTargets();

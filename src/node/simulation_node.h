@@ -126,7 +126,16 @@ private:
   SimulationConfig tuningOf(const NodeConfiguration& configuration) const;
   void rebuildLoop();
   void swapRebuilt();  // with mutex_ held, at a tick boundary
-  bool rebuilding() const { return rebuilding_ || !rebuilt_.empty(); }
+  bool rebuilding() const { return rebuilding_ || !rebuilt_.empty() || training_; }
+
+  // ~set_method to `cubature` before it is trained (services.cpp): the training runs on a thread of
+  // its own while the current method steps on (state REBUILDING, its progress in ~status's message
+  // and the diagnostics), and the switch happens at the first tick after it (adoptTrainedCubature).
+  void trainInBackground(Simulation::CubatureTraining training);  // with mutex_ held
+  void adoptTrainedCubature();  // with mutex_ held, at a tick boundary
+  // What a switch does besides Simulation::setMethod, and its reply ("switched from ... at step ...").
+  std::string finishSwitch(const std::string& previous, Method method, bool was_diverged);  // with mutex_ held
+  std::string trainingProgress() const;
 
   // The services (services.cpp).
   bool setMethod(SetMethod::Request& request, SetMethod::Response& response);
@@ -234,6 +243,17 @@ private:
   bool rebuilding_ = false;
   bool stopping_ = false;
   std::thread rebuild_thread_;
+  // The cubature's training in the background: running (with mutex_), its result or failure waiting
+  // for a tick, whether the switch is still wanted (a later ~set_method to another method cancels
+  // it), and its progress (with progress_mutex_: the training thread updates it without mutex_).
+  bool training_ = false;
+  bool switch_after_training_ = false;
+  std::optional<Cubature> trained_;
+  std::string training_failure_;
+  std::atomic<bool> cancel_training_{false};
+  std::thread training_thread_;
+  mutable std::mutex progress_mutex_;
+  std::string training_progress_;
 
   ros::Timer timer_;
   ros::WallTimer wall_timer_;  // under use_sim_time: the node makes the clock, so it cannot wait on it

@@ -174,6 +174,9 @@ void StartupProgress::onIteration(const std::string& stage, int iteration, doubl
   if (stage == "equilibrium")
     std::snprintf(text, sizeof text, "Newton iteration %d, largest unbalanced force %.3g N (target %.3g N)", iteration,
                   residual, target);
+  else if (stage == "cubature")
+    std::snprintf(text, sizeof text, "%d springs selected, training error %.3g%% (cubature_tolerance %.3g%%)",
+                  iteration, 100.0 * residual, 100.0 * target);
   else
     std::snprintf(text, sizeof text, "%s step %d, residual %.3g (target %.3g)",
                   stage == "eigensolver" ? "Lanczos" : stage.c_str(), iteration, residual, target);

@@ -173,7 +173,9 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     status.tick_step_seconds = lockstep() ? track.tick_seconds : tick_step_seconds_;
     status.total_energy = track.last_energy;
     status.state = state(track);
-    status.message = simulation.diverged() ? track.divergence_message : "";
+    // Why it diverged, else what a training in the background has done so far.
+    status.message = simulation.diverged() ? track.divergence_message
+                     : training_ && &track == &primary() ? trainingProgress() : "";
     status.handles = handle_frames_->status();
     status.handle_formulation =
         handle_frames_->empty() ? "" : toString(simulation.handleFormulation());
@@ -305,6 +307,8 @@ void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& statu
   if (!collider_frames_->status().empty())
     status.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, collider_frames_->status());
   status.add("state", stateName(first));
+  if (training_)
+    status.add("cubature training", trainingProgress());
   status.add("method", lockstep() ? "lockstep" : toString(simulation.method()));
   status.add("step count", steps(first));
   status.add("simulated time (s)", simTime(first));

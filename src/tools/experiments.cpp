@@ -378,7 +378,8 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
       result.cubature = CubatureRow{setup.variant, static_cast<int>(c->springs.size()),
                                     static_cast<int>(grid.springs().size()), c->training_poses,
                                     setup.sim.cubature_tolerance, c->training_error, c->heldout_error,
-                                    c->training_seconds};
+                                    c->training_seconds, c->validation_error,
+                                    run.sim->cacheReport().cubature_loaded};
 
   auto record = [&](long step) {
     const Eigen::Matrix3Xd reference = runs[0].sim->points();

@@ -115,6 +115,8 @@ struct CubatureRow
   std::string variant;
   int springs = 0, grid_springs = 0, training_poses = 0;
   double tolerance = 0.0, training_error = 0.0, heldout_error = 0.0, training_seconds = 0.0;
+  double validation_error = 0.0;  // on the last validation set, which decided the stop
+  bool loaded = false;            // from the cache (with --no-cache: the one the check before the runs filled)
 };
 
 struct AccuracyResult

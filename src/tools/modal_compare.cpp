@@ -22,6 +22,7 @@
 #include <limits>
 #include <map>
 #include <new>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <stdexcept>
@@ -55,8 +56,9 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
   --quiet               no progress line on stderr
   --cache-dir DIR       where the equilibrium, bases and cubatures are cached between runs (default:
                         the node's, $ROS_HOME/modal_mass_spring, else ~/.ros/modal_mass_spring)
-  --no-cache            compute them every time, reading and writing no cache (the cost experiment,
-                        which times the build, never uses it)
+  --no-cache            compute them every time, reading and writing no cache: what the check before
+                        the runs builds is kept for this run alone in a temporary folder, removed at
+                        the end (the cost experiment, which times the build, never uses it)
 
   accuracy:   --steps N (5000)  --interval N (1000, snapshots)  --sample N (10, error samples; divides
                 --interval, at most --steps)
@@ -531,13 +533,21 @@ int handleSteps(const Options& o, const ExperimentSetup& setup, bool move_only =
   return static_cast<int>(samples) * o.accuracy.sample;
 }
 
+bool runsCubature(const Options& o)
+{
+  return std::find(o.methods.begin(), o.methods.end(), Method::Cubature) != o.methods.end();
+}
+
 // The core's checks of one setup (validateParameters: ranges, sizes, the memory estimate), which
-// build nothing, named by config and variant.
+// build nothing, named by config and variant. The cubature's training counts when a method of the
+// run is `cubature`, whatever the config's `method`.
 void validateSetup(const Options& o, const ExperimentSetup& setup, const GridParams& grid, const std::string& what)
 {
   try
   {
-    validateParameters(grid, setup.sim);
+    SimulationParams params = setup.sim;
+    params.method = runsCubature(o) ? Method::Cubature : Method::Physical;
+    validateParameters(grid, params);
   }
   catch (const std::invalid_argument& e)
   {
@@ -582,14 +592,15 @@ double resultBytes(const Options& o, const ExperimentSetup& setup, long steps, l
 // names what takes most of it: the results kept, or the setup's simulations.
 void checkResultMemory(const Options& o, const std::vector<ExperimentSetup>& setups, double result_bytes)
 {
-  const bool cubature = std::find(o.methods.begin(), o.methods.end(), Method::Cubature) != o.methods.end();
+  const bool cubature = runsCubature(o);
   for (const ExperimentSetup& setup : setups)
   {
     // Every method's simulation and the references are alive at once; only `cubature`'s trains.
     const double runs = o.methods.size() + 2.0;
-    const double training_bytes = cubatureTrainingBytes(setup.grid, setup.sim);
-    const double simulation_bytes =
-        runs * (estimateMemoryBytes(setup.grid, setup.sim) - training_bytes) + (cubature ? training_bytes : 0.0);
+    SimulationParams untrained = setup.sim;
+    untrained.method = Method::Physical;
+    const double training_bytes = cubature ? cubatureTrainingBytes(setup.grid, setup.sim) : 0.0;
+    const double simulation_bytes = runs * estimateMemoryBytes(setup.grid, untrained) + training_bytes;
     const double needed_gb = (result_bytes + simulation_bytes) / 1e9;
     if (needed_gb <= setup.sim.memory_limit_gb)
       continue;
@@ -640,12 +651,17 @@ void buildEverySetup(const Options& o, const std::vector<ExperimentSetup>& setup
         if (std::chrono::duration<double>(now - last).count() < 2.0)
           return;
         last = now;
-        std::cerr << "building " << setup.variant << ": " << stage << ", "
-                  << (stage == "equilibrium" ? "Newton iteration " : "Lanczos step ") << iteration << ", "
-                  << (stage == "equilibrium" ? "largest unbalanced force " : "residual ") << residual
-                  << (stage == "equilibrium" ? " N (target " : " (target ") << target
-                  << (stage == "equilibrium" ? " N), " : "), ") << std::fixed << std::setprecision(1)
-                  << std::chrono::duration<double>(now - start).count() << " s" << std::defaultfloat << "\n";
+        std::cerr << "building " << setup.variant << ": " << stage << ", ";
+        if (stage == "cubature")
+          std::cerr << iteration << " springs selected, training error " << 100.0 * residual
+                    << "% (cubature_tolerance " << 100.0 * target << "%), ";
+        else
+          std::cerr << (stage == "equilibrium" ? "Newton iteration " : "Lanczos step ") << iteration << ", "
+                    << (stage == "equilibrium" ? "largest unbalanced force " : "residual ") << residual
+                    << (stage == "equilibrium" ? " N (target " : " (target ") << target
+                    << (stage == "equilibrium" ? " N), " : "), ");
+        std::cerr << std::fixed << std::setprecision(1) << std::chrono::duration<double>(now - start).count() << " s"
+                  << std::defaultfloat << std::setprecision(6) << "\n";
       };
     try
     {
@@ -985,7 +1001,14 @@ void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>&
       std::cout << "cubature (" << setup.variant << "): " << c.springs << " of " << c.grid_springs
                 << " springs, training error " << fmt(100.0 * c.training_error) << "% on " << c.training_poses
                 << " poses (cubature_tolerance " << fmt(100.0 * c.tolerance) << "%), held-out "
-                << fmt(100.0 * c.heldout_error) << "%, trained in " << fmt(c.training_seconds) << " s\n";
+                << fmt(100.0 * c.heldout_error) << "%, trained in " << fmt(c.training_seconds) << " s"
+                << (c.loaded ? " (loaded from the cache)" : "");
+      // The training stops at its caps too: say so rather than let the figures pass for the tolerance.
+      if (std::max(c.training_error, c.validation_error) > c.tolerance)
+        std::cout << "; above cubature_tolerance (validation " << fmt(100.0 * c.validation_error)
+                  << "%): the training stopped at its caps (cubature_max_springs, cubature_max_training_poses) or "
+                     "found no spring that helps";
+      std::cout << "\n";
     }
     for (const ErrorSample& e : result.errors)
     {
@@ -1154,15 +1177,46 @@ void runStabilityExperiment(const Options& o, const std::vector<ExperimentSetup>
     std::cout << "check: " << c << "\n";
 }
 
+// With --no-cache, a cache folder of this run alone: what the check before the runs builds (the
+// equilibrium, bases, cubature) is built once and the runs load it; removed when the run ends.
+class RunCache
+{
+public:
+  explicit RunCache(Options& o)
+  {
+    if (!o.no_cache)
+      return;
+    std::string pattern = (std::filesystem::temp_directory_path() / "modal_compare_cache.XXXXXX").string();
+    if (!mkdtemp(pattern.data()))
+      throw std::runtime_error("--no-cache: cannot create a temporary folder in " +
+                               std::filesystem::temp_directory_path().string() + " for this run's precomputation");
+    directory_ = pattern;
+    o.accuracy.cache.directory = o.stability.cache.directory = directory_;
+  }
+  ~RunCache()
+  {
+    std::error_code ignored;
+    if (!directory_.empty())
+      std::filesystem::remove_all(directory_, ignored);
+  }
+  RunCache(const RunCache&) = delete;
+  RunCache& operator=(const RunCache&) = delete;
+
+private:
+  std::string directory_;
+};
+
 }  // namespace
 
 int main(int argc, char** argv)
 {
   Options options;
   std::vector<ExperimentSetup> setups, handle_setups;
+  std::optional<RunCache> run_cache;
   try
   {
     options = parseArguments(argc, argv);
+    run_cache.emplace(options);
     std::vector<HandleScenario> scenarios;
     setups = buildSetups(options, scenarios);
     validate(options, setups);

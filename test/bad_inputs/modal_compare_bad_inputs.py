@@ -253,6 +253,10 @@ def cases(configs):
         tool("simulations_beyond_memory", "memory_limit_gb", "--set", "rows=300", "--set", "cols=300",
              "--set", "memory_limit_gb=1", "--methods", "linear,physical", "--experiment", "accuracy",
              "--steps", "10"),
+        # the cubature's training beyond the limit, refused when a method trains it (physical alone runs)
+        tool("cubature_training_beyond_memory", "memory_limit_gb", "--set", "cubature_training_poses=100000",
+             "--set", "memory_limit_gb=1", "--methods", "physical,cubature", "--experiment", "accuracy",
+             "--steps", "10"),
         # also refused when another experiment runs: the config is read whole
         config("handles_bad_in_accuracy_run", held.replace("name: lift", "name: 'lift,now'"),
                "handle_scenarios[0].name", "--experiment", "accuracy"),

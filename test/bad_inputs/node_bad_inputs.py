@@ -88,6 +88,9 @@ CASES = [
     ({"cubature_seed": -1}, [], ["cubature_seed"]),
     ({"cubature_seed": "one"}, [], ["cubature_seed"]),
     ({"rows": 3000, "cols": 3000, "dimension": 3, "num_modes": 30}, [], ["rows"]),  # names memory_limit_gb too
+    # the cubature's training beyond the limit (counted because the node starts on cubature)
+    ({"method": "cubature", "cubature_training_poses": 100000, "memory_limit_gb": 1.0}, [],
+     ["cubature_training_poses", "memory_limit_gb"]),
     ({"real_time_factor": 0.0}, [], ["real_time_factor"]),
     ({"real_time_factor": 10000.0}, [], ["real_time_factor"]),
     ({"real_time_factor": 1000.0, "publish_rate": 1.0}, [], ["real_time_factor"]),

@@ -164,6 +164,47 @@ TEST_F(ModalCompareTool, CachedRunGivesTheSameResultsAndNoCacheWritesNone)
   EXPECT_GT(errors("second").size(), 100u);
 }
 
+// --no-cache builds the precomputation once: the check before the runs trains the cubature, the run
+// loads it from a folder of this run alone, removed at the end. The cubature's report says when the
+// training stopped above its tolerance (here at a 5-spring cap).
+TEST_F(ModalCompareTool, NoCacheTrainsTheCubatureOnceAndSaysWhenItsCapsStoppedIt)
+{
+  const fs::path scratch = dir_ / "tmp";
+  fs::create_directories(scratch);
+  const std::string args = "--config " + config("paper_3d.yaml") +
+                           " --set rows=5 --set cols=5 --set num_modes=6 --experiment accuracy --methods physical,cubature"
+                           " --steps 20 --interval 10 --sample 10 --no-snapshots --no-cache";
+  const CommandResult r = run("TMPDIR=" + scratch.string() + " " + tool(args));
+  ASSERT_EQ(r.status, 0) << r.output;
+  const size_t line = r.output.find("cubature (base): ");
+  ASSERT_NE(line, std::string::npos) << r.output;
+  const std::string report = r.output.substr(line, r.output.find('\n', line) - line);
+  EXPECT_NE(report.find("(loaded from the cache)"), std::string::npos) << report;
+  EXPECT_EQ(report.find("above cubature_tolerance"), std::string::npos) << report;
+  EXPECT_TRUE(fs::is_empty(scratch)) << "the run's cache folder is removed";
+  EXPECT_FALSE(fs::exists(dir_ / "modal_mass_spring")) << "--no-cache wrote the default cache";
+
+  const CommandResult capped = run(tool(args + " --set cubature_max_springs=5 --tag capped"));
+  ASSERT_EQ(capped.status, 0) << capped.output;
+  EXPECT_NE(capped.output.find("above cubature_tolerance"), std::string::npos) << capped.output;
+  EXPECT_NE(capped.output.find("cubature_max_springs"), std::string::npos) << capped.output;
+}
+
+// A method that does not train the cubature is not refused for the training's memory.
+TEST_F(ModalCompareTool, MemoryCheckCountsTheCubatureOnlyWhenAMethodTrainsIt)
+{
+  // 100000 training poses, growing to 800000: tens of GB for the training alone, nothing for the rest.
+  const std::string args = "--config " + config("paper_3d.yaml") +
+                           " --set cubature_training_poses=100000 --set memory_limit_gb=1"
+                           " --experiment accuracy --steps 10 --interval 10 --sample 10 --no-snapshots --no-cache";
+  const CommandResult without = run(tool(args + " --methods full,physical"));
+  EXPECT_EQ(without.status, 0) << without.output;
+  const CommandResult with = run(tool(args + " --methods physical,cubature --tag with"));
+  EXPECT_EQ(with.status, 2) << with.output;
+  EXPECT_NE(with.output.find("memory_limit_gb"), std::string::npos) << with.output;
+  EXPECT_NE(with.output.find("cubature's training would need"), std::string::npos) << with.output;
+}
+
 // Item 9: a diverged sample and the bound of a basis of zero modes are empty fields, which the
 // plotting script reads.
 TEST_F(ModalCompareTool, CsvFilesHoldNoNanOrInfAndThePlotsReadThem)

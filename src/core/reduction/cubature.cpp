@@ -139,63 +139,62 @@ Eigen::MatrixXd trainingPoses(const Grid& grid, const ModalBasis& basis, const E
 namespace
 {
 
-// The training problem: targets b and, for any spring, its column of the (never stored) matrix A.
-// Both are stacked pose by pose (r entries each) and every pose is scaled by 1 / |its target|, so
-// |A w - b| / |b| is the RMS over poses of the relative error.
+// The training problem, with every pose scaled by 1 / |its target| so that |A w - b| / |b| is the
+// RMS over poses of the relative error. Pose p's target (r entries) is column p of target(); spring
+// s's column of A is never stored: its block for pose p is -D_s^T F_s(:, p), with D_s = springRows
+// (dim x r) and F_s (dim x poses) the spring's scaled force change (forces()). The training keeps
+// D_s^T and F_s of the selected springs only, dim (r + poses) numbers each instead of r poses.
 class TrainingSet
 {
 public:
   TrainingSet(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref, const Eigen::MatrixXd& poses)
-    : grid_(grid), phi_(basis.phi), phi_t_(basis.phi.transpose()), x_ref_(x_ref),
+    : grid_(grid), phi_(basis.phi), x_ref_(x_ref),
       base_(reducedSpringForce(grid, phi_, x_ref, Eigen::VectorXd::Zero(phi_.cols())))
   {
     append(poses);
   }
 
-  // Adds poses after the current ones (their rows follow the current rows of b and of every column).
+  // Adds poses after the current ones.
   void append(const Eigen::MatrixXd& poses)
   {
     const Eigen::Index r = phi_.cols(), first = size(), count = poses.cols();
     poses_.conservativeResize(r, first + count);
     poses_.rightCols(count) = poses;
     scale_.conservativeResize(first + count);
-    b_.conservativeResize(r * (first + count));
+    b_.conservativeResize(r, first + count);
     for (Eigen::Index p = first; p < first + count; ++p)
     {
       const Eigen::VectorXd target = reducedSpringForce(grid_, phi_, x_ref_, poses_.col(p)) - base_;
       const double norm = target.norm();
       scale_[p] = norm > 0.0 ? 1.0 / norm : 0.0;  // a pose that moves no spring carries no information
-      b_.segment(p * r, r) = scale_[p] * target;
+      b_.col(p) = scale_[p] * target;
     }
   }
 
   Eigen::Index size() const { return poses_.cols(); }
   const Eigen::MatrixXd& poses() const { return poses_; }
-  const Eigen::VectorXd& target() const { return b_; }
+  const Eigen::MatrixXd& target() const { return b_; }
 
-  // (g_s(X_p) - g_s(0)) scaled, for every pose p from `first` on.
-  Eigen::VectorXd column(int spring, Eigen::Index first = 0) const
+  // F_s: the scaled f_s(X_p) - f_s(0), the spring's force on its particle i, for every pose p (a
+  // column each); `rows` is its D_s.
+  Eigen::MatrixXd forces(const Spring& s, const Eigen::MatrixXd& rows) const
   {
-    const Spring& s = grid_.springs()[spring];
-    const Eigen::MatrixXd rows = springRows(grid_, phi_t_, s);
     const SmallVector d0 = restDiff(grid_, x_ref_, s);
     const SmallVector f0 = springForce(s, d0);
-    const Eigen::MatrixXd d = (rows * poses_.rightCols(size() - first)).colwise() + Eigen::VectorXd(d0);
+    const Eigen::MatrixXd d = (rows * poses_).colwise() + Eigen::VectorXd(d0);
     Eigen::MatrixXd f(d.rows(), d.cols());
     for (Eigen::Index p = 0; p < d.cols(); ++p)
-      f.col(p) = scale_[first + p] * (springForce(s, d.col(p)) - f0);
-    Eigen::MatrixXd g = -rows.transpose() * f;  // r x poses
-    return Eigen::Map<const Eigen::VectorXd>(g.data(), g.size());
+      f.col(p) = scale_[p] * (springForce(s, d.col(p)) - f0);
+    return f;
   }
 
 private:
   const Grid& grid_;
   const Eigen::MatrixXd& phi_;
-  const Eigen::MatrixXd phi_t_;
   const Eigen::VectorXd& x_ref_;
   const Eigen::VectorXd base_;
-  Eigen::MatrixXd poses_;
-  Eigen::VectorXd scale_, b_;
+  Eigen::MatrixXd poses_, b_;
+  Eigen::VectorXd scale_;
 };
 
 // Each purpose draws from its own stream of the seed: growing the training set never changes the
@@ -206,23 +205,40 @@ std::mt19937_64 poseStream(int seed, int purpose)
   return std::mt19937_64(sequence);
 }
 
-// The relative error of weights w on springs' columns of `set` (its rows from pose `first` on).
-double relativeError(const TrainingSet& set, const std::vector<int>& springs, const Eigen::VectorXd& w,
-                     Eigen::MatrixXd* columns = nullptr)
+// The springs' columns of A, kept as their factors: D_s^T side by side (r x dim k) and F_s stacked
+// (dim k x poses), for the first k springs.
+struct SpringFactors
 {
-  const Eigen::VectorXd& b = set.target();
-  Eigen::VectorXd fit = Eigen::VectorXd::Zero(b.size());
-  if (columns)
-    columns->resize(b.size(), static_cast<Eigen::Index>(springs.size()));
-  for (size_t k = 0; k < springs.size(); ++k)
+  Eigen::MatrixXd diff_t, forces;
+
+  // A w for the first w.size() springs, as r x poses: -sum_s D_s^T (w_s F_s), one matrix product.
+  Eigen::MatrixXd fit(const Eigen::VectorXd& w, int dim) const
   {
-    const Eigen::VectorXd column = set.column(springs[k]);
-    fit += w[static_cast<Eigen::Index>(k)] * column;
-    if (columns)
-      columns->col(static_cast<Eigen::Index>(k)) = column;
+    const Eigen::Index k = w.size();
+    Eigen::MatrixXd weighted = forces.topRows(dim * k);
+    for (Eigen::Index s = 0; s < k; ++s)
+      weighted.middleRows(dim * s, dim) *= w[s];
+    return -diff_t.leftCols(dim * k) * weighted;
   }
-  const double norm = b.norm();
-  return norm > 0.0 ? (fit - b).norm() / norm : 0.0;
+};
+
+// The relative error of weights w on `factors`' springs, their forces on `set`'s poses.
+double relativeError(const TrainingSet& set, const SpringFactors& factors, const Eigen::VectorXd& w, int dim)
+{
+  const double norm = set.target().norm();
+  return norm > 0.0 ? (factors.fit(w, dim) - set.target()).norm() / norm : 0.0;
+}
+
+// The column of spring (rows, f) dotted with a matrix of the target's shape: -sum(F_s .* (D_s Y)).
+double columnDot(const Eigen::MatrixXd& rows, const Eigen::MatrixXd& f, const Eigen::MatrixXd& y)
+{
+  return -(f.array() * (rows * y).array()).sum();
+}
+
+// Sums each run of `dim` consecutive rows of a column vector: dim k entries to k.
+Eigen::VectorXd sumBlocks(const Eigen::VectorXd& v, int dim)
+{
+  return Eigen::Map<const Eigen::MatrixXd>(v.data(), dim, v.size() / dim).colwise().sum().transpose();
 }
 
 }  // namespace
@@ -257,12 +273,13 @@ int effectiveMaxSprings(const CubatureParams& params, int num_springs)
 }
 
 Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::VectorXd& x_ref,
-                       const CubatureParams& params, const PoseSampler& sampler)
+                       const CubatureParams& params, const PoseSampler& sampler, const IterationFn& on_iteration)
 {
   auto draw = [&](int count, std::mt19937_64& stream) {
     return sampler ? sampler(count, stream) : trainingPoses(grid, basis, x_ref, count, params.pose_size, stream);
   };
   const auto start = std::chrono::steady_clock::now();
+  const int dim = grid.dimension();
   std::mt19937_64 rng(static_cast<std::uint64_t>(params.seed));
   std::mt19937_64 validation_rng = poseStream(params.seed, 1), heldout_rng = poseStream(params.seed, 2);
   TrainingSet training(grid, basis, x_ref, draw(params.training_poses, rng));
@@ -288,17 +305,23 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
   }
   const int max_springs = effectiveMaxSprings(params, static_cast<int>(grid.springs().size()));
   const Eigen::Index max_poses = effectiveMaxTrainingPoses(params);
+  const Eigen::MatrixXd phi_t = basis.phi.transpose();  // a dof's row of Phi contiguous, for D_s
+  auto rowsOf = [&](int spring) { return springRows(grid, phi_t, grid.springs()[spring]); };
 
   std::vector<int> pool(grid.springs().size()), selected;
   for (size_t k = 0; k < pool.size(); ++k)
     pool[k] = static_cast<int>(k);
-  Eigen::MatrixXd a(training.target().size(), std::min(max_springs, 64));  // the selected springs' columns
+  // The selected springs' factors on the training poses, their capacity doubled as they grow.
+  SpringFactors chosen;
+  const Eigen::Index capacity = dim * std::min(max_springs, 64);
+  chosen.diff_t.resize(basis.phi.cols(), capacity);
+  chosen.forces.resize(capacity, training.size());
   NnlsNormal weights_fit;
-  Eigen::VectorXd residual = training.target();
-  double error = training.target().norm() > 0.0 ? 1.0 : 0.0, validation_error = 0.0;
+  Eigen::MatrixXd residual = training.target();
+  double error = 1.0, validation_error = 0.0;
   while (true)
   {
-    const Eigen::VectorXd& b = training.target();
+    const Eigen::MatrixXd& b = training.target();
     const double b_norm = b.norm();
     while (error > params.tolerance && static_cast<int>(selected.size()) < max_springs && !pool.empty())
     {
@@ -307,18 +330,21 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
       const size_t candidates = std::min<size_t>(kCubatureCandidates, pool.size());
       size_t best = candidates;
       double best_score = 0.0;
-      Eigen::VectorXd best_column;
+      Eigen::MatrixXd best_rows, best_forces;
       for (size_t c = 0; c < candidates; ++c)
       {
         std::swap(pool[c], pool[c + std::uniform_int_distribution<size_t>(0, pool.size() - 1 - c)(rng)]);
-        Eigen::VectorXd column = training.column(pool[c]);
-        const double norm = column.norm();
-        const double score = norm > 0.0 ? column.dot(residual) / norm : 0.0;
+        Eigen::MatrixXd rows = rowsOf(pool[c]);
+        Eigen::MatrixXd forces = training.forces(grid.springs()[pool[c]], rows);
+        // |column|^2 = sum over poses of F_s^T (D_s D_s^T) F_s.
+        const double norm = std::sqrt(std::max(0.0, (forces.array() * ((rows * rows.transpose()) * forces).array()).sum()));
+        const double score = norm > 0.0 ? columnDot(rows, forces, residual) / norm : 0.0;
         if (score > best_score)
         {
           best = c;
           best_score = score;
-          best_column = std::move(column);
+          best_rows = std::move(rows);
+          best_forces = std::move(forces);
         }
       }
       if (best == candidates)
@@ -327,35 +353,61 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
       selected.push_back(pool[best]);
       pool[best] = pool.back();
       pool.pop_back();
-      if (k >= a.cols())
-        a.conservativeResize(Eigen::NoChange, std::min<Eigen::Index>(2 * a.cols(), max_springs));
-      a.col(k) = best_column;
-      // The refit: the new column's Gram entries, then NNLS from the previous weights.
-      weights_fit.addVariable(a.leftCols(k + 1).transpose() * best_column, best_column.dot(b));
+      if (dim * (k + 1) > chosen.diff_t.cols())
+      {
+        const Eigen::Index grown = dim * std::min<Eigen::Index>(2 * chosen.diff_t.cols() / dim, max_springs);
+        chosen.diff_t.conservativeResize(Eigen::NoChange, grown);
+        chosen.forces.conservativeResize(grown, Eigen::NoChange);
+      }
+      chosen.diff_t.middleCols(dim * k, dim) = best_rows.transpose();
+      chosen.forces.middleRows(dim * k, dim) = best_forces;
+      // The refit: the new column's Gram entries (sum over poses of F_t^T D_t D_s^T F_s), then NNLS
+      // from the previous weights.
+      const Eigen::MatrixXd coupling = chosen.diff_t.leftCols(dim * (k + 1)).transpose() * best_rows.transpose();
+      const Eigen::VectorXd gram_rows =
+          (chosen.forces.topRows(dim * (k + 1)).array() * (coupling * best_forces).array()).rowwise().sum();
+      weights_fit.addVariable(sumBlocks(gram_rows, dim), columnDot(best_rows, best_forces, b));
       weights_fit.solve();
-      residual = b - a.leftCols(k + 1) * weights_fit.weights();
+      residual = b - chosen.fit(weights_fit.weights(), dim);
       error = residual.norm() / b_norm;
+      if (on_iteration)
+        on_iteration("cubature", static_cast<int>(selected.size()), error, params.tolerance);
     }
     // The fit is judged on fresh poses of the same law: below the tolerance there too, it generalises.
     // Otherwise those poses join the training set (twice as many poses, the same springs refitted) and
     // the selection goes on, as long as the training set may grow.
-    TrainingSet validation(grid, basis, x_ref,
-                           draw(static_cast<int>(training.size()), validation_rng));
-    Eigen::MatrixXd validation_columns;
-    validation_error = relativeError(validation, selected, weights_fit.weights(), &validation_columns);
+    const TrainingSet validation(grid, basis, x_ref, draw(static_cast<int>(training.size()), validation_rng));
+    const Eigen::Index k = static_cast<Eigen::Index>(selected.size());
+    SpringFactors on_validation{chosen.diff_t.leftCols(dim * k), Eigen::MatrixXd(dim * k, validation.size())};
+    for (Eigen::Index s = 0; s < k; ++s)
+      on_validation.forces.middleRows(dim * s, dim) =
+          validation.forces(grid.springs()[selected[static_cast<size_t>(s)]], chosen.diff_t.middleCols(dim * s, dim).transpose());
+    validation_error = relativeError(validation, on_validation, weights_fit.weights(), dim);
     if (validation_error <= params.tolerance || error > params.tolerance || 2 * training.size() > max_poses)
       break;
-    const Eigen::Index k = static_cast<Eigen::Index>(selected.size()), rows = a.rows();
+    const Eigen::Index before = training.size();
     training.append(validation.poses());
-    a.conservativeResize(training.target().size(), Eigen::NoChange);
-    a.bottomLeftCorner(a.rows() - rows, k) = validation_columns;
-    const Eigen::MatrixXd gram = a.leftCols(k).transpose() * a.leftCols(k);
-    const Eigen::VectorXd atb = a.leftCols(k).transpose() * training.target();
+    chosen.forces.conservativeResize(Eigen::NoChange, training.size());
+    chosen.forces.block(0, before, dim * k, validation.size()) = on_validation.forces;
+    // The Gram matrix anew, a block of springs at a time: entry (s, t) sums (D_s D_t^T) .* (F_s F_t^T).
+    const auto diff_t = chosen.diff_t.leftCols(dim * k);
+    const auto forces = chosen.forces.topRows(dim * k);
+    Eigen::MatrixXd gram(k, k);
+    for (Eigen::Index t0 = 0; t0 < k; t0 += 64)
+    {
+      const Eigen::Index width = dim * std::min<Eigen::Index>(64, k - t0);
+      const Eigen::MatrixXd products = (diff_t.transpose() * diff_t.middleCols(dim * t0, width)).array() *
+                                       (forces * forces.middleRows(dim * t0, width).transpose()).array();
+      for (Eigen::Index t = 0; t < width / dim; ++t)
+        gram.col(t0 + t) = sumBlocks(products.middleCols(dim * t, dim).rowwise().sum(), dim);
+    }
+    const Eigen::VectorXd atb =
+        -sumBlocks((forces.array() * (diff_t.transpose() * training.target()).array()).rowwise().sum(), dim);
     weights_fit = NnlsNormal();
     for (Eigen::Index j = 0; j < k; ++j)
       weights_fit.addVariable(gram.col(j).head(j + 1), atb[j]);
     weights_fit.solve();
-    residual = training.target() - a.leftCols(k) * weights_fit.weights();
+    residual = training.target() - chosen.fit(weights_fit.weights(), dim);
     error = residual.norm() / training.target().norm();
   }
 
@@ -378,9 +430,16 @@ Cubature trainCubature(const Grid& grid, const ModalBasis& basis, const Eigen::V
                              "): a cubature of no springs would model no force");
 
   // Held-out poses, as many as the training's, that neither the selection nor the stop saw.
-  const TrainingSet heldout(grid, basis, x_ref,
-                            draw(cubature.training_poses, heldout_rng));
-  cubature.heldout_error = relativeError(heldout, cubature.springs, cubature.weights);
+  const TrainingSet heldout(grid, basis, x_ref, draw(cubature.training_poses, heldout_rng));
+  const Eigen::Index kept = static_cast<Eigen::Index>(cubature.springs.size());
+  SpringFactors on_heldout{Eigen::MatrixXd(basis.phi.cols(), dim * kept), Eigen::MatrixXd(dim * kept, heldout.size())};
+  for (Eigen::Index s = 0; s < kept; ++s)
+  {
+    const Eigen::MatrixXd rows = rowsOf(cubature.springs[static_cast<size_t>(s)]);
+    on_heldout.diff_t.middleCols(dim * s, dim) = rows.transpose();
+    on_heldout.forces.middleRows(dim * s, dim) = heldout.forces(grid.springs()[cubature.springs[static_cast<size_t>(s)]], rows);
+  }
+  cubature.heldout_error = relativeError(heldout, on_heldout, cubature.weights, dim);
   cubature.training_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return cubature;
 }

@@ -61,7 +61,7 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
   {
     if (on_stage)
       on_stage("cubature");
-    prepareCubature();
+    prepareCubature(on_iteration);
   }
   if (!params_.colliders.empty())
     contact_ = std::make_unique<Contact>(grid_, params_.colliders,
@@ -223,33 +223,58 @@ void Simulation::adoptBasis(Precomputed&& data)
   basis_built_ = true;
 }
 
-void Simulation::prepareCubature()
+void Simulation::prepareCubature(const IterationFn& on_iteration)
+{
+  if (!loadCachedCubature())
+    setCubature(cubatureTraining()(on_iteration));
+}
+
+bool Simulation::loadCachedCubature()
 {
   if (cubature_)
-    return;
+    return true;
+  if (cache_.directory.empty())
+    return false;
   const std::string key = cubatureKey(grid_.params(), params_);
-  const int num_springs = static_cast<int>(grid_.springs().size());
-  if (!cache_.directory.empty())
-  {
-    cache_report_.cubature_file = cacheFile(cache_.directory, "cubature", key);
-    cubature_ = loadCubature(cache_report_.cubature_file, key, num_springs, cache_);
-    cache_report_.cubature_loaded = cubature_.has_value();
-  }
-  if (cubature_)
-    return;
+  cache_report_.cubature_file = cacheFile(cache_.directory, "cubature", key);
+  cubature_ = loadCubature(cache_report_.cubature_file, key, static_cast<int>(grid_.springs().size()), cache_);
+  cache_report_.cubature_loaded = cubature_.has_value();
+  return cubature_.has_value();
+}
+
+Simulation::CubatureTraining Simulation::cubatureTraining() const
+{
+  if (!basis_built_)
+    throw std::logic_error("cubatureTraining: the basis is not built (buildBasis first)");
+  // The training's memory counts now, whatever the method the parameters were checked with.
+  SimulationParams training = params_;
+  training.method = Method::Cubature;
+  validateParameters(grid_.params(), training);
   // On the skinning span the poses turn the cloth (its motions are large rotations), else the modes'.
+  // The job refers to what never changes after the basis is built and copies the parameters.
   PoseSampler sampler;
   if (params_.basis == BasisKind::Skinning)
   {
     const Eigen::MatrixXd projection =
         skinningProjection(grid_, x_ref_, physical_basis_, mass_, params_.num_skinning_weights);
-    sampler = [this, projection](int count, std::mt19937_64& rng) {
-      return skinningTrainingPoses(grid_, physical_basis_, x_ref_, projection, count, params_.cubature_pose_size, rng);
+    sampler = [this, projection, size = params_.cubature_pose_size](int count, std::mt19937_64& rng) {
+      return skinningTrainingPoses(grid_, physical_basis_, x_ref_, projection, count, size, rng);
     };
   }
-  cubature_ = trainCubature(grid_, physical_basis_, x_ref_, cubatureParams(params_), sampler);
-  if (!cache_report_.cubature_file.empty())
-    cache_report_.cubature_stored = storeCubature(cache_report_.cubature_file, key, *cubature_, cache_);
+  return [this, sampler, params = cubatureParams(params_)](const IterationFn& on_iteration) {
+    return trainCubature(grid_, physical_basis_, x_ref_, params, sampler, on_iteration);
+  };
+}
+
+void Simulation::setCubature(Cubature cubature)
+{
+  cubature_ = std::move(cubature);
+  if (cache_.directory.empty())
+    return;
+  const std::string key = cubatureKey(grid_.params(), params_);
+  cache_report_.cubature_file = cacheFile(cache_.directory, "cubature", key);
+  cache_report_.cubature_loaded = false;
+  cache_report_.cubature_stored = storeCubature(cache_report_.cubature_file, key, *cubature_, cache_);
 }
 
 IntegratorSettings Simulation::integratorSettings() const

@@ -196,7 +196,7 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
   if (needed_gb > p.memory_limit_gb)
   {
     // Blame what takes most of it: the cubature's training poses, or the grid and its modes.
-    const double training_gb = cubatureTrainingBytes(grid, p) / 1e9;
+    const double training_gb = p.method == Method::Cubature ? cubatureTrainingBytes(grid, p) / 1e9 : 0.0;
     const bool training = training_gb > 0.5 * needed_gb;
     std::ostringstream value;
     std::ostringstream allowed;
@@ -210,7 +210,10 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
     else
     {
       value << grid.rows << " x " << grid.cols << " grid (" << grid.dimension << "D), num_modes = " << p.num_modes;
-      allowed << "needs about " << needed_gb << " GB, ";
+      allowed << "needs about " << needed_gb << " GB";
+      if (training_gb > 0.0)
+        allowed << " (the cubature's training about " << training_gb << " GB of it)";
+      allowed << ", ";
     }
     allowed << "above memory_limit_gb = " << p.memory_limit_gb << " GB; "
             << (training ? "use fewer cubature_training_poses or a smaller cubature_max_training_poses or cubature_max_springs"
@@ -229,13 +232,20 @@ static double physicalBasisSize(const GridParams& g, const SimulationParams& p)
   return static_cast<double>(p.num_modes) + (p.basis == BasisKind::ModalDerivatives ? p.num_derivative_modes : 0);
 }
 
-// The selected springs' columns (with a copy while they grow) and those on the last validation set,
-// their Gram matrix and the NNLS factor. Counted whatever the method: ~set_method may train it later.
+// The training and validation sets (poses and targets), the residual and the fit (basis size x poses
+// each), the selected springs' factors (D_s^T: basis size x dim per spring; F_s: dim x poses per
+// spring, on the training set, the validation set and in the fit's and the Gram update's products), the NNLS
+// Gram matrix and factor (with the Gram's spare capacity), and Phi^T (with basis: skinning, the
+// skinning map B the pose sampler's projection is made from, as large).
 double cubatureTrainingBytes(const GridParams& g, const SimulationParams& p)
 {
-  const double max_springs = effectiveMaxSprings(cubatureParams(p), static_cast<int>(std::min<long long>(countSprings(g), 1 << 30)));
-  const double max_poses = static_cast<double>(effectiveMaxTrainingPoses(cubatureParams(p)));
-  return 8.0 * (3.0 * max_poses * physicalBasisSize(g, p) * max_springs + 4.0 * max_springs * max_springs);
+  const double springs = effectiveMaxSprings(cubatureParams(p), static_cast<int>(std::min<long long>(countSprings(g), 1 << 30)));
+  const double poses = static_cast<double>(effectiveMaxTrainingPoses(cubatureParams(p)));
+  const double coordinates = physicalBasisSize(g, p);
+  const double dim = g.dimension;
+  const double dofs = static_cast<double>(g.rows) * g.cols * dim;
+  return 8.0 * (6.0 * coordinates * poses + 4.0 * dim * springs * poses + coordinates * dim * springs +
+                3.0 * springs * springs + (p.basis == BasisKind::Skinning ? 2.0 : 1.0) * dofs * coordinates);
 }
 
 double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
@@ -276,7 +286,9 @@ double estimateMemoryBytes(const GridParams& g, const SimulationParams& p)
   }
   if (r + 1.0 >= n)
     bytes += 3.0 * 8.0 * n * n;
-  bytes += cubatureTrainingBytes(g, p);
+  // Only `cubature` trains (a switch to it checks again: Simulation::trainCubatureAside).
+  if (p.method == Method::Cubature)
+    bytes += cubatureTrainingBytes(g, p);
   // The constraint modes Psi (interior dofs x handle dofs), Phi^T M Psi, and a right-hand side.
   long long handle_particles = 0;
   for (const std::vector<int>& handle : g.handles)

@@ -3,6 +3,7 @@
 #include "modal_mass_spring/cubature.h"
 #include "modal_mass_spring/simulation.h"
 #include "modal_mass_spring/spring_forces.h"
+#include "modal_mass_spring/validation.h"
 #include "dynamics/method_model.h"
 #include "solvers/nnls.h"
 
@@ -13,7 +14,9 @@
 #include <cmath>
 #include <functional>
 #include <random>
+#include <stdexcept>
 #include <string>
+#include <thread>
 #include <vector>
 
 using namespace modal_mass_spring;
@@ -740,4 +743,83 @@ TEST(Cubature, ForceEnergyAndTangentEqualTheirSumsOverTheSpringsComputedOnTheWho
           << g.dimension << "D " << size << " " << order;
       }
   }
+}
+
+TEST(Cubature, TrainedAsideWhileTheSimulationStepsItEqualsTheCubatureOfASwitch)
+{
+  // The node trains on a thread of its own while the current method steps: the job must read nothing
+  // stepping changes, tell each spring selected, and stop when its callback throws.
+  SimulationParams s = paperParams(Method::Physical, 30);
+  Simulation running(paper3D(), s);
+  const Simulation::CubatureTraining job = running.cubatureTraining();
+  std::vector<int> selected;
+  std::vector<double> errors;
+  Cubature aside;
+  std::thread trainer([&] {
+    aside = job([&](const std::string& stage, int springs, double error, double tolerance) {
+      EXPECT_EQ(stage, "cubature");
+      EXPECT_EQ(tolerance, s.cubature_tolerance);
+      selected.push_back(springs);
+      errors.push_back(error);
+    });
+  });
+  for (int k = 0; k < 200; ++k)
+    running.step();
+  running.reset();
+  trainer.join();
+  ASSERT_FALSE(selected.empty());
+  EXPECT_EQ(selected.front(), 1);
+  EXPECT_GE(static_cast<size_t>(selected.back()), aside.springs.size());  // the zero weights are dropped
+  EXPECT_LE(errors.back(), s.cubature_tolerance);
+  EXPECT_EQ(running.cubature(), nullptr);  // nothing changed until setCubature
+  running.setCubature(aside);
+  running.setMethod(Method::Cubature);
+  s.method = Method::Cubature;
+  const Simulation switched(paper3D(), s);
+  EXPECT_EQ(running.cubature()->springs, switched.cubature()->springs);
+  EXPECT_EQ(running.cubature()->weights, switched.cubature()->weights);
+  // A callback that throws stops the training (the node's shutdown).
+  int calls = 0;
+  EXPECT_THROW(job([&](const std::string&, int, double, double) {
+                 if (++calls == 3)
+                   throw std::runtime_error("stop");
+               }),
+               std::runtime_error);
+  EXPECT_EQ(calls, 3);
+}
+
+TEST(Cubature, TrainingMemoryIsCountedOnlyWhereCubatureTrainsAndChecksAtTheSwitch)
+{
+  // The 100 x 100 held cloth on the skinning span, 24 weights: a limit between what `physical` needs
+  // and what the training adds lets `physical` build and refuses `cubature` by its training.
+  GridParams g = clothSheet(100);
+  SimulationParams s;
+  s.method = Method::Physical;
+  s.num_modes = 30;
+  s.basis = BasisKind::Skinning;
+  s.num_skinning_weights = 24;
+  const double physical = estimateMemoryBytes(g, s), training = cubatureTrainingBytes(g, s);
+  SimulationParams cubature = s;
+  cubature.method = Method::Cubature;
+  EXPECT_DOUBLE_EQ(estimateMemoryBytes(g, cubature), physical + training);
+  s.memory_limit_gb = cubature.memory_limit_gb = (physical + 0.5 * training) / 1e9;
+  EXPECT_EQ(refusal([&] { validateParameters(g, s); }), "");
+  const std::string message = refusal([&] { validateParameters(g, cubature); });
+  EXPECT_TRUE(contains(message, "memory_limit_gb")) << message;
+  EXPECT_TRUE(contains(message, "cubature's training")) << message;
+  // The training's own bound (its sets and the selected springs' factors): under 500 MB up to 100 x 100.
+  for (int n : {10, 20, 30, 50, 100})
+    EXPECT_LT(cubatureTrainingBytes(clothSheet(n), s), 500e6) << n << " x " << n;
+
+  // A switch to `cubature` checks it then: refused by name, the run goes on.
+  GridParams small = paper3D();
+  SimulationParams p = paperParams(Method::Physical, 30);
+  const double base = estimateMemoryBytes(small, p);
+  p.memory_limit_gb = (base + 0.5 * cubatureTrainingBytes(small, p)) / 1e9;
+  Simulation sim(small, p);
+  sim.step(10);
+  const std::string at_switch = refusal([&] { sim.setMethod(Method::Cubature); });
+  EXPECT_TRUE(contains(at_switch, "memory_limit_gb")) << at_switch;
+  EXPECT_EQ(sim.method(), Method::Physical);
+  EXPECT_EQ(sim.stepCount(), 10);
 }
