@@ -2,7 +2,8 @@
 // too), steps it `--skip` steps, then `--steps` more, and reports the thread's CPU time per step of
 // the second stretch. Under callgrind, only that stretch is instrumented (run with --instr-atstart=no
 // and --toggle-collect on Simulation::step), so setup and the skipped steps cost no instructions:
-//   valgrind --tool=callgrind --instr-atstart=no '--toggle-collect=modal_mass_spring::Simulation::step(int)' \
+//   valgrind --tool=callgrind --instr-atstart=no --collect-atstart=no
+//     '--toggle-collect=modal_mass_spring::Simulation::step(int)'
 //     step_breakdown --config FILE --method cubature --skip 800 --steps 200 [--set key=value ...]
 // docs/benchmarks.md, "Where a reduced step's time goes", reads the inclusive costs per function.
 #include "handle_scenarios.h"
