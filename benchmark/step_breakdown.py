@@ -1,13 +1,15 @@
 #!/usr/bin/env python3
 """Where a step's instructions go, from a callgrind profile of benchmark/step_breakdown.
 
-Usage: step_breakdown.py CALLGRIND_OUT STEPS [CALLGRIND_OUT STEPS ...]
+Usage: step_breakdown.py CALLGRIND_OUT STEPS TIME_STEP [CALLGRIND_OUT STEPS TIME_STEP ...]
 
 Reads `callgrind_annotate --inclusive=yes` of each profile (collected inside Simulation::step only)
-and prints one markdown row per profile: instructions per step in total and in each part, the parts
+and prints one markdown row per profile: instructions per step and per simulated second (STEPS steps of
+TIME_STEP s) in total, and per step in each part, the parts
 by the functions' inclusive costs:
-  forces          the force models' force() and energy()
-  tangent         their tangentStiffness()
+  forces          the method's force model's force() and energy() (not the wrapper that adds the
+                  handles' and the frame's loads: those are in other)
+  tangent         its tangentStiffness()
   solve           the implicit integrator's direction() without the tangent in it, and the explicit
                   one's solve()
   contact         the contact correction (correctContacts) without the reconstructions in it
@@ -21,8 +23,8 @@ import subprocess
 import sys
 
 PARTS = {
-    "forces": [r"ForceModel::force\(", r"ForceModel::energy\("],
-    "tangent": [r"ForceModel::tangentStiffness\("],
+    "forces": [r"(Full|LinearModal|PhysicalModal|Cubature)ForceModel::(force|energy)\("],
+    "tangent": [r"(Full|LinearModal|PhysicalModal|Cubature)ForceModel::tangentStiffness\("],
     "direction": [r"ImplicitNewmark::direction\("],
     "explicit_solve": [r"ExplicitNewmark::solve\("],
     "contact": [r"Method::correctContacts\("],
@@ -58,12 +60,12 @@ def part(costs, patterns):
 
 def main():
     args = sys.argv[1:]
-    if not args or len(args) % 2:
+    if not args or len(args) % 3:
         sys.exit(__doc__)
-    print("| profile | instructions per step | forces | tangent | factorisation and solve | contact | "
-          "reconstruction | handles | other |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for path, steps in zip(args[::2], args[1::2]):
+    print("| profile | instructions per step | per simulated second | forces | tangent | factorisation and solve | "
+          "contact | reconstruction | handles | other |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for path, steps, time_step in zip(args[::3], args[1::3], args[2::3]):
         costs, callees = profile(path)
         p = {k: part(costs, v) for k, v in PARTS.items()}
         # The reconstructions the contact correction calls are counted once, as reconstruction.
@@ -75,7 +77,8 @@ def main():
         other = p["total"] - sum(parts)
         n = int(steps)
         cells = [f"{x / n / 1e6:.3g} M ({100 * x / p['total']:.0f}%)" for x in parts + [other]]
-        print(f"| {path} | {p['total'] / n / 1e6:.3g} M | " + " | ".join(cells) + " |")
+        per_second = p["total"] / n / float(time_step)
+        print(f"| {path} | {p['total'] / n / 1e6:.3g} M | {per_second / 1e9:.3g} G | " + " | ".join(cells) + " |")
 
 
 if __name__ == "__main__":
