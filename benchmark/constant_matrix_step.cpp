@@ -12,7 +12,10 @@
 //                         F(X_k) + K_c X_k its right-hand side) with the right-hand side over T only,
 //                         the hyper-reduced projective dynamics of Brandt et al. 2018;
 //   --matrix equilibrium: K_c = Phi^T K(x_ref) Phi, the reduced tangent at the hanging equilibrium
-//                         (a quasi-Newton with the tangent lagged to the start).
+//                         (a quasi-Newton with the tangent lagged to the start);
+//   --matrix lagged:      the cubature's reduced tangent at the start of every --refresh-th step,
+//                         factorised again then (a quasi-Newton with a lagged tangent; counted with
+//                         the steps: --toggle-collect on refreshTangent too).
 // An iteration costs the cubature's force (2 |T| dim r multiply-adds) and two triangular solves of
 // size r; nothing grows with the grid. At every step the iteration is first run to convergence (the
 // converged implicit step X*, not timed) and then, from the same start, for --iterations (counted
@@ -88,6 +91,28 @@ struct ConstantMatrixStep
     force.noalias() -= d.transpose() * g;
   }
 
+  // The cubature's reduced tangent at x, sum_s D_s^T (w_s K_s) D_s, a compressed spring's geometric
+  // part dropped so that it stays positive semi-definite.
+  Eigen::MatrixXd tangent(const Eigen::VectorXd& x)
+  {
+    diff.noalias() = d * x;
+    diff += base;
+    Eigen::MatrixXd k = Eigen::MatrixXd::Zero(d.cols(), d.cols());
+    Eigen::MatrixXd kd(3, d.cols());
+    for (Eigen::Index s = 0; s < rest_length.size(); ++s)
+    {
+      const Eigen::Vector3d ds = diff.segment<3>(3 * s);
+      const double length = ds.norm();
+      const Eigen::Vector3d n = ds / length;
+      const double geometric = std::max(0.0, 1.0 - rest_length[s] / length);
+      const Eigen::Matrix3d ks =
+          weighted_stiffness[s] * (geometric * Eigen::Matrix3d::Identity() + (1.0 - geometric) * n * n.transpose());
+      kd.noalias() = ks * d.middleRows<3>(3 * s);
+      k.noalias() += d.middleRows<3>(3 * s).transpose() * kd;
+    }
+    return k;
+  }
+
   // k iterations of A dX = -G(X) from x.
   void iterate(Eigen::VectorXd& x, int k)
   {
@@ -107,10 +132,16 @@ __attribute__((noinline)) void constantMatrixStep(ConstantMatrixStep& p, Eigen::
   p.iterate(x, iterations);
 }
 
+// Counted under callgrind with the steps: the tangent at x and the new factor (--matrix lagged).
+__attribute__((noinline)) void refreshTangent(ConstantMatrixStep& p, const Eigen::VectorXd& x)
+{
+  p.factor.compute(p.inertia * Eigen::MatrixXd::Identity(p.r, p.r) + p.tangent(x));
+}
+
 int run(int argc, char** argv)
 {
   std::string config, matrix = "laplacian";
-  int steps = 400, skip = 0, iterations = 10;
+  int steps = 400, skip = 0, iterations = 10, refresh = 10;
   std::vector<std::pair<std::string, std::string>> sets;
   for (int i = 1; i < argc; ++i)
   {
@@ -128,6 +159,8 @@ int run(int argc, char** argv)
       skip = std::stoi(value);
     else if (arg == "--iterations")
       iterations = std::stoi(value);
+    else if (arg == "--refresh")
+      refresh = std::stoi(value);
     else if (arg == "--set")
     {
       const size_t eq = value.find('=');
@@ -138,9 +171,10 @@ int run(int argc, char** argv)
     else
       throw std::invalid_argument("unknown option " + arg);
   }
-  if (config.empty() || steps < 1 || skip < 0 || iterations < 1 || (matrix != "laplacian" && matrix != "equilibrium"))
+  if (config.empty() || steps < 1 || skip < 0 || iterations < 1 || (matrix != "laplacian" && matrix != "equilibrium" && matrix != "lagged") ||
+      refresh < 1)
     throw std::invalid_argument("need --config FILE, --steps >= 1, --skip >= 0, --iterations >= 1, "
-                                "--matrix laplacian or equilibrium");
+                                "--matrix laplacian, equilibrium or lagged, --refresh >= 1");
 
   // The package's cubature on the skinning span, constraint modes for the handle (u = Psi dx_b + Phi X).
   YamlParameterSource source = YamlParameterSource::fromFile(config);
@@ -225,7 +259,9 @@ int run(int argc, char** argv)
   p.load_of_handles = phi.transpose() * mass.asDiagonal() * psi;
 
   Eigen::MatrixXd k_c;
-  if (matrix == "equilibrium")
+  if (matrix == "lagged")
+    k_c = p.tangent(Eigen::VectorXd::Zero(p.r));  // refreshed every --refresh steps below
+  else if (matrix == "equilibrium")
   {
     const ModalBasis& b = sim.physicalBasis();
     k_c = b.reduced_stiffness.size() > 0 ? b.reduced_stiffness : Eigen::MatrixXd(b.eigenvalues.asDiagonal());
@@ -283,6 +319,16 @@ int run(int argc, char** argv)
     const double t = (n + 1) * p.h;
     driver.particleMotion(t, positions, velocities, accelerations);
     p.base = p.base_ref + p.base_of_handles * (positions - x_ref_b);
+    if (matrix == "lagged" && n % refresh == 0)
+    {
+      // The tangent at the start of this step, factorised again: counted with the step.
+      CALLGRIND_START_INSTRUMENTATION;
+      const double start = threadCpuSeconds();
+      refreshTangent(p, x);
+      if (n >= skip)
+        cpu += threadCpuSeconds() - start;
+      CALLGRIND_STOP_INSTRUMENTATION;
+    }
     const Eigen::VectorXd load = p.load_of_handles * (accelerations + p.alpha * velocities);
     p.rhs = (x + p.h * v) / (p.h * p.h) + (p.alpha / p.h) * x - load;
     // The converged implicit step, not counted.
