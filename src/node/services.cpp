@@ -263,10 +263,7 @@ bool SimulationNode::step(Step::Request& request, Step::Response& response)
       return true;
     }
     for (Track& track : tracks_)
-    {
-      track.tick_seconds = 0.0;
-      track.tick_steps = 0;
-    }
+      track.startTick();
     uint32_t taken = 0;
     while (taken < request.steps && stepAll())
       ++taken;
@@ -274,8 +271,7 @@ bool SimulationNode::step(Step::Request& request, Step::Response& response)
     for (Track& track : tracks_)
     {
       stepped = std::max(stepped, track.tick_steps);
-      if (track.tick_steps > 0)
-        track.step_seconds = track.tick_seconds / track.tick_steps;
+      track.finishTick();
     }
     clock_seconds_ += stepped * config_.simulation.time_step;
     ++state_changes_;

@@ -31,6 +31,14 @@ double secondsSince(Clock::time_point start)
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
+// This thread's CPU time (s): what a step costs whatever else shares the machine's cores.
+double threadCpuSeconds()
+{
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
 // Polls a StartupProgress from its own thread while the simulation is built.
 class ProgressWatcher
 {
@@ -474,7 +482,9 @@ bool SimulationNode::stepAll()
     }
     applyHandForce(k);
     const auto start = Clock::now();
+    const double cpu_start = threadCpuSeconds();
     const StepResult result = track.simulation->step(1);
+    track.tick_cpu_seconds += threadCpuSeconds() - cpu_start;
     track.tick_seconds += secondsSince(start);
     track.tick_steps += result.steps_taken;
     if (result.diverged)
@@ -538,10 +548,7 @@ void SimulationNode::onTick()
     tick_steps_ = 0;
     tick_step_seconds_ = 0.0;
     for (Track& track : tracks_)
-    {
-      track.tick_seconds = 0.0;
-      track.tick_steps = 0;
-    }
+      track.startTick();
     const bool running = lockstep() ? std::any_of(tracks_.begin(), tracks_.end(),
                                                   [](const Track& t) { return !t.simulation->diverged(); })
                                     : !primary().simulation->diverged();
@@ -593,8 +600,7 @@ void SimulationNode::onTick()
     for (Track& track : tracks_)
     {
       tick_steps_ = std::max(tick_steps_, track.tick_steps);
-      if (track.tick_steps > 0)
-        track.step_seconds = track.tick_seconds / track.tick_steps;
+      track.finishTick();
     }
     clock_seconds_ += tick_steps_ * dt;
     achieved_factor_ = tick_steps_ * dt / std::max(wall, 1e-9);
@@ -606,14 +612,15 @@ void SimulationNode::onTick()
       last_status_log_ = ros::WallTime::now();
       const Track& first = primary();
       status_warns = state(first) == Status::DIVERGED;
-      char line[320];
+      char line[480];
       std::snprintf(line, sizeof line,
-                    "%s: %s, step %ld, simulated %.3f s, energy %.6g J, %.3f ms of stepping per tick%s",
+                    "%s: %s, step %ld, simulated %.3f s, energy %.6g J, %.3f ms of stepping per tick; %s%s%s",
                     stateName(first).c_str(),
                     lockstep() ? "methods in lockstep" : ("method " + toString(first.simulation->method())).c_str(),
                     steps(first), simTime(first), first.last_energy,
-                    1e3 * tick_step_seconds_,
-                    lockstep() ? (", real-time factor " + std::to_string(achieved_factor_)).c_str() : "");
+                    1e3 * tick_step_seconds_, lockstep() ? (first.name + ": ").c_str() : "",
+                    formatCpuPace(first.step_cpu_seconds, dt).c_str(),
+                    lockstep() ? ("; achieved real-time factor " + std::to_string(achieved_factor_)).c_str() : "");
       status_line = line;
     }
   }

@@ -45,6 +45,10 @@
 namespace modal_mass_spring
 {
 
+// A step's CPU time, the CPU seconds per simulated second it costs (over time_step) and the real-time
+// factor the CPU allows (its inverse), for the status line and the labels; "no step timed yet" before one.
+std::string formatCpuPace(double step_cpu_seconds, double time_step);
+
 class SimulationNode
 {
 public:
@@ -74,8 +78,18 @@ private:
     double last_energy = 0.0;
     std::string divergence_message;
     double tick_seconds = 0.0;      // this tick's stepping of this method
+    double tick_cpu_seconds = 0.0;  // and the stepping thread's CPU time in it
     int tick_steps = 0;
     double step_seconds = 0.0;      // the last tick's mean step
+    double step_cpu_seconds = 0.0;  // and its mean CPU time
+    void startTick() { tick_seconds = tick_cpu_seconds = 0.0, tick_steps = 0; }
+    void finishTick()
+    {
+      if (tick_steps == 0)
+        return;
+      step_seconds = tick_seconds / tick_steps;
+      step_cpu_seconds = tick_cpu_seconds / tick_steps;
+    }
     double rms_distance = 0.0, max_distance = 0.0;  // to the reference, m
     long step_offset = 0;  // steps of the models a rebuild replaced: the count goes on across a swap
   };

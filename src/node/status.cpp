@@ -58,6 +58,16 @@ MarkerOptions markerOptions(const NodeParams& params)
 
 }  // namespace
 
+std::string formatCpuPace(double step_cpu_seconds, double time_step)
+{
+  if (!(step_cpu_seconds > 0.0) || !(time_step > 0.0))
+    return "no step timed yet";
+  char text[128];
+  std::snprintf(text, sizeof text, "%.3g ms of CPU a step, %.3g CPU s per simulated s, %.3g x real time",
+                1e3 * step_cpu_seconds, step_cpu_seconds / time_step, time_step / step_cpu_seconds);
+  return text;
+}
+
 SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
 {
   const NodeParams& params = config_.node;
@@ -109,7 +119,8 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     {
       options.label = toString(simulation.method()) +
                       (measured ? "\nRMS " + formatDistance(track.rms_distance) + " to full" : "") + "\n" +
-                      formatCost(track.step_seconds);
+                      formatCost(track.step_seconds) + "\n" +
+                      formatCpuPace(track.step_cpu_seconds, config_.simulation.time_step);
       if (lockstep())
       {
         char pace[64];
@@ -185,6 +196,9 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     status.rms_distance = track.rms_distance;
     status.max_distance = track.max_distance;
     status.step_seconds = track.step_seconds;
+    status.step_cpu_seconds = track.step_cpu_seconds;
+    status.cpu_per_simulated_second =
+        track.step_cpu_seconds > 0.0 ? track.step_cpu_seconds / config_.simulation.time_step : 0.0;
     status.real_time_factor = achieved_factor_;
     const DerivativeBasisInfo& derivatives = simulation.derivativeInfo();
     status.basis = toString(simulation.params().basis);

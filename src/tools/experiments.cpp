@@ -51,6 +51,23 @@ void report(const ProgressFn& progress, const std::string& label, double fractio
     progress(label, fraction);
 }
 
+}  // namespace
+
+double cpuPerSimulatedSecond(double step_cpu_seconds, double time_step)
+{
+  if (!(step_cpu_seconds > 0.0 && time_step > 0.0) || !std::isfinite(step_cpu_seconds) || !std::isfinite(time_step))
+    return std::numeric_limits<double>::quiet_NaN();
+  return step_cpu_seconds / time_step;
+}
+
+double realTimeFactor(double step_cpu_seconds, double time_step)
+{
+  return 1.0 / cpuPerSimulatedSecond(step_cpu_seconds, time_step);
+}
+
+namespace
+{
+
 SimulationParams withMethod(SimulationParams params, Method method)
 {
   params.method = method;
@@ -143,10 +160,12 @@ int stepsPerRepeat(Simulation& sim, double min_repeat_seconds)
 
 // Seconds per step of one timed run of `steps` steps. A method may diverge (the linear one drifts
 // without bound along zero modes): it starts over and goes on, so every run has the same steps.
-double timedRun(Simulation& sim, int steps, bool& diverged)
+// Wall time per step; the thread's CPU time per step goes to `cpu_seconds`.
+double timedRun(Simulation& sim, int steps, bool& diverged, double& cpu_seconds)
 {
   sim.reset();
   const auto start = Clock::now();
+  const double cpu_start = threadCpuSeconds();
   for (int taken = 0; taken < steps;)
   {
     const StepResult result = sim.step(steps - taken);
@@ -157,6 +176,7 @@ double timedRun(Simulation& sim, int steps, bool& diverged)
       sim.reset();
     }
   }
+  cpu_seconds = (threadCpuSeconds() - cpu_start) / steps;
   return seconds(start) / steps;
 }
 
@@ -192,15 +212,20 @@ std::vector<CostRow> runCost(const ExperimentSetup& setup, const CostOptions& op
       row.repeats = options.repeats;
       sim->setMethod(options.methods[m]);
       row.steps_per_repeat = stepsPerRepeat(*sim, options.min_repeat_seconds);
-      std::vector<double> per_step;
+      std::vector<double> per_step, cpu_per_step;
       for (int r = 0; r < options.repeats; ++r)
       {
-        per_step.push_back(timedRun(*sim, row.steps_per_repeat, row.diverged));
+        cpu_per_step.emplace_back();
+        per_step.push_back(timedRun(*sim, row.steps_per_repeat, row.diverged, cpu_per_step.back()));
         report(progress, label + " " + row.method,
                (s + (m + (r + 1.0) / options.repeats) / options.methods.size()) / total);
       }
       row.step_seconds = median(per_step);
       row.step_seconds_min = *std::min_element(per_step.begin(), per_step.end());
+      row.step_cpu_seconds = median(cpu_per_step);
+      row.time_step = setup.sim.time_step;
+      row.cpu_per_simulated_second = cpuPerSimulatedSecond(row.step_cpu_seconds, row.time_step);
+      row.real_time_factor = realTimeFactor(row.step_cpu_seconds, row.time_step);
       rows.push_back(row);
     }
   }
@@ -421,6 +446,7 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
   std::vector<AccuracySummary> out;
   std::vector<std::vector<double>> times, cpu_times;
   std::vector<int> counts;
+  std::vector<double> time_steps;  // of each summary's samples: time / step
   for (const ErrorSample& e : rows)
   {
     auto it = std::find_if(out.begin(), out.end(), [&](const AccuracySummary& s) {
@@ -434,12 +460,14 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
       times.emplace_back();
       cpu_times.emplace_back();
       counts.push_back(0);
+      time_steps.push_back(0.0);
       it = out.end() - 1;
     }
     const size_t k = it - out.begin();
     AccuracySummary& s = *it;
     if (e.step == 0)
       continue;
+    time_steps[k] = e.time / static_cast<double>(e.step);
     if (e.diverged)
     {
       s.diverged = true;
@@ -472,6 +500,8 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
       s.final_rms = std::numeric_limits<double>::quiet_NaN();
     s.step_seconds_median = median(times[k]);
     s.step_cpu_seconds_median = median(cpu_times[k]);
+    s.cpu_per_simulated_second = cpuPerSimulatedSecond(s.step_cpu_seconds_median, time_steps[k]);
+    s.real_time_factor = realTimeFactor(s.step_cpu_seconds_median, time_steps[k]);
     double sum = 0.0;
     for (double t : times[k])
       sum += t;
@@ -719,12 +749,14 @@ std::string windowsField(const std::vector<StableWindow>& windows)
 void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows)
 {
   precise(out) << "variant,method,dimension,rows,cols,particles,free_dofs,springs,num_modes,"
-                  "build_seconds,step_seconds,step_seconds_min,repeats,steps_per_repeat,diverged\n";
+                  "build_seconds,step_seconds,step_seconds_min,step_cpu_seconds,time_step,cpu_per_simulated_second,"
+                  "real_time_factor,repeats,steps_per_repeat,diverged\n";
   for (const CostRow& r : rows)
     out << r.variant << ',' << r.method << ',' << r.dimension << ',' << r.rows << ',' << r.cols << ','
         << r.particles << ',' << r.free_dofs << ',' << r.springs << ',' << r.num_modes << ','
         << Field{r.build_seconds} << ',' << Field{r.step_seconds} << ',' << Field{r.step_seconds_min} << ','
-        << r.repeats << ',' << r.steps_per_repeat << ',' << (r.diverged ? 1 : 0) << '\n';
+        << Field{r.step_cpu_seconds} << ',' << Field{r.time_step} << ',' << Field{r.cpu_per_simulated_second} << ','
+        << Field{r.real_time_factor} << ',' << r.repeats << ',' << r.steps_per_repeat << ',' << (r.diverged ? 1 : 0) << '\n';
 }
 
 void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows)
@@ -750,14 +782,14 @@ std::vector<AccuracySummary> notBuiltSummaries(const std::string& variant, const
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::vector<AccuracySummary> out;
   for (const auto& [method, reason] : result.not_built)
-    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, nan, false, reason});
+    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, nan, nan, nan, false, reason});
   return out;
 }
 
 void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummary>& rows)
 {
   precise(out) << "variant,method,mean_rms,max_rms,mean_max,final_rms,step_seconds_median,step_seconds_mean,"
-                  "step_cpu_seconds_median,diverged,not_built\n";
+                  "step_cpu_seconds_median,cpu_per_simulated_second,real_time_factor,diverged,not_built\n";
   for (const AccuracySummary& s : rows)
   {
     // The reason is free text: quoted, its quotes doubled.
@@ -766,7 +798,8 @@ void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummar
       reason += c == '"' ? std::string("\"\"") : std::string(1, c);
     out << s.variant << ',' << s.method << ',' << Field{s.mean_rms} << ',' << Field{s.max_rms} << ','
         << Field{s.mean_max} << ',' << Field{s.final_rms} << ',' << Field{s.step_seconds_median} << ','
-        << Field{s.step_seconds_mean} << ',' << Field{s.step_cpu_seconds_median} << ',' << (s.diverged ? 1 : 0) << ",\"" << reason << "\"\n";
+        << Field{s.step_seconds_mean} << ',' << Field{s.step_cpu_seconds_median} << ','
+        << Field{s.cpu_per_simulated_second} << ',' << Field{s.real_time_factor} << ',' << (s.diverged ? 1 : 0) << ",\"" << reason << "\"\n";
   }
 }
 

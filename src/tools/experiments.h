@@ -35,6 +35,12 @@ struct ExperimentSetup
 // other varied setting equal, `integrator` explicit. Nullptr when there is none.
 const ExperimentSetup* explicitTwin(const ExperimentSetup& setup, const std::vector<ExperimentSetup>& setups);
 
+// CPU seconds per simulated second of a step of `time_step` s that took `step_cpu_seconds` of CPU: the
+// figure that compares steps of different sizes; its inverse is the real-time factor the CPU allows
+// (above 1: faster than real time). NaN unless both are positive and finite.
+double cpuPerSimulatedSecond(double step_cpu_seconds, double time_step);
+double realTimeFactor(double step_cpu_seconds, double time_step);
+
 // Reports how far a long run is (label, fraction done in [0, 1]); may be empty.
 using ProgressFn = std::function<void(const std::string&, double)>;
 
@@ -56,6 +62,9 @@ struct CostRow
   double build_seconds = 0.0;        // median time to build the modal basis
   double step_seconds = 0.0;         // median time per step
   double step_seconds_min = 0.0;
+  double step_cpu_seconds = 0.0;     // median of this thread's CPU time per step
+  double time_step = 0.0;            // s
+  double cpu_per_simulated_second = 0.0, real_time_factor = 0.0;  // of step_cpu_seconds and time_step
   int repeats = 0, steps_per_repeat = 0;
   bool diverged = false;             // a timed run diverged: its time covers fewer steps
 };
@@ -237,6 +246,8 @@ struct AccuracySummary
   std::string variant, method;
   double mean_rms = 0.0, max_rms = 0.0, mean_max = 0.0, final_rms = 0.0;
   double step_seconds_median = 0.0, step_seconds_mean = 0.0, step_cpu_seconds_median = 0.0;
+  // The median CPU time per step over the time step (cpuPerSimulatedSecond) and its inverse.
+  double cpu_per_simulated_second = 0.0, real_time_factor = 0.0;
   bool diverged = false;
   std::string not_built;  // why the method could not be built (no samples, distances NaN); empty when it ran
 };

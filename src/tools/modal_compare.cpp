@@ -913,12 +913,17 @@ void runCostExperiment(const Options& o, const std::vector<ExperimentSetup>& set
         writeCostCsv(out, rows);
       });
   std::vector<std::vector<std::string>> table{
-      {"variant", "grid", "dim", "free dofs", "modes", "basis build ms", "method", "step us (median)"}};
+      {"variant", "grid", "dim", "free dofs", "modes", "basis build ms", "method", "step us (median)",
+       "CPU us (median)", "CPU s per simulated s", "real-time factor"}};
   for (const CostRow& r : rows)
     table.push_back({r.variant, std::to_string(r.rows) + "x" + std::to_string(r.cols), std::to_string(r.dimension),
                      std::to_string(r.free_dofs), std::to_string(r.num_modes), fmt(1e3 * r.build_seconds),
-                     r.method, fmt(1e6 * r.step_seconds) + (r.diverged ? " (diverged)" : "")});
-  printTable("cost (" + o.tag + "): median of " + std::to_string(o.cost.repeats) + " timed runs", table);
+                     r.method, fmt(1e6 * r.step_seconds) + (r.diverged ? " (diverged)" : ""),
+                     fmt(1e6 * r.step_cpu_seconds), fmt(r.cpu_per_simulated_second), fmt(r.real_time_factor)});
+  printTable("cost (" + o.tag + "): median of " + std::to_string(o.cost.repeats) +
+                 " timed runs; wall and this thread's CPU time per step, the CPU time per simulated second and "
+                 "the real-time factor it allows (time_step / CPU per step)",
+             table);
 }
 
 // The basis and, with a converged reference, how well it agrees with itself at half its step.
@@ -951,14 +956,17 @@ void printAccuracyHeader(const Options& o, const ExperimentSetup& setup, const A
 void printAccuracySummary(const Options& o, const std::string& reference, const std::vector<ErrorSample>& errors)
 {
   std::vector<std::vector<std::string>> summary{{"variant", "method", "mean RMS m", "largest RMS m", "mean largest m",
-                                                 "RMS at the end m", "step us (median)", "step us (mean)"}};
+                                                 "RMS at the end m", "step us (median)", "step us (mean)",
+                                                 "CPU us (median)", "CPU s per simulated s", "real-time factor"}};
   for (const AccuracySummary& s : summarizeAccuracy(errors))
     if (s.method != reference && s.method != "reference_half_step")
       summary.push_back({s.variant, s.method, fmt(s.mean_rms), fmt(s.max_rms), fmt(s.mean_max),
                          s.diverged ? "diverged" : fmt(s.final_rms), fmt(1e6 * s.step_seconds_median),
-                         fmt(1e6 * s.step_seconds_mean)});
+                         fmt(1e6 * s.step_seconds_mean), fmt(1e6 * s.step_cpu_seconds_median),
+                         fmt(s.cpu_per_simulated_second), fmt(s.real_time_factor)});
   printTable("accuracy (" + o.tag + "): over every sample after step 0, against " + reference +
-                 "; wall time per step while running",
+                 "; wall and this thread's CPU time per step while running, the CPU time per simulated second "
+                 "and the real-time factor it allows (time_step / CPU per step)",
              summary);
 }
 
@@ -1119,18 +1127,21 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
   runEachSetup(o, "handles", setups, run, write);
   const std::vector<AccuracySummary> summaries = summaries_of();
   std::vector<std::vector<std::string>> table{
-      {"scenario", "method", "mean RMS m", "largest RMS m", "RMS at the end m", "step us (median)", "CPU us (median)"}};
+      {"scenario", "method", "mean RMS m", "largest RMS m", "RMS at the end m", "step us (median)", "CPU us (median)",
+       "CPU s per simulated s", "real-time factor"}};
   for (const AccuracySummary& s : summaries)
     if (!s.not_built.empty())
-      table.push_back({s.variant, s.method, "did not build: " + s.not_built, "", "", "", ""});
+      table.push_back({s.variant, s.method, "did not build: " + s.not_built, "", "", "", "", "", ""});
     else if (s.method != "reference_half_step" && (s.method != reference || s.step_seconds_median > 0.0))
       // The reference's own row when it is timed (`full` at the methods' step): the step times to compare.
       table.push_back({s.variant, s.method, s.method == reference ? "(reference)" : fmt(s.mean_rms),
                        s.method == reference ? "" : fmt(s.max_rms),
                        s.method == reference ? "" : s.diverged ? "diverged" : fmt(s.final_rms),
-                       fmt(1e6 * s.step_seconds_median), fmt(1e6 * s.step_cpu_seconds_median)});
+                       fmt(1e6 * s.step_seconds_median), fmt(1e6 * s.step_cpu_seconds_median),
+                       fmt(s.cpu_per_simulated_second), fmt(s.real_time_factor)});
   printTable("handles (" + o.tag + "): distance of the free particles to " + reference +
-                 " over every sample after step 0; wall and this thread's CPU time per step while running",
+                 " over every sample after step 0; wall and this thread's CPU time per step while running, the "
+                 "CPU time per simulated second and the real-time factor it allows (time_step / CPU per step)",
              table);
   for (const std::string& m : messages)
     std::cout << "note: " << m << "\n";

@@ -302,6 +302,9 @@ TEST(Timer, StepsAFixedSimulatedTimePerTick)
         << s.tick_steps << " steps in a tick, expected " << per_tick;
     EXPECT_EQ(s.step_count - statuses[k - 1]->step_count, s.tick_steps) << "a tick without a status";
     EXPECT_NEAR(s.sim_time, s.step_count * dt, 1e-9 * s.sim_time);
+    // What a simulated second costs: the step's CPU time over the time step.
+    EXPECT_GT(s.step_cpu_seconds, 0.0);
+    EXPECT_NEAR(s.cpu_per_simulated_second, s.step_cpu_seconds / dt, 1e-12 * s.cpu_per_simulated_second);
   }
   // The fraction is carried: over many ticks the steps add up to the simulated time asked for.
   const double steps = static_cast<double>(statuses.back()->step_count - statuses.front()->step_count);

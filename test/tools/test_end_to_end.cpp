@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cstdio>
 #include <filesystem>
@@ -14,6 +15,7 @@
 #include <cstdlib>
 #include <set>
 #include <string>
+#include <vector>
 
 namespace fs = std::filesystem;
 
@@ -301,6 +303,44 @@ TEST_F(ModalCompareTool, HandlesExperimentMeasuresEveryScenarioAndMethodAgainstT
   for (const char* scenario : {"shift", "apart"})
     for (const char* method : {"reference", "full", "linear", "physical", "cubature", "reference_half_step"})
       EXPECT_TRUE(rows.count(std::string(scenario) + "," + method)) << scenario << " " << method << "\n" << r.output;
+  // Every timed method's CPU seconds per simulated second is its CPU time per step over the 2 ms
+  // step, and the real-time factor its inverse; the printed table has both.
+  {
+    std::ifstream summary(dir_ / "data" / "handles_held_summary.csv");
+    std::string header, row;
+    std::getline(summary, header);
+    auto split = [](const std::string& text) {
+      std::vector<std::string> fields;
+      std::stringstream stream(text);
+      for (std::string field; std::getline(stream, field, ',');)
+        fields.push_back(field);
+      return fields;
+    };
+    const std::vector<std::string> names = split(header);
+    auto column = [&](const std::string& name) {
+      const auto it = std::find(names.begin(), names.end(), name);
+      EXPECT_NE(it, names.end()) << name << " in " << header;
+      return static_cast<size_t>(it - names.begin());
+    };
+    const size_t method = column("method"), cpu = column("step_cpu_seconds_median"),
+                 per_second = column("cpu_per_simulated_second"), factor = column("real_time_factor");
+    int timed = 0;
+    while (std::getline(summary, row))
+    {
+      const std::vector<std::string> fields = split(row);
+      ASSERT_GT(fields.size(), factor) << row;
+      if (fields[method] == "reference" || fields[method] == "reference_half_step")
+        continue;
+      ++timed;
+      const double step_cpu = std::stod(fields[cpu]);
+      ASSERT_GT(step_cpu, 0.0) << row;
+      EXPECT_NEAR(std::stod(fields[per_second]), step_cpu / 0.002, 1e-9 * step_cpu / 0.002) << row;
+      EXPECT_NEAR(std::stod(fields[factor]) * std::stod(fields[per_second]), 1.0, 1e-9) << row;
+    }
+    EXPECT_EQ(timed, 2 * 4);  // full, linear, physical, cubature in each scenario
+    EXPECT_NE(r.output.find("CPU s per simulated s"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("real-time factor"), std::string::npos) << r.output;
+  }
   // 0.3 s of 2 ms steps, sampled every 10 steps: 15 samples and step 0 per scenario and run.
   std::ifstream errors(dir_ / "data" / "handles_held_error.csv");
   int samples = 0;

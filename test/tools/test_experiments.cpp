@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -304,6 +305,66 @@ TEST(Accuracy, SummaryOfAMethodDivergedBeforeItsFirstSampleIsNotZero)
   EXPECT_TRUE(std::isnan(summary[0].max_rms));
   EXPECT_TRUE(std::isnan(summary[0].mean_max));
   EXPECT_TRUE(std::isnan(summary[0].final_rms));
+  EXPECT_TRUE(std::isnan(summary[0].cpu_per_simulated_second));
+  EXPECT_TRUE(std::isnan(summary[0].real_time_factor));
+}
+
+// The summary's CPU seconds per simulated second is its median CPU time per step over the time step
+// (time / step of the samples), the real-time factor its inverse, and the CSV writes both.
+TEST(Accuracy, SummaryGivesCpuPerSimulatedSecondAndTheRealTimeFactor)
+{
+  const double time_step = 0.002;
+  std::vector<ErrorSample> rows;
+  const double cpu[] = {0.0, 5e-4, 1e-4, 2e-4};  // per step; step 0 is not timed
+  for (int k = 0; k < 4; ++k)
+  {
+    ErrorSample e;
+    e.variant = "base";
+    e.method = "cubature";
+    e.step = 10L * k;
+    e.time = e.step * time_step;
+    e.step_cpu_seconds = cpu[k];
+    e.step_seconds = 2.0 * cpu[k];
+    rows.push_back(e);
+  }
+  const std::vector<AccuracySummary> summary = summarizeAccuracy(rows);
+  ASSERT_EQ(summary.size(), 1u);
+  EXPECT_DOUBLE_EQ(summary[0].step_cpu_seconds_median, 2e-4);
+  EXPECT_DOUBLE_EQ(summary[0].cpu_per_simulated_second, 2e-4 / time_step);
+  EXPECT_DOUBLE_EQ(summary[0].real_time_factor, time_step / 2e-4);
+
+  std::ostringstream csv;
+  writeAccuracySummaryCsv(csv, summary);
+  const std::string text = csv.str();
+  const std::string header = text.substr(0, text.find('\n'));
+  EXPECT_NE(header.find("step_cpu_seconds_median,cpu_per_simulated_second,real_time_factor,"), std::string::npos)
+      << header;
+  // The row's fields at the header's positions of the three columns.
+  std::vector<std::string> names, fields;
+  std::stringstream header_stream(header), row_stream(text.substr(header.size() + 1));
+  for (std::string field; std::getline(header_stream, field, ',');)
+    names.push_back(field);
+  for (std::string field; std::getline(row_stream, field, ',');)
+    fields.push_back(field);
+  auto value = [&](const std::string& name) {
+    const size_t k = std::find(names.begin(), names.end(), name) - names.begin();
+    return k < fields.size() ? std::stod(fields[k]) : std::numeric_limits<double>::quiet_NaN();
+  };
+  EXPECT_DOUBLE_EQ(value("cpu_per_simulated_second"), value("step_cpu_seconds_median") / time_step) << text;
+  EXPECT_DOUBLE_EQ(value("real_time_factor"), time_step / value("step_cpu_seconds_median")) << text;
+}
+
+TEST(Accuracy, CpuPerSimulatedSecondIsUndefinedWithoutATimedStep)
+{
+  EXPECT_DOUBLE_EQ(cpuPerSimulatedSecond(1e-3, 5e-3), 0.2);
+  EXPECT_DOUBLE_EQ(realTimeFactor(1e-3, 5e-3), 5.0);
+  const double inf = std::numeric_limits<double>::infinity(), nan = std::numeric_limits<double>::quiet_NaN();
+  for (const auto& [cpu, dt] : std::vector<std::pair<double, double>>{{0.0, 1e-3}, {1e-3, 0.0}, {-1e-3, 1e-3},
+                                                                      {nan, 1e-3}, {1e-3, inf}, {inf, 1e-3}})
+  {
+    EXPECT_TRUE(std::isnan(cpuPerSimulatedSecond(cpu, dt))) << cpu << " " << dt;
+    EXPECT_TRUE(std::isnan(realTimeFactor(cpu, dt))) << cpu << " " << dt;
+  }
 }
 
 // The number of reference substeps is checked before it is converted to int.
@@ -405,5 +466,12 @@ TEST(Cost, ReportsEveryMethodAndSize)
     EXPECT_GT(r.step_seconds, 0.0);
     EXPECT_GT(r.build_seconds, 0.0);
     EXPECT_GE(r.steps_per_repeat, 10);
+    EXPECT_GT(r.step_cpu_seconds, 0.0);
+    EXPECT_EQ(r.time_step, setup.sim.time_step);
+    EXPECT_DOUBLE_EQ(r.cpu_per_simulated_second, r.step_cpu_seconds / setup.sim.time_step);
+    EXPECT_DOUBLE_EQ(r.real_time_factor, setup.sim.time_step / r.step_cpu_seconds);
   }
+  std::ostringstream csv;
+  writeCostCsv(csv, rows);
+  EXPECT_NE(csv.str().find("step_cpu_seconds,time_step,cpu_per_simulated_second,real_time_factor,"), std::string::npos);
 }

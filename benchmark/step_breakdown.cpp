@@ -1,0 +1,137 @@
+// Where a step's time goes: builds one method on a config's first handle scenario (its colliders
+// too), steps it `--skip` steps, then `--steps` more, and reports the thread's CPU time per step of
+// the second stretch. Under callgrind, only that stretch is instrumented (run with --instr-atstart=no
+// and --toggle-collect on Simulation::step), so setup and the skipped steps cost no instructions:
+//   valgrind --tool=callgrind --instr-atstart=no --collect-atstart=no
+//     '--toggle-collect=modal_mass_spring::Simulation::step(int)'
+//     step_breakdown --config FILE --method cubature --skip 800 --steps 200 [--set key=value ...]
+// docs/benchmarks.md, "Where a reduced step's time goes", reads the inclusive costs per function.
+#include "handle_scenarios.h"
+#include "yaml_colliders.h"
+#include "yaml_parameter_source.h"
+
+#include "modal_mass_spring/cache.h"
+#include "modal_mass_spring/options.h"
+#include "modal_mass_spring/parameters.h"
+#include "modal_mass_spring/simulation.h"
+
+#include <valgrind/callgrind.h>
+
+#include <time.h>
+
+#include <cstdio>
+#include <iostream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+using namespace modal_mass_spring;
+
+namespace
+{
+
+double threadCpuSeconds()
+{
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
+int run(int argc, char** argv)
+{
+  std::string config, method = "cubature";
+  int skip = 0, steps = 200;
+  std::vector<std::pair<std::string, std::string>> sets;
+  for (int i = 1; i < argc; ++i)
+  {
+    const std::string arg = argv[i];
+    if (i + 1 >= argc)
+      throw std::invalid_argument("option " + arg + " needs a value");
+    const std::string value = argv[++i];
+    if (arg == "--config")
+      config = value;
+    else if (arg == "--method")
+      method = value;
+    else if (arg == "--skip")
+      skip = std::stoi(value);
+    else if (arg == "--steps")
+      steps = std::stoi(value);
+    else if (arg == "--set")
+    {
+      const size_t eq = value.find('=');
+      if (eq == std::string::npos)
+        throw std::invalid_argument("--set must be KEY=VALUE, got '" + value + "'");
+      sets.emplace_back(value.substr(0, eq), value.substr(eq + 1));
+    }
+    else
+      throw std::invalid_argument("unknown option " + arg);
+  }
+  if (config.empty() || skip < 0 || steps < 1)
+    throw std::invalid_argument("need --config FILE, --skip >= 0 and --steps >= 1");
+
+  YamlParameterSource source = YamlParameterSource::fromFile(config);
+  for (const auto& [key, value] : sets)
+    source.set(key, value);
+  source.set("method", method);
+  GridParams grid = loadGridParams(source);
+  SimulationParams params = loadSimulationParams(source);
+  if (const YAML::Node node = source.getNode("colliders"); node.IsDefined())
+    params.colliders = parseColliders(node, "colliders");
+  const YAML::Node scenarios_node = source.getNode("handle_scenarios");
+  if (!scenarios_node.IsDefined())
+    throw std::invalid_argument("config '" + config + "' has no handle_scenarios");
+  const HandleScenario scenario = parseHandleScenarios(scenarios_node, "handle_scenarios").front();
+  grid = gridWithHandles(grid, scenario);
+  params.handles_one_body = scenario.handles.size() == 1;  // as modal_compare's handles experiment
+
+  CacheOptions cache;
+  cache.directory = defaultCacheDirectory();
+  Simulation sim(grid, params, StageFn{}, cache);
+  const HandleDriver driver(scenario, sim);
+  auto advance = [&](int count, long& newton) {
+    for (int k = 0; k < count; ++k)
+    {
+      driver.drive(sim);
+      const StepResult r = sim.step();
+      if (r.diverged)
+        throw std::runtime_error(r.message);
+      newton += sim.lastNewtonIterations();
+    }
+  };
+  long newton = 0;
+  advance(skip, newton);
+  newton = 0;
+  CALLGRIND_START_INSTRUMENTATION;
+  const double start = threadCpuSeconds();
+  advance(steps, newton);
+  const double cpu = threadCpuSeconds() - start;
+  CALLGRIND_STOP_INSTRUMENTATION;
+  std::printf("method %s, %d particles, r = %d, steps %d..%d (t = %.3f s), CPU per step %.3f ms, "
+              "Newton iterations per step %.2f",
+              method.c_str(), sim.grid().numParticles(), static_cast<int>(sim.physicalBasis().phi.cols()), skip,
+              skip + steps, sim.time(), 1e3 * cpu / steps, static_cast<double>(newton) / steps);
+  if (const Contact* contact = sim.contact())
+  {
+    int touching = 0;
+    for (int t : contact->report().touching)
+      touching += t;
+    std::printf(", touching %d, deepest after correction %.2f mm", touching, 1e3 * contact->report().penetration_after);
+  }
+  std::printf("\n");
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv)
+{
+  try
+  {
+    return run(argc, argv);
+  }
+  catch (const std::exception& e)
+  {
+    std::cerr << "step_breakdown: " << e.what() << "\n";
+    return 2;
+  }
+}
