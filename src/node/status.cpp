@@ -109,7 +109,9 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     {
       options.label = toString(simulation.method()) +
                       (measured ? "\nRMS " + formatDistance(track.rms_distance) + " to full" : "") + "\n" +
-                      formatCost(track.step_seconds);
+                      formatCost(track.step_seconds) +
+                      (simulation.selfCollision() ? "\nself-collision " + formatCost(simulation.lastSelfCollisionSeconds())
+                                                  : "");
       if (lockstep())
       {
         char pace[64];
@@ -184,6 +186,11 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     status.max_distance = track.max_distance;
     status.step_seconds = track.step_seconds;
     status.real_time_factor = achieved_factor_;
+    if (const SelfCollision* self = simulation.selfCollision())
+    {
+      status.self_collision_seconds = simulation.lastSelfCollisionSeconds();
+      status.self_collision_contacts = static_cast<uint32_t>(self->report().contacts);
+    }
     const DerivativeBasisInfo& derivatives = simulation.derivativeInfo();
     status.basis = toString(simulation.params().basis);
     status.linear_modes = simulation.basis().phi.cols();
