@@ -4,6 +4,8 @@
 
 #include "modal_mass_spring/validation.h"
 
+#include <Eigen/Geometry>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
