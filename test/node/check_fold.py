@@ -44,7 +44,7 @@ class Fold(unittest.TestCase):
         self.assertGreater(contacts, 0, "no pair corrected after the fold")
         s = status()
         self.assertGreater(s.self_collision_seconds, 0.0)
-        self.assertEqual(s.state, "RUNNING")
+        self.assertEqual(s.state, Status.RUNNING)
         # Every pair more than two springs apart at least the thickness less 1 mm apart (the held
         # corners, 380 and 399, take no part).
         cloud = rospy.wait_for_message(NODE + "/points", PointCloud2, timeout=30.0)
