@@ -151,7 +151,7 @@ public:
   virtual void correctContacts(Contact& contact) = 0;
   // Corrects next() for self-collision, before commit(): `full` only (the Simulation refuses it for
   // the modal methods; they throw std::logic_error).
-  virtual void correctSelfCollision(SelfCollision& self);
+  virtual void correctSelfCollision(SelfCollision& self, const Contact* contact);
 
 protected:
   MethodModel(Method method, const LinearizedGrid& linearized, std::unique_ptr<ForceModel> force);
@@ -214,7 +214,7 @@ public:
   // through the coupling of Rayleigh damping, -beta K_ib v_b.
   void setHandleMotion(const HandleMotion& motion) override;
   void correctContacts(Contact& contact) override;
-  void correctSelfCollision(SelfCollision& self) override;
+  void correctSelfCollision(SelfCollision& self, const Contact* contact) override;
 
 private:
   MassDamping massDamping(double alpha, double beta) const override;

@@ -21,6 +21,7 @@
 // by barycentric weights. Fixed and held particles, and the triangles at them, take no part.
 #pragma once
 
+#include "modal_mass_spring/contact.h"
 #include "modal_mass_spring/grid.h"
 
 #include <Eigen/Core>
@@ -76,8 +77,13 @@ public:
   void setFriction(double friction) { friction_ = friction; }
 
   // Corrects the free dofs' absolute end positions x and velocities v, given their start positions
-  // x_start (all free-dof vectors, as Contact::correctParticles) and the step dt.
-  void correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double dt);
+  // x_start (all free-dof vectors, as Contact::correctParticles) and the step dt. A particle within
+  // the colliders' thickness of an active collider of `contact` (corrected before) is held where it
+  // is, as if it were fixed: the layer above a layer on a table is pushed off it, not the table's
+  // layer into the table (which the colliders would push back the next step, leaving a velocity
+  // into the table every step).
+  void correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double dt,
+               const Contact* contact = nullptr);
   const SelfCollisionReport& report() const { return report_; }
 
   // Gauss-Seidel sweeps of the position and of the velocity correction.
@@ -116,6 +122,7 @@ private:
   std::vector<Pair> pairs_;
   std::vector<char> touched_;
   SelfCollisionReport report_;
+  std::vector<double> inverse_mass_;  // per slot, relative to a free particle's: 1, or 0 on a collider
 };
 
 }  // namespace modal_mass_spring

@@ -25,19 +25,19 @@ void FullMethod::correctContacts(Contact& contact)
   next.q.noalias() = contact_x_ - reference;
 }
 
-void MethodModel::correctSelfCollision(SelfCollision& /*self*/)
+void MethodModel::correctSelfCollision(SelfCollision& /*self*/, const Contact* /*contact*/)
 {
   throw std::logic_error("self-collision is corrected for method 'full' only; method '" + toString(method()) +
                          "' was asked to");
 }
 
-void FullMethod::correctSelfCollision(SelfCollision& self)
+void FullMethod::correctSelfCollision(SelfCollision& self, const Contact* contact)
 {
   State& next = mutableNext();
   const Eigen::VectorXd& reference = freeReference();
   contact_x_.noalias() = reference + next.q;
   contact_start_.noalias() = reference + state().q;
-  self.correct(contact_start_, contact_x_, next.v, settings_.time_step);
+  self.correct(contact_start_, contact_x_, next.v, settings_.time_step, contact);
   next.q.noalias() = contact_x_ - reference;
 }
 

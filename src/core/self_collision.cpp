@@ -330,13 +330,34 @@ void SelfCollision::detect(const Eigen::VectorXd& x)
   }
 }
 
-void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double /*dt*/)
+void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double /*dt*/,
+                            const Contact* contact)
 {
   report_ = SelfCollisionReport{};
   report_.closest_before = report_.closest_after = thickness_;
   detect(x);
   if (pairs_.empty())
     return;
+  // The particles of the pairs that lie on a collider do not move here.
+  inverse_mass_.assign(particle_of_.size(), 1.0);
+  if (contact)
+    for (const Pair& pair : pairs_)
+      for (int slot : {pair.p, pair.c[0], pair.c[1], pair.c[2]})
+      {
+        if (slot < 0 || inverse_mass_[slot] == 0.0)
+          continue;
+        const Eigen::Vector3d at = x.segment<3>(3 * slot);
+        for (int i = 0; i < static_cast<int>(contact->colliders().size()); ++i)
+        {
+          Eigen::Vector3d normal;
+          if (contact->active(i) &&
+              signedDistance(contact->colliders()[i], contact->pose(i), at, normal) <= 1.001 * contact->thickness())
+          {
+            inverse_mass_[slot] = 0.0;
+            break;
+          }
+        }
+      }
   report_.contacts = static_cast<int>(pairs_.size());
   double* const xs = x.data();
   double* const vs = v.data();
@@ -344,16 +365,19 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
   auto ref = [](double* values, int slot) { return Eigen::Map<Eigen::Vector3d>(values + 3 * slot); };
   auto cref = [](const double* values, int slot) { return Eigen::Map<const Eigen::Vector3d>(values + 3 * slot); };
   const int count = static_cast<int>(pairs_.size());
-  // Moves p by delta / (1 + sum w^2) and the corners against it by their weights: equal masses, so the
-  // pair's relative displacement changes by delta and its momentum not at all.
+  // Moves p by delta / (1 + sum w^2) and the corners against it by their weights (each times its
+  // inverse mass, 0 on a collider): the pair's relative displacement changes by delta and, between
+  // free particles, its momentum not at all.
   auto apply = [&](double* values, const Pair& pair, const double w[3], const Eigen::Vector3d& delta) {
-    double sum = 1.0;
+    double sum = inverse_mass_[pair.p];
     for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
-      sum += w[k] * w[k];
+      sum += w[k] * w[k] * inverse_mass_[pair.c[k]];
+    if (sum <= 0.0)
+      return;  // every particle of the pair held by a collider
     const Eigen::Vector3d share = delta / sum;
-    ref(values, pair.p) += share;
+    ref(values, pair.p) += inverse_mass_[pair.p] * share;
     for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
-      ref(values, pair.c[k]) -= w[k] * share;
+      ref(values, pair.c[k]) -= inverse_mass_[pair.c[k]] * w[k] * share;
   };
   auto relative = [&](const double* values, const Pair& pair, const double w[3]) {
     Eigen::Vector3d r = cref(values, pair.p);

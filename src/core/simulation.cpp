@@ -598,10 +598,12 @@ StepResult Simulation::step(int steps)
       contact_seconds_ = processCpuSeconds() - start;
       handles_moved_ = handles_moved_ || contact_->moved();
     }
+    // After the colliders: a particle they hold does not move for self-collision (the layer above
+    // rests on it; see SelfCollision::correct).
     if (ok && self_collision_)
     {
       const double start = processCpuSeconds();
-      model_->correctSelfCollision(*self_collision_);
+      model_->correctSelfCollision(*self_collision_, contact_.get());
       self_collision_seconds_ = processCpuSeconds() - start;
     }
     const std::string why = divergence(ok, model_->next());
