@@ -79,9 +79,10 @@ public:
   // Corrects the free dofs' absolute end positions x and velocities v, given their start positions
   // x_start (all free-dof vectors, as Contact::correctParticles) and the step dt. A particle within
   // the colliders' thickness of an active collider of `contact` (corrected before) is held where it
-  // is, as if it were fixed: the layer above a layer on a table is pushed off it, not the table's
-  // layer into the table (which the colliders would push back the next step, leaving a velocity
-  // into the table every step).
+  // is, as if it were fixed, by a pair pushing along the surface's normal: the layer above a layer
+  // on a table is pushed off it, not the table's layer into the table (which the colliders would
+  // push back the next step, leaving a velocity into the table every step). Pushed along the
+  // surface (two particles side by side on it), it moves as any other.
   void correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double dt,
                const Contact* contact = nullptr);
   const SelfCollisionReport& report() const { return report_; }
@@ -122,7 +123,8 @@ private:
   std::vector<Pair> pairs_;
   std::vector<char> touched_;
   SelfCollisionReport report_;
-  std::vector<double> inverse_mass_;  // per slot, relative to a free particle's: 1, or 0 on a collider
+  // Per slot: the outward normal of the collider surface it lies on (zero when on none).
+  std::vector<Eigen::Vector3d> surface_normal_;
 };
 
 }  // namespace modal_mass_spring

@@ -338,14 +338,17 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
   detect(x);
   if (pairs_.empty())
     return;
-  // The particles of the pairs that lie on a collider do not move here.
-  inverse_mass_.assign(particle_of_.size(), 1.0);
+  // The particles of the pairs that lie on a collider, and the surface's normal there.
+  surface_normal_.assign(particle_of_.size(), Eigen::Vector3d::Zero());
   if (contact)
+  {
+    std::vector<char> checked(particle_of_.size(), 0);
     for (const Pair& pair : pairs_)
       for (int slot : {pair.p, pair.c[0], pair.c[1], pair.c[2]})
       {
-        if (slot < 0 || inverse_mass_[slot] == 0.0)
+        if (slot < 0 || checked[slot])
           continue;
+        checked[slot] = 1;
         const Eigen::Vector3d at = x.segment<3>(3 * slot);
         for (int i = 0; i < static_cast<int>(contact->colliders().size()); ++i)
         {
@@ -353,11 +356,12 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
           if (contact->active(i) &&
               signedDistance(contact->colliders()[i], contact->pose(i), at, normal) <= 1.001 * contact->thickness())
           {
-            inverse_mass_[slot] = 0.0;
+            surface_normal_[slot] = normal;
             break;
           }
         }
       }
+  }
   report_.contacts = static_cast<int>(pairs_.size());
   double* const xs = x.data();
   double* const vs = v.data();
@@ -365,19 +369,29 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
   auto ref = [](double* values, int slot) { return Eigen::Map<Eigen::Vector3d>(values + 3 * slot); };
   auto cref = [](const double* values, int slot) { return Eigen::Map<const Eigen::Vector3d>(values + 3 * slot); };
   const int count = static_cast<int>(pairs_.size());
+  // A particle's inverse mass in a pair pushing along `normal`, relative to a free particle's: 0 on a
+  // collider when the push is along the surface's normal (more than 60 degrees from the surface).
+  auto inverse = [&](int slot, const Eigen::Vector3d& normal) {
+    return std::abs(surface_normal_[slot].dot(normal)) > 0.5 ? 0.0 : 1.0;
+  };
   // Moves p by delta / (1 + sum w^2) and the corners against it by their weights (each times its
-  // inverse mass, 0 on a collider): the pair's relative displacement changes by delta and, between
-  // free particles, its momentum not at all.
-  auto apply = [&](double* values, const Pair& pair, const double w[3], const Eigen::Vector3d& delta) {
-    double sum = inverse_mass_[pair.p];
+  // inverse mass): the pair's relative displacement changes by delta and, between free particles, its
+  // momentum not at all.
+  auto apply = [&](double* values, const Pair& pair, const double w[3], const Eigen::Vector3d& normal,
+                   const Eigen::Vector3d& delta) {
+    double m[4] = {inverse(pair.p, normal), 0.0, 0.0, 0.0};
+    double sum = m[0];
     for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
-      sum += w[k] * w[k] * inverse_mass_[pair.c[k]];
+    {
+      m[k + 1] = inverse(pair.c[k], normal);
+      sum += w[k] * w[k] * m[k + 1];
+    }
     if (sum <= 0.0)
       return;  // every particle of the pair held by a collider
     const Eigen::Vector3d share = delta / sum;
-    ref(values, pair.p) += inverse_mass_[pair.p] * share;
+    ref(values, pair.p) += m[0] * share;
     for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
-      ref(values, pair.c[k]) -= inverse_mass_[pair.c[k]] * w[k] * share;
+      ref(values, pair.c[k]) -= m[k + 1] * w[k] * share;
   };
   auto relative = [&](const double* values, const Pair& pair, const double w[3]) {
     Eigen::Vector3d r = cref(values, pair.p);
@@ -400,7 +414,7 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
       // the push as the normal bound (as the colliders).
       const double push = thickness_ - g.gap;
       const Eigen::Vector3d slip = relative(xs, pair, g.w) - relative(starts, pair, g.w);
-      apply(xs, pair, g.w, push * g.normal + coulomb(slip - slip.dot(g.normal) * g.normal, friction_ * push));
+      apply(xs, pair, g.w, g.normal, push * g.normal + coulomb(slip - slip.dot(g.normal) * g.normal, friction_ * push));
     }
   for (int sweep = 0; sweep < kSweeps; ++sweep)
     for (int k = 0; k < count; ++k)
@@ -415,7 +429,7 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
       if (approach <= 0.0)
         continue;
       const Eigen::Vector3d tangential = velocity + approach * g.normal;
-      apply(vs, pair, g.w, approach * g.normal + coulomb(tangential, friction_ * approach));
+      apply(vs, pair, g.w, g.normal, approach * g.normal + coulomb(tangential, friction_ * approach));
     }
   for (int k = 0; k < count; ++k)
     report_.closest_after = std::min(report_.closest_after, geometry(pairs_[k], xs, starts).gap);
