@@ -125,6 +125,8 @@ private:
   SelfCollisionReport report_;
   // Per slot: the outward normal of the collider surface it lies on (zero when on none).
   std::vector<Eigen::Vector3d> surface_normal_;
+  // Per anchor slot: the centre and the squared radius of a sphere around its cell (this step's).
+  std::vector<Eigen::Vector4d> cell_sphere_;
 };
 
 }  // namespace modal_mass_spring

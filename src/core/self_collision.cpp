@@ -288,15 +288,25 @@ void SelfCollision::detect(const Eigen::VectorXd& x)
   const bool triangles = primitive_ == SelfPrimitive::Triangles;
   // A triangle within the thickness of a particle has its first corner within the thickness plus its
   // longest edge.
+  // Around each cell, a sphere through its farthest corner from the corners' mean: a particle farther
+  // than the thickness from it is that far from both triangles (the cheap test before the exact one).
   double longest = 0.0;
   if (triangles)
+  {
+    cell_sphere_.resize(count);
     for (int s = 0; s < count; ++s)
       if (anchor_[s])
       {
         const int b = slotAt(row_[s], col_[s] + 1), c = slotAt(row_[s] + 1, col_[s]), d = slotAt(row_[s] + 1, col_[s] + 1);
         longest = std::max({longest, (at(b) - at(s)).squaredNorm(), (at(c) - at(s)).squaredNorm(),
                             (at(d) - at(s)).squaredNorm(), (at(d) - at(b)).squaredNorm(), (at(d) - at(c)).squaredNorm()});
+        const Eigen::Vector3d centre = 0.25 * (at(s) + at(b) + at(c) + at(d));
+        const double radius = std::sqrt(std::max({(at(s) - centre).squaredNorm(), (at(b) - centre).squaredNorm(),
+                                                  (at(c) - centre).squaredNorm(), (at(d) - centre).squaredNorm()})) +
+                              thickness_;
+        cell_sphere_[s] << centre, radius * radius;
       }
+  }
   const double reach = thickness_ + std::sqrt(longest);
   const double reach2 = reach * reach, thickness2 = thickness_ * thickness_;
   const Cells cells = sortIntoCells(xs, count, reach, cell_of_, cell_start_, sorted_);
@@ -317,6 +327,8 @@ void SelfCollision::detect(const Eigen::VectorXd& x)
       const int dr = rp < rq ? rq - rp : std::max(0, rp - rq - 1);
       const int dc = cp < cq ? cq - cp : std::max(0, cp - cq - 1);
       if (std::max(dr, dc) <= 2)
+        return;
+      if ((cell_sphere_[q].head<3>() - xp).squaredNorm() >= cell_sphere_[q][3])
         return;
       const int b = slotAt(rq, cq + 1), c = slotAt(rq + 1, cq), d = slotAt(rq + 1, cq + 1);
       for (const auto& corners : {std::array<int, 3>{q, b, d}, std::array<int, 3>{q, d, c}})
