@@ -9,6 +9,9 @@ wave (the default; launch/held_cloth.launch), in a loop: a slow wave, ~waves swi
     for ~hold seconds, and back.
 drag (launch/cloth_table.launch scenario:=drag), in a loop: lowered by ~lower metres in ~seconds;
     dragged by ~drag metres along y in ~seconds; held; dragged back, raised back.
+fold (launch/fold.launch), once: after ~hold seconds, over a half circle of ~radius metres in the
+    y-z plane towards -y in ~seconds (a corner of a towel lying on a table carried over its middle
+    onto the other half), ending ~clearance metres above where it started; then held there.
 circle (test/node/handles*.test): on a circle of ~radius metres in the x-z plane once every
     ~period seconds, turning by up to ~angle radians.
 
@@ -79,6 +82,17 @@ class Drag:
         return (0.0, 0.0, -lower * (1.0 - smoothstep(t / seconds))), 0.0
 
 
+class Fold:
+    def __init__(self, radius, seconds, clearance, hold):
+        self.radius, self.seconds, self.clearance, self.hold = radius, seconds, clearance, hold
+
+    def at(self, t):
+        """((x, y, z) offset in m, yaw in rad) at t seconds."""
+        u = smoothstep((t - self.hold) / self.seconds)
+        phi = math.pi * u
+        return (0.0, -self.radius * (1.0 - math.cos(phi)), self.radius * math.sin(phi) + self.clearance * u), 0.0
+
+
 class Circle:
     def __init__(self, radius, period, angle, hold):
         self.radius, self.period, self.angle, self.hold = radius, period, angle, hold
@@ -115,7 +129,10 @@ def motion_from_params():
         return Drag(param("lower", 0.3), param("drag", 0.5), param("seconds", 4.0, True), param("hold", 2.0))
     if name == "circle":
         return Circle(param("radius", 0.1), param("period", 4.0, True), param("angle", 0.3), param("hold", 1.0))
-    fail("~motion = %r: must be one of wave, drag, circle" % (name,))
+    if name == "fold":
+        return Fold(param("radius", 0.25, True), param("seconds", 4.0, True), param("clearance", 0.01),
+                    param("hold", 1.0))
+    fail("~motion = %r: must be one of wave, drag, fold, circle" % (name,))
 
 
 def main():

@@ -13,7 +13,7 @@
 // changes the modal velocity by Phi_p^T p (Phi is mass-orthonormal), so the touching particles'
 // impulses are solved together by projected Gauss-Seidel in reduced coordinates, a few sweeps, each
 // constraint (normal, then the tangential cone) against its own diagonal |Phi_p^T e|^2.
-// Not modelled: self-collision, collider-collider contact, rolling or torsional friction, and the
+// Not modelled here: self-collision (self_collision.h), collider-collider contact, rolling or torsional friction, and the
 // cloth pushing the colliders (they move only as they are told).
 #pragma once
 

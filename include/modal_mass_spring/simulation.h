@@ -8,6 +8,7 @@
 #include "modal_mass_spring/modal_basis.h"
 #include "modal_mass_spring/modal_derivatives.h"
 #include "modal_mass_spring/options.h"
+#include "modal_mass_spring/self_collision.h"
 #include "modal_mass_spring/skinning.h"
 #include "modal_mass_spring/state.h"
 #include "modal_mass_spring/validation.h"  // validateParameters, estimateMemoryBytes
@@ -88,6 +89,12 @@ struct SimulationParams
   // (contact is corrected in world coordinates; moving_frame is refused).
   std::vector<Collider> colliders;
   double contact_thickness = 0.0;
+  // Self-collision (self_collision.h): the free particles kept self_collision_thickness (m, in
+  // (0, spacing]) apart from the cloth more than two springs away, with Coulomb friction self_friction
+  // between the layers. 3D grids and `full` only: the modal methods are refused (docs/design.md says why).
+  bool self_collision = false;
+  double self_collision_thickness = 0.005;
+  double self_friction = 0.5;
 };
 
 // The formulation a simulation with these parameters uses: auto resolved (ConstraintModes or
@@ -165,7 +172,8 @@ public:
   // modal reference configuration (until reset); going to full, u = offset + Phi X. Clears a
   // divergence: the last good state goes on under the new method. The first switch to a modal
   // method builds the bases (buildBasis) unless they are built; the first to `cubature` trains it
-  // (trainCubature, seconds on a large grid).
+  // (trainCubature, seconds on a large grid). With self-collision on, a modal method is refused
+  // (std::invalid_argument, nothing changed).
   void setMethod(Method method);
   // The trained cubature (springs, weights, training report), or null before `cubature` was first used.
   const Cubature* cubature() const { return cubature_ ? &*cubature_ : nullptr; }
@@ -276,6 +284,14 @@ public:
   void placeCollider(int i, const Eigen::Isometry3d& pose);
   // The CPU time the last step's contact correction took (s, the process's; 0 without colliders).
   double lastContactSeconds() const { return contact_seconds_; }
+  // Self-collision (null when off): its thickness, friction and what the last step did.
+  const SelfCollision* selfCollision() const { return self_collision_.get(); }
+  // Turns self-collision on or off and sets its thickness and friction, from the next step on (live
+  // tuning). Throws std::invalid_argument, changing nothing, for what validateSelfCollision refuses
+  // and for turning it on under a modal method.
+  void setSelfCollision(bool enabled, double thickness, double friction);
+  // The CPU time the last step's self-collision took (s, the process's; 0 when off).
+  double lastSelfCollisionSeconds() const { return self_collision_seconds_; }
   // The force the grid puts on each handle (N, grid coordinates), what holding it takes reversed:
   // the springs' pull on its particles plus their weight and external force minus their mass times
   // their prescribed acceleration. A grid hanging at rest pulls its whole weight.
@@ -380,6 +396,8 @@ private:
   bool frame_pending_ = false;
   std::unique_ptr<Contact> contact_;  // null without colliders
   double contact_seconds_ = 0.0;
+  std::unique_ptr<SelfCollision> self_collision_;  // null when off
+  double self_collision_seconds_ = 0.0;
 };
 
 }  // namespace modal_mass_spring

@@ -21,6 +21,9 @@ SimulationConfig SimulationNode::tuningOf(const NodeConfiguration& c) const
   config.show_shadow = c.node.show_shadow;
   config.drag_stiffness = c.node.drag_stiffness;
   config.poke_impulse = c.node.poke_impulse;
+  config.self_collision = c.simulation.self_collision;
+  config.self_collision_thickness = c.simulation.self_collision_thickness;
+  config.self_friction = c.simulation.self_friction;
   config.alpha = c.simulation.alpha;
   config.beta = c.simulation.beta;
   config.structural_stiffness = c.grid.structural_stiffness;
@@ -57,6 +60,9 @@ void SimulationNode::reconfigure(SimulationConfig& config, uint32_t)
   params["show_shadow"] = static_cast<bool>(config.show_shadow);
   params["drag_stiffness"] = config.drag_stiffness;
   params["poke_impulse"] = config.poke_impulse;
+  params["self_collision"] = static_cast<bool>(config.self_collision);
+  params["self_collision_thickness"] = config.self_collision_thickness;
+  params["self_friction"] = config.self_friction;
   params["alpha"] = config.alpha;
   params["beta"] = config.beta;
   params["structural_stiffness"] = config.structural_stiffness;
@@ -76,6 +82,24 @@ void SimulationNode::reconfigure(SimulationConfig& config, uint32_t)
     config = tuningOf(accepted_);  // what the client gets back, and what the server keeps
     return;
   }
+  // Self-collision acts from the next step on every track; a track that runs a modal method now (a
+  // switch since the start) refuses it, and then nothing changes.
+  const SimulationParams& self = candidate.simulation;
+  if (self.self_collision)
+    for (const Track& track : tracks_)
+      if (track.simulation->method() != Method::Full)
+      {
+        ROS_ERROR("dynamic_reconfigure: self_collision: true needs method full on every grid, but '%s' runs %s; "
+                  "refused, nothing changed",
+                  track.name.c_str(), toString(track.simulation->method()).c_str());
+        config = tuningOf(accepted_);
+        return;
+      }
+  for (Track& track : tracks_)
+    track.simulation->setSelfCollision(self.self_collision, self.self_collision_thickness, self.self_friction);
+  config_.simulation.self_collision = self.self_collision;
+  config_.simulation.self_collision_thickness = self.self_collision_thickness;
+  config_.simulation.self_friction = self.self_friction;
   const NodeConfiguration previous = accepted_;
   private_params_ = params;
   accepted_ = candidate;
@@ -221,6 +245,20 @@ void SimulationNode::swapRebuilt()
   rebuilt_.clear();
   config_.grid = rebuilt_config_.grid;
   config_.simulation = rebuilt_config_.simulation;
+  // Self-collision may have been changed live while the model was built: the values in force now.
+  const SimulationParams& self = accepted_.simulation;
+  for (Track& track : tracks_)
+    try
+    {
+      track.simulation->setSelfCollision(self.self_collision, self.self_collision_thickness, self.self_friction);
+    }
+    catch (const std::invalid_argument& error)
+    {
+      ROS_ERROR("dynamic_reconfigure: %s", error.what());
+    }
+  config_.simulation.self_collision = self.self_collision;
+  config_.simulation.self_collision_thickness = self.self_collision_thickness;
+  config_.simulation.self_friction = self.self_friction;
   hand_forces_->configure(config_.node.drag_stiffness, config_.grid.mass, config_.simulation.time_step);
   ROS_INFO("dynamic_reconfigure: rebuilt model swapped in at step %ld, motion carried over", steps(primary()));
 }

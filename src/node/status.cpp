@@ -120,7 +120,9 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
       options.label = toString(simulation.method()) +
                       (measured ? "\nRMS " + formatDistance(track.rms_distance) + " to full" : "") + "\n" +
                       formatCost(track.step_seconds) + "\n" +
-                      formatCpuPace(track.step_cpu_seconds, config_.simulation.time_step);
+                      formatCpuPace(track.step_cpu_seconds, config_.simulation.time_step) +
+                      (simulation.selfCollision() ? "\nself-collision " + formatCost(simulation.lastSelfCollisionSeconds())
+                                                  : "");
       if (lockstep())
       {
         char pace[64];
@@ -200,6 +202,11 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     status.cpu_per_simulated_second =
         track.step_cpu_seconds > 0.0 ? track.step_cpu_seconds / config_.simulation.time_step : 0.0;
     status.real_time_factor = achieved_factor_;
+    if (const SelfCollision* self = simulation.selfCollision())
+    {
+      status.self_collision_seconds = simulation.lastSelfCollisionSeconds();
+      status.self_collision_contacts = static_cast<uint32_t>(self->report().contacts);
+    }
     const DerivativeBasisInfo& derivatives = simulation.derivativeInfo();
     status.basis = toString(simulation.params().basis);
     status.linear_modes = simulation.basis().phi.cols();

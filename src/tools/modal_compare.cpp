@@ -84,7 +84,8 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
                 against the reference as in accuracy (--sample, --reference-time-step, --methods), each
                 scenario run for its move_time (at least 10 time steps) + hold_time; writes handles_<tag>_error.csv,
                 handles_<tag>_summary.csv and (unless --no-snapshots) handles_<tag>_snapshots.csv,
-                every particle of every run where the move ends (of the first --vary combination)
+                every particle of every run where the move ends and at the end of the hold (of the
+                first --vary combination)
   cost:       --sizes LIST (5,10,20,40; square grids)  --repeats R (7)  --min-repeat-seconds T (0.02)
 )";
 
@@ -1104,10 +1105,12 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
     options.steps = handleSteps(o, setup);
     options.interval = handleSteps(o, setup, true);
     const AccuracyResult result = runAccuracy(setup, options, std::ref(progress));
-    // The shapes where the move ends, where the methods differ most; of the first --vary combination
-    // only, to keep the file small.
+    // The shapes where the move ends, where the methods differ most, and at the end of the hold, where
+    // the cloth has settled (a fold lies on itself); of the first --vary combination only, to keep the
+    // file small.
     for (const Snapshot& snapshot : result.snapshots)
-      if (snapshot.step == options.interval && setup.settings == setups.front().settings)
+      if ((snapshot.step == options.interval || snapshot.step == options.steps) &&
+          setup.settings == setups.front().settings)
         snapshots.push_back(snapshot);
     errors.insert(errors.end(), result.errors.begin(), result.errors.end());
     errors.insert(errors.end(), result.reference_check.begin(), result.reference_check.end());

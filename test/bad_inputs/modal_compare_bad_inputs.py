@@ -274,6 +274,15 @@ def cases(configs):
         config("colliders_frame", "colliders:\n  - {type: sphere, center: [0, 0, 0], radius: 0.1, frame: finger}\n",
                "colliders[0].frame"),
         config("contact_thickness_negative", "contact_thickness: -0.01\n", "contact_thickness"),
+        # ------------------------------------------------ self-collision
+        config("self_collision_2d", "self_collision: true\n", "self_collision"),
+        config("self_collision_thickness_zero", "dimension: 3\nself_collision: true\nself_collision_thickness: 0\n",
+               "self_collision_thickness"),
+        config("self_collision_thickness_above_spacing",
+               "dimension: 3\nself_collision: true\nself_collision_thickness: 0.2\n", "self_collision_thickness"),
+        config("self_collision_thickness_nan", "dimension: 3\nself_collision: true\nself_collision_thickness: .nan\n",
+               "self_collision_thickness"),
+        config("self_friction_negative", "dimension: 3\nself_collision: true\nself_friction: -1\n", "self_friction"),
     ]
     return table
 

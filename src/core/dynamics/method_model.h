@@ -10,6 +10,7 @@
 #include "modal_mass_spring/handles.h"
 #include "modal_mass_spring/modal_basis.h"
 #include "modal_mass_spring/options.h"
+#include "modal_mass_spring/self_collision.h"
 #include "dynamics/integrator.h"
 
 #include <Eigen/Core>
@@ -148,6 +149,9 @@ public:
   // Corrects next() for contact with the colliders (Contact), before commit(): per particle for
   // `full`, through the basis for the modal methods. The acceleration is left as the forces gave it.
   virtual void correctContacts(Contact& contact) = 0;
+  // Corrects next() for self-collision, before commit(): `full` only (the Simulation refuses it for
+  // the modal methods; they throw std::logic_error).
+  virtual void correctSelfCollision(SelfCollision& self, const Contact* contact);
 
 protected:
   MethodModel(Method method, const LinearizedGrid& linearized, std::unique_ptr<ForceModel> force);
@@ -210,6 +214,7 @@ public:
   // through the coupling of Rayleigh damping, -beta K_ib v_b.
   void setHandleMotion(const HandleMotion& motion) override;
   void correctContacts(Contact& contact) override;
+  void correctSelfCollision(SelfCollision& self, const Contact* contact) override;
 
 private:
   MassDamping massDamping(double alpha, double beta) const override;

@@ -67,6 +67,8 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
     contact_ = std::make_unique<Contact>(grid_, params_.colliders,
                                          params_.contact_thickness > 0.0 ? params_.contact_thickness
                                                                          : kDefaultThicknessFraction * g.spacing);
+  if (params_.self_collision)
+    self_collision_ = std::make_unique<SelfCollision>(grid_, params_.self_collision_thickness, params_.self_friction);
   reset();
 }
 
@@ -343,6 +345,8 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
 
 void Simulation::setMethod(Method method)
 {
+  if (self_collision_ && method != Method::Full)
+    rejectParameter("method", toString(method), kSelfCollisionMethods);
   // The energy measures differ between methods (linear conserves its quadratic model's): the rise
   // since the start carries over, so that switching back and forth never resets the check.
   const double rise = methodEnergy() - start_energy_;
@@ -629,6 +633,14 @@ StepResult Simulation::step(int steps)
       contact_seconds_ = processCpuSeconds() - start;
       handles_moved_ = handles_moved_ || contact_->moved();
     }
+    // After the colliders: a particle they hold does not move for self-collision (the layer above
+    // rests on it; see SelfCollision::correct).
+    if (ok && self_collision_)
+    {
+      const double start = processCpuSeconds();
+      model_->correctSelfCollision(*self_collision_, contact_.get());
+      self_collision_seconds_ = processCpuSeconds() - start;
+    }
     const std::string why = divergence(ok, model_->next());
     if (!why.empty())
     {
@@ -789,6 +801,29 @@ double Simulation::totalEnergy() const { return totalEnergy(positions()); }
 double Simulation::totalEnergy(const Eigen::VectorXd& x) const
 {
   return kineticEnergy() + springEnergy(grid_, x) + gravityEnergy(grid_, x);
+}
+
+void Simulation::setSelfCollision(bool enabled, double thickness, double friction)
+{
+  validateSelfCollision(grid_.params(), enabled, thickness, friction);
+  if (enabled && method() != Method::Full)
+    rejectParameter("self_collision", "true",
+                    "needs method full (now '" + toString(method()) + "'): " + std::string(kSelfCollisionMethods));
+  params_.self_collision = enabled;
+  params_.self_collision_thickness = thickness;
+  params_.self_friction = friction;
+  if (!enabled)
+  {
+    self_collision_.reset();
+    self_collision_seconds_ = 0.0;
+  }
+  else if (!self_collision_)
+    self_collision_ = std::make_unique<SelfCollision>(grid_, thickness, friction);
+  else
+  {
+    self_collision_->setThickness(thickness);
+    self_collision_->setFriction(friction);
+  }
 }
 
 void Simulation::checkColliderPose(int i, const Eigen::Isometry3d& pose) const

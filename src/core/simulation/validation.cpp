@@ -190,6 +190,9 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
   if (!p.colliders.empty() && p.handle_formulation == HandleFormulation::MovingFrame)
     rejectParameter("handle_formulation", "moving_frame",
                     "cannot be used with colliders (contact is resolved in world coordinates); use auto or constraint_modes");
+  validateSelfCollision(grid, p.self_collision, p.self_collision_thickness, p.self_friction);
+  if (p.self_collision && p.method != Method::Full)
+    rejectParameter("method", toString(p.method), kSelfCollisionMethods);
   if (!std::isfinite(p.memory_limit_gb) || p.memory_limit_gb <= 0.0)
     rejectParameter("memory_limit_gb", p.memory_limit_gb, "must be a finite number of GB > 0");
   const double needed_gb = estimateMemoryBytes(grid, p) / 1e9;

@@ -1,0 +1,115 @@
+// Self-collision's cost (docs/benchmarks.md, "Self-collision"): an N x N cloth (1 m square) lying on a
+// table folded in half, its upper half the thickness (5 mm) above the lower one, stepped by explicit
+// `full` at 0.2 ms with and without self-collision, and the self-collision pass alone on that state
+// with the upper half 0.1 mm into the thickness (every particle of it touching).
+// Usage: catkin_make self_collision_cost && devel/lib/modal_mass_spring/self_collision_cost
+#include "modal_mass_spring/self_collision.h"
+#include "modal_mass_spring/simulation.h"
+
+#include <benchmark/benchmark.h>
+
+#include <cmath>
+
+using namespace modal_mass_spring;
+
+namespace
+{
+
+constexpr double kThickness = 0.005;
+
+GridParams cloth(int n)
+{
+  GridParams g;
+  g.rows = g.cols = n;
+  g.dimension = 3;
+  g.spacing = 1.0 / (n - 1);
+  g.mass = 1.0 / (n * n);
+  g.structural_stiffness = 50.0;
+  g.shear_stiffness = 20.0;
+  g.bending = true;
+  g.bending_stiffness = 5.0;
+  g.rotation_deg = 90.0;  // lying flat, rows along +y
+  return g;
+}
+
+// Folded at its middle row over a crease of radius thickness / 2: the upper half `gap` above the lower.
+Eigen::VectorXd folded(const Grid& grid, double gap)
+{
+  const GridParams& g = grid.params();
+  const double flat = (g.rows / 2 - 1) * g.spacing, rho = 0.5 * gap;
+  Eigen::VectorXd x(grid.numDofs());
+  for (int r = 0; r < g.rows; ++r)
+    for (int c = 0; c < g.cols; ++c)
+    {
+      const double t = r * g.spacing;
+      Eigen::Vector3d at(c * g.spacing, t, 0.0);
+      if (t > flat + M_PI * rho)
+        at.tail<2>() << flat - (t - flat - M_PI * rho), 2.0 * rho;
+      else if (t > flat)
+        at.tail<2>() << flat + rho * std::sin((t - flat) / rho), rho * (1.0 - std::cos((t - flat) / rho));
+      x.segment<3>(3 * grid.particleIndex(r, c)) = at;
+    }
+  return x;
+}
+
+SimulationParams explicitFull(bool self)
+{
+  SimulationParams s;
+  s.method = Method::Full;
+  s.integrator = IntegratorKind::Explicit;
+  s.time_step = 2e-4;
+  s.alpha = 1.0;
+  Collider table;
+  table.point = Eigen::Vector3d(0.0, 0.0, -0.001);
+  s.colliders = {table};
+  s.contact_thickness = 0.001;
+  s.self_collision = self;
+  s.self_collision_thickness = kThickness;
+  return s;
+}
+
+// One explicit `full` step of the folded cloth on the table; arg 1: with self-collision. Reports the
+// self-collision share of the step (its CPU time, Simulation::lastSelfCollisionSeconds).
+void BM_FoldedFullStep(benchmark::State& state)
+{
+  GridParams g = cloth(static_cast<int>(state.range(0)));
+  g.fixed = {0};
+  Simulation sim(g, explicitFull(state.range(1) != 0));
+  sim.setPhysicalState(sim.grid().gatherFree(folded(sim.grid(), kThickness) - sim.linearizationPositions()),
+                       Eigen::VectorXd::Zero(sim.grid().numFreeDofs()));
+  double self_seconds = 0.0;
+  for (auto _ : state)
+  {
+    sim.step();
+    self_seconds += sim.lastSelfCollisionSeconds();
+  }
+  state.counters["self_ms"] = benchmark::Counter(1e3 * self_seconds / state.iterations());
+  state.counters["contacts"] = sim.selfCollision() ? sim.selfCollision()->report().contacts : 0;
+}
+BENCHMARK(BM_FoldedFullStep)->ArgsProduct({{30, 100}, {0, 1}})->Unit(benchmark::kMicrosecond);
+
+// The self-collision pass alone on the folded cloth, its upper half 0.1 mm into the thickness (the
+// state copied back each time).
+void BM_SelfCollisionPass(benchmark::State& state)
+{
+  GridParams g = cloth(static_cast<int>(state.range(0)));
+  g.fixed = {0};
+  const Grid grid(g);
+  SelfCollision self(grid, kThickness, 0.5);
+  const Eigen::VectorXd start = grid.gatherFree(folded(grid, kThickness));
+  const Eigen::VectorXd end = grid.gatherFree(folded(grid, kThickness - 1e-4));
+  Eigen::VectorXd x = end, v = Eigen::VectorXd::Zero(end.size());
+  for (auto _ : state)
+  {
+    x = end;
+    v.setZero();
+    self.correct(start, x, v, 2e-4);
+    benchmark::DoNotOptimize(x.data());
+  }
+  state.counters["contacts"] = self.report().contacts;
+}
+BENCHMARK(BM_SelfCollisionPass)->Arg(30)->Arg(100)->Unit(benchmark::kMicrosecond);
+
+}  // namespace
+
+BENCHMARK_MAIN();

@@ -1,0 +1,132 @@
+// Self-collision of a 3D grid: the free particles are kept at least a thickness apart from every part
+// of the cloth more than two springs away, as a correction of each step's end state (after the
+// colliders', in the same way: positions, then velocities, with Coulomb friction between the layers).
+//
+// Two particles are "more than two springs away" when the structural and shear springs (a grid cell's
+// sides and diagonals) need more than two to join them: max(|row difference|, |column difference|) > 2.
+// Closer pairs are held apart by the springs themselves.
+//
+// Primitives (docs/design.md, "Self-collision" measures both): spheres of half the thickness at the
+// particles, and each particle against the triangles of the cells (two per cell) whose corners are
+// all more than two springs from it. Spheres alone let a layer through a cell of the other whenever
+// the thickness is below the spacing over sqrt(2) (a particle over a cell's centre is that far from
+// its corners); the triangles close the cells, and the spheres still keep particles apart at the
+// grid's edges, where every triangle at a particle may touch a neighbour of the other.
+//
+// Broad phase: a uniform grid of cells as wide as the reach (the thickness plus the longest edge of
+// any triangle, so that a triangle within the thickness has its first corner in a neighbouring cell),
+// rebuilt every step by a counting sort. Narrow phase: the pairs found within the thickness at the
+// step's end, corrected by a few Gauss-Seidel sweeps of equal-and-opposite pushes split by the inverse
+// masses (every free particle weighs the same), the contact point of a triangle spread to its corners
+// by barycentric weights. Fixed and held particles, and the triangles at them, take no part.
+#pragma once
+
+#include "modal_mass_spring/contact.h"
+#include "modal_mass_spring/grid.h"
+
+#include <Eigen/Core>
+
+#include <vector>
+
+namespace modal_mass_spring
+{
+
+enum class SelfPrimitive
+{
+  Spheres,    // particle against particle only
+  Triangles,  // particle against triangle, and particle against particle
+};
+
+// Throws std::invalid_argument (rejectParameter) naming the parameter: self_collision on a 2D grid,
+// a self_collision_thickness not finite, <= 0 or larger than the spacing, a self_friction not finite
+// or negative. The thickness and friction are checked only when self_collision is on (the default
+// thickness may exceed a fine grid's spacing).
+void validateSelfCollision(const GridParams& grid, bool enabled, double thickness, double friction);
+
+// What a modal method with self-collision is told: why only `full` is allowed.
+constexpr const char* kSelfCollisionMethods =
+    "must be full with self_collision: true (a modal basis cannot hold two layers a thickness apart: the "
+    "contact's shape is local and far from the modes; turn self_collision off to use linear, physical or "
+    "cubature)";
+
+// True when particles p and q are more than two springs apart (see above).
+bool selfSeparated(const Grid& grid, int p, int q);
+
+// The smallest distance between two particles more than two springs apart (positions of all
+// particles, 3 per particle), counting only pairs closer than `cutoff` (infinity when none is).
+double closestSeparatedDistance(const Grid& grid, const Eigen::VectorXd& positions, double cutoff);
+
+// What the last correction did.
+struct SelfCollisionReport
+{
+  int contacts = 0;  // pairs (particle-particle and particle-triangle) closer than the thickness
+  // The smallest gap among them before the correction and after it (m; the thickness when none).
+  double closest_before = 0.0;
+  double closest_after = 0.0;
+};
+
+class SelfCollision
+{
+public:
+  // grid: 3D; thickness > 0 and <= the spacing; friction >= 0 (validated by the caller).
+  SelfCollision(const Grid& grid, double thickness, double friction, SelfPrimitive primitive = SelfPrimitive::Triangles);
+
+  double thickness() const { return thickness_; }
+  double friction() const { return friction_; }
+  void setThickness(double thickness) { thickness_ = thickness; }
+  void setFriction(double friction) { friction_ = friction; }
+
+  // Corrects the free dofs' absolute end positions x and velocities v, given their start positions
+  // x_start (all free-dof vectors, as Contact::correctParticles) and the step dt. A particle within
+  // the colliders' thickness of an active collider of `contact` (corrected before) is held where it
+  // is, as if it were fixed, by a pair pushing along the surface's normal: the layer above a layer
+  // on a table is pushed off it, not the table's layer into the table (which the colliders would
+  // push back the next step, leaving a velocity into the table every step). Pushed along the
+  // surface (two particles side by side on it), it moves as any other.
+  void correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double dt,
+               const Contact* contact = nullptr);
+  const SelfCollisionReport& report() const { return report_; }
+
+  // Gauss-Seidel sweeps of the position and of the velocity correction.
+  static constexpr int kSweeps = 4;
+
+private:
+  // One pair: particle p (a free-particle slot) against corners c[0..2] (slots, -1 for none: a
+  // particle-particle pair has only c[0]).
+  struct Pair
+  {
+    int p;
+    int c[3];
+  };
+  // The closest point to p on the pair's other side, its barycentric weights, the unit normal from
+  // there to p (oriented by the start positions inside a triangle) and the gap along it.
+  struct Geometry
+  {
+    double w[3];
+    Eigen::Vector3d normal;
+    double gap;
+  };
+  Geometry geometry(const Pair& pair, const double* x, const double* x_start) const;
+  // Finds the pairs closer than the thickness at positions x.
+  void detect(const Eigen::VectorXd& x);
+
+  const Grid& grid_;
+  double thickness_;
+  double friction_;
+  SelfPrimitive primitive_;
+  std::vector<int> particle_of_;  // slot -> grid particle
+  std::vector<int> slot_of_;      // grid particle -> slot, -1 when fixed or held
+  std::vector<int> row_, col_;    // per slot
+  std::vector<char> anchor_;      // per slot: its particle is the first corner of a cell with every corner free
+  // The broad phase's cells, kept between steps (no allocation a step once grown).
+  std::vector<int> cell_of_, cell_start_, sorted_;
+  std::vector<Pair> pairs_;
+  std::vector<char> touched_;
+  SelfCollisionReport report_;
+  // Per slot: the outward normal of the collider surface it lies on (zero when on none).
+  std::vector<Eigen::Vector3d> surface_normal_;
+  // Per anchor slot: the centre and the squared radius of a sphere around its cell (this step's).
+  std::vector<Eigen::Vector4d> cell_sphere_;
+};
+
+}  // namespace modal_mass_spring

@@ -1,0 +1,450 @@
+// Self-collision: the broad phase's cells, the pairs within the thickness and their correction
+// (self_collision.h).
+#include "modal_mass_spring/self_collision.h"
+
+#include "modal_mass_spring/validation.h"
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+
+namespace modal_mass_spring
+{
+namespace
+{
+
+// The correction Coulomb friction with the bound `limit` makes to a tangential quantity t (as the
+// colliders': cancel it where the bound covers it, else shorten it by the bound).
+Eigen::Vector3d coulomb(const Eigen::Vector3d& t, double limit)
+{
+  const double squared = t.squaredNorm();
+  if (squared <= limit * limit)
+    return -t;
+  return -limit / std::sqrt(squared) * t;
+}
+
+// The point of triangle (a, b, c) closest to p and its barycentric weights (Ericson, Real-Time
+// Collision Detection, 5.1.5).
+Eigen::Vector3d closestOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                  const Eigen::Vector3d& c, double w[3])
+{
+  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
+  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
+  if (d1 <= 0.0 && d2 <= 0.0)
+  {
+    w[0] = 1.0, w[1] = w[2] = 0.0;
+    return a;
+  }
+  const Eigen::Vector3d bp = p - b;
+  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
+  if (d3 >= 0.0 && d4 <= d3)
+  {
+    w[1] = 1.0, w[0] = w[2] = 0.0;
+    return b;
+  }
+  const double vc = d1 * d4 - d3 * d2;
+  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0)
+  {
+    const double t = d1 / (d1 - d3);
+    w[0] = 1.0 - t, w[1] = t, w[2] = 0.0;
+    return a + t * ab;
+  }
+  const Eigen::Vector3d cp = p - c;
+  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
+  if (d6 >= 0.0 && d5 <= d6)
+  {
+    w[2] = 1.0, w[0] = w[1] = 0.0;
+    return c;
+  }
+  const double vb = d5 * d2 - d1 * d6;
+  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0)
+  {
+    const double t = d2 / (d2 - d6);
+    w[0] = 1.0 - t, w[2] = t, w[1] = 0.0;
+    return a + t * ac;
+  }
+  const double va = d3 * d6 - d5 * d4;
+  if (va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0)
+  {
+    const double t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+    w[1] = 1.0 - t, w[2] = t, w[0] = 0.0;
+    return b + t * (c - b);
+  }
+  const double denominator = 1.0 / (va + vb + vc);
+  const double v = vb * denominator, u = vc * denominator;
+  w[0] = 1.0 - v - u, w[1] = v, w[2] = u;
+  return a + v * ab + u * ac;
+}
+
+// Points sorted into a uniform grid of cubic cells at least `reach` wide over their bounding box
+// (wider when that would make more than a few cells per point), by a counting sort.
+struct Cells
+{
+  Eigen::Vector3d origin;
+  double size = 0.0;
+  int dims[3] = {1, 1, 1};
+  std::vector<int>* start = nullptr;   // cell c holds sorted[start[c] .. start[c + 1])
+  std::vector<int>* sorted = nullptr;
+
+  void cellOf(const double* point, int out[3]) const
+  {
+    for (int a = 0; a < 3; ++a)
+      out[a] = std::min(dims[a] - 1, std::max(0, static_cast<int>((point[a] - origin[a]) / size)));
+  }
+  int index(int i, int j, int k) const { return i + dims[0] * (j + dims[1] * k); }
+};
+
+Cells sortIntoCells(const double* x, int count, double reach, std::vector<int>& cell_of, std::vector<int>& start,
+                    std::vector<int>& sorted)
+{
+  Cells cells;
+  Eigen::Vector3d low = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), high = -low;
+  for (int p = 0; p < count; ++p)
+  {
+    const Eigen::Map<const Eigen::Vector3d> at(x + 3 * p);
+    low = low.cwiseMin(at);
+    high = high.cwiseMax(at);
+  }
+  if (count == 0)
+    low = high = Eigen::Vector3d::Zero();
+  cells.origin = low;
+  cells.size = reach;
+  const double limit = 4.0 * count + 64.0;  // cells
+  for (;;)
+  {
+    double total = 1.0;
+    for (int a = 0; a < 3; ++a)
+    {
+      cells.dims[a] = static_cast<int>(std::floor((high[a] - low[a]) / cells.size)) + 1;
+      total *= cells.dims[a];
+    }
+    if (total <= limit)
+      break;
+    cells.size *= std::max(1.01, std::cbrt(total / limit));
+  }
+  const int total = cells.dims[0] * cells.dims[1] * cells.dims[2];
+  cell_of.resize(count);
+  start.assign(total + 1, 0);
+  for (int p = 0; p < count; ++p)
+  {
+    int c[3];
+    cells.cellOf(x + 3 * p, c);
+    cell_of[p] = cells.index(c[0], c[1], c[2]);
+    ++start[cell_of[p] + 1];
+  }
+  for (int c = 0; c < total; ++c)
+    start[c + 1] += start[c];
+  sorted.resize(count);
+  std::vector<int> fill(start.begin(), start.end() - 1);
+  for (int p = 0; p < count; ++p)
+    sorted[fill[cell_of[p]]++] = p;
+  cells.start = &start;
+  cells.sorted = &sorted;
+  return cells;
+}
+
+// Calls visit(q) for every point in the 27 cells around `point`.
+template <typename Visit>
+void forNeighbours(const Cells& cells, const double* point, Visit&& visit)
+{
+  int c[3];
+  cells.cellOf(point, c);
+  const std::vector<int>& start = *cells.start;
+  const std::vector<int>& sorted = *cells.sorted;
+  for (int k = std::max(0, c[2] - 1); k <= std::min(cells.dims[2] - 1, c[2] + 1); ++k)
+    for (int j = std::max(0, c[1] - 1); j <= std::min(cells.dims[1] - 1, c[1] + 1); ++j)
+    {
+      const int i0 = std::max(0, c[0] - 1), i1 = std::min(cells.dims[0] - 1, c[0] + 1);
+      // Cells along x are consecutive: one range.
+      for (int s = start[cells.index(i0, j, k)]; s < start[cells.index(i1, j, k) + 1]; ++s)
+        visit(sorted[s]);
+    }
+}
+
+// More than two springs apart: the Chebyshev distance of the grid indices.
+bool separatedIndices(int row_p, int col_p, int row_q, int col_q)
+{
+  return std::max(std::abs(row_p - row_q), std::abs(col_p - col_q)) > 2;
+}
+
+}  // namespace
+
+void validateSelfCollision(const GridParams& grid, bool enabled, double thickness, double friction)
+{
+  if (!enabled)
+    return;
+  if (grid.dimension != 3)
+    rejectParameter("self_collision", "true",
+                    "needs a 3D grid (dimension: 3): a 2D grid lies in its plane and cannot fold over itself; use "
+                    "self_collision: false with dimension: 2");
+  if (!std::isfinite(thickness) || thickness <= 0.0 || thickness > grid.spacing)
+    rejectParameter("self_collision_thickness", thickness,
+                    "must be a finite number of metres > 0 and at most the grid's spacing (" +
+                        std::to_string(grid.spacing) + " m): particles one spring apart are that far apart at rest");
+  if (!std::isfinite(friction) || friction < 0.0)
+    rejectParameter("self_friction", friction, "must be a finite Coulomb coefficient >= 0");
+}
+
+bool selfSeparated(const Grid& grid, int p, int q)
+{
+  const int cols = grid.params().cols;
+  return separatedIndices(p / cols, p % cols, q / cols, q % cols);
+}
+
+double closestSeparatedDistance(const Grid& grid, const Eigen::VectorXd& positions, double cutoff)
+{
+  const int count = grid.numParticles();
+  std::vector<int> cell_of, start, sorted;
+  const Cells cells = sortIntoCells(positions.data(), count, cutoff, cell_of, start, sorted);
+  double closest = std::numeric_limits<double>::infinity();
+  for (int p = 0; p < count; ++p)
+  {
+    const Eigen::Map<const Eigen::Vector3d> at(positions.data() + 3 * p);
+    forNeighbours(cells, positions.data() + 3 * p, [&](int q) {
+      if (q <= p || !selfSeparated(grid, p, q))
+        return;
+      const double d = (Eigen::Map<const Eigen::Vector3d>(positions.data() + 3 * q) - at).norm();
+      if (d < cutoff)
+        closest = std::min(closest, d);
+    });
+  }
+  return closest;
+}
+
+SelfCollision::SelfCollision(const Grid& grid, double thickness, double friction, SelfPrimitive primitive)
+  : grid_(grid), thickness_(thickness), friction_(friction), primitive_(primitive)
+{
+  const int rows = grid.params().rows, cols = grid.params().cols;
+  slot_of_.assign(grid.numParticles(), -1);
+  for (int p = 0; p < grid.numParticles(); ++p)
+    if (!grid.isFixed(p) && !grid.isHandle(p))
+    {
+      // The free dofs keep the particles' order, three each.
+      slot_of_[p] = grid.freeIndex(3 * p) / 3;
+      particle_of_.push_back(p);
+      row_.push_back(p / cols);
+      col_.push_back(p % cols);
+    }
+  anchor_.assign(particle_of_.size(), 0);
+  for (size_t s = 0; s < particle_of_.size(); ++s)
+  {
+    const int r = row_[s], c = col_[s];
+    if (r + 1 < rows && c + 1 < cols && slot_of_[grid.particleIndex(r, c + 1)] >= 0 &&
+        slot_of_[grid.particleIndex(r + 1, c)] >= 0 && slot_of_[grid.particleIndex(r + 1, c + 1)] >= 0)
+      anchor_[s] = 1;
+  }
+}
+
+SelfCollision::Geometry SelfCollision::geometry(const Pair& pair, const double* x, const double* x_start) const
+{
+  Geometry g;
+  auto at = [](const double* v, int slot) { return Eigen::Map<const Eigen::Vector3d>(v + 3 * slot); };
+  const Eigen::Vector3d p = at(x, pair.p);
+  if (pair.c[1] < 0)
+  {
+    g.w[0] = 1.0, g.w[1] = g.w[2] = 0.0;
+    Eigen::Vector3d d = p - at(x, pair.c[0]);
+    g.gap = d.norm();
+    if (g.gap < 1e-12 * thickness_)
+      d = at(x_start, pair.p) - at(x_start, pair.c[0]);  // on top of each other: apart the way they came
+    g.normal = d.norm() > 0.0 ? Eigen::Vector3d(d.normalized()) : Eigen::Vector3d::UnitZ();
+    return g;
+  }
+  const Eigen::Vector3d a = at(x, pair.c[0]), b = at(x, pair.c[1]), c = at(x, pair.c[2]);
+  const Eigen::Vector3d y = closestOnTriangle(p, a, b, c, g.w);
+  const Eigen::Vector3d d = p - y;
+  const double distance = d.norm();
+  const bool inside = g.w[0] > 1e-9 && g.w[1] > 1e-9 && g.w[2] > 1e-9;
+  if (!inside && distance > 1e-12 * thickness_)
+  {
+    g.normal = d / distance;
+    g.gap = distance;
+    return g;
+  }
+  // Over the face: the side the particle was on at the step's start, so that a particle the step
+  // carried through the face is pushed back, not on through.
+  Eigen::Vector3d n = (b - a).cross(c - a);
+  if (!(n.norm() > 0.0))
+    n = Eigen::Vector3d::UnitZ();
+  n.normalize();
+  const Eigen::Vector3d a0 = at(x_start, pair.c[0]), b0 = at(x_start, pair.c[1]), c0 = at(x_start, pair.c[2]);
+  const double side = (at(x_start, pair.p) - (g.w[0] * a0 + g.w[1] * b0 + g.w[2] * c0)).dot((b0 - a0).cross(c0 - a0));
+  g.normal = side < 0.0 ? Eigen::Vector3d(-n) : n;
+  g.gap = d.dot(g.normal);
+  return g;
+}
+
+void SelfCollision::detect(const Eigen::VectorXd& x)
+{
+  pairs_.clear();
+  const int count = static_cast<int>(particle_of_.size());
+  const int cols = grid_.params().cols;
+  const double* xs = x.data();
+  auto at = [xs](int slot) { return Eigen::Map<const Eigen::Vector3d>(xs + 3 * slot); };
+  auto slotAt = [&](int row, int col) { return slot_of_[row * cols + col]; };
+  const bool triangles = primitive_ == SelfPrimitive::Triangles;
+  // A triangle within the thickness of a particle has its first corner within the thickness plus its
+  // longest edge.
+  // Around each cell, a sphere through its farthest corner from the corners' mean: a particle farther
+  // than the thickness from it is that far from both triangles (the cheap test before the exact one).
+  double longest = 0.0;
+  if (triangles)
+  {
+    cell_sphere_.resize(count);
+    for (int s = 0; s < count; ++s)
+      if (anchor_[s])
+      {
+        const int b = slotAt(row_[s], col_[s] + 1), c = slotAt(row_[s] + 1, col_[s]), d = slotAt(row_[s] + 1, col_[s] + 1);
+        longest = std::max({longest, (at(b) - at(s)).squaredNorm(), (at(c) - at(s)).squaredNorm(),
+                            (at(d) - at(s)).squaredNorm(), (at(d) - at(b)).squaredNorm(), (at(d) - at(c)).squaredNorm()});
+        const Eigen::Vector3d centre = 0.25 * (at(s) + at(b) + at(c) + at(d));
+        const double radius = std::sqrt(std::max({(at(s) - centre).squaredNorm(), (at(b) - centre).squaredNorm(),
+                                                  (at(c) - centre).squaredNorm(), (at(d) - centre).squaredNorm()})) +
+                              thickness_;
+        cell_sphere_[s] << centre, radius * radius;
+      }
+  }
+  const double reach = thickness_ + std::sqrt(longest);
+  const double reach2 = reach * reach, thickness2 = thickness_ * thickness_;
+  const Cells cells = sortIntoCells(xs, count, reach, cell_of_, cell_start_, sorted_);
+  for (int p = 0; p < count; ++p)
+  {
+    const Eigen::Vector3d xp = at(p);
+    const int rp = row_[p], cp = col_[p];
+    forNeighbours(cells, xs + 3 * p, [&](int q) {
+      const double d2 = (at(q) - xp).squaredNorm();
+      if (q == p || d2 >= reach2)
+        return;
+      const int rq = row_[q], cq = col_[q];
+      if (q > p && d2 < thickness2 && separatedIndices(rp, cp, rq, cq))
+        pairs_.push_back(Pair{p, {q, -1, -1}});
+      if (!triangles || !anchor_[q])
+        return;
+      // Every corner of the cell (rq..rq+1, cq..cq+1) more than two springs from p.
+      const int dr = rp < rq ? rq - rp : std::max(0, rp - rq - 1);
+      const int dc = cp < cq ? cq - cp : std::max(0, cp - cq - 1);
+      if (std::max(dr, dc) <= 2)
+        return;
+      if ((cell_sphere_[q].head<3>() - xp).squaredNorm() >= cell_sphere_[q][3])
+        return;
+      const int b = slotAt(rq, cq + 1), c = slotAt(rq + 1, cq), d = slotAt(rq + 1, cq + 1);
+      for (const auto& corners : {std::array<int, 3>{q, b, d}, std::array<int, 3>{q, d, c}})
+      {
+        double w[3];
+        const Eigen::Vector3d y = closestOnTriangle(xp, at(corners[0]), at(corners[1]), at(corners[2]), w);
+        if ((xp - y).squaredNorm() < thickness2)
+          pairs_.push_back(Pair{p, {corners[0], corners[1], corners[2]}});
+      }
+    });
+  }
+}
+
+void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double /*dt*/,
+                            const Contact* contact)
+{
+  report_ = SelfCollisionReport{};
+  report_.closest_before = report_.closest_after = thickness_;
+  detect(x);
+  if (pairs_.empty())
+    return;
+  // The particles of the pairs that lie on a collider, and the surface's normal there.
+  surface_normal_.assign(particle_of_.size(), Eigen::Vector3d::Zero());
+  if (contact)
+  {
+    std::vector<char> checked(particle_of_.size(), 0);
+    for (const Pair& pair : pairs_)
+      for (int slot : {pair.p, pair.c[0], pair.c[1], pair.c[2]})
+      {
+        if (slot < 0 || checked[slot])
+          continue;
+        checked[slot] = 1;
+        const Eigen::Vector3d at = x.segment<3>(3 * slot);
+        for (int i = 0; i < static_cast<int>(contact->colliders().size()); ++i)
+        {
+          Eigen::Vector3d normal;
+          if (contact->active(i) &&
+              signedDistance(contact->colliders()[i], contact->pose(i), at, normal) <= 1.001 * contact->thickness())
+          {
+            surface_normal_[slot] = normal;
+            break;
+          }
+        }
+      }
+  }
+  report_.contacts = static_cast<int>(pairs_.size());
+  double* const xs = x.data();
+  double* const vs = v.data();
+  const double* const starts = x_start.data();
+  auto ref = [](double* values, int slot) { return Eigen::Map<Eigen::Vector3d>(values + 3 * slot); };
+  auto cref = [](const double* values, int slot) { return Eigen::Map<const Eigen::Vector3d>(values + 3 * slot); };
+  const int count = static_cast<int>(pairs_.size());
+  // A particle's inverse mass in a pair pushing along `normal`, relative to a free particle's: 0 on a
+  // collider when the push is along the surface's normal (more than 60 degrees from the surface).
+  auto inverse = [&](int slot, const Eigen::Vector3d& normal) {
+    return std::abs(surface_normal_[slot].dot(normal)) > 0.5 ? 0.0 : 1.0;
+  };
+  // Moves p by delta / (1 + sum w^2) and the corners against it by their weights (each times its
+  // inverse mass): the pair's relative displacement changes by delta and, between free particles, its
+  // momentum not at all.
+  auto apply = [&](double* values, const Pair& pair, const double w[3], const Eigen::Vector3d& normal,
+                   const Eigen::Vector3d& delta) {
+    double m[4] = {inverse(pair.p, normal), 0.0, 0.0, 0.0};
+    double sum = m[0];
+    for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
+    {
+      m[k + 1] = inverse(pair.c[k], normal);
+      sum += w[k] * w[k] * m[k + 1];
+    }
+    if (sum <= 0.0)
+      return;  // every particle of the pair held by a collider
+    const Eigen::Vector3d share = delta / sum;
+    ref(values, pair.p) += m[0] * share;
+    for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
+      ref(values, pair.c[k]) -= m[k + 1] * w[k] * share;
+  };
+  auto relative = [&](const double* values, const Pair& pair, const double w[3]) {
+    Eigen::Vector3d r = cref(values, pair.p);
+    for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
+      r -= w[k] * cref(values, pair.c[k]);
+    return r;
+  };
+  touched_.assign(count, 0);
+  for (int sweep = 0; sweep < kSweeps; ++sweep)
+    for (int k = 0; k < count; ++k)
+    {
+      const Pair& pair = pairs_[k];
+      const Geometry g = geometry(pair, xs, starts);
+      if (sweep == 0)
+        report_.closest_before = std::min(report_.closest_before, g.gap);
+      if (g.gap >= thickness_)
+        continue;
+      touched_[k] = 1;
+      // Positions: push apart to the thickness, Coulomb on the pair's relative slip over the step with
+      // the push as the normal bound (as the colliders).
+      const double push = thickness_ - g.gap;
+      const Eigen::Vector3d slip = relative(xs, pair, g.w) - relative(starts, pair, g.w);
+      apply(xs, pair, g.w, g.normal, push * g.normal + coulomb(slip - slip.dot(g.normal) * g.normal, friction_ * push));
+    }
+  for (int sweep = 0; sweep < kSweeps; ++sweep)
+    for (int k = 0; k < count; ++k)
+    {
+      if (!touched_[k])
+        continue;
+      const Pair& pair = pairs_[k];
+      const Geometry g = geometry(pair, xs, starts);
+      // Velocities: remove the approach, Coulomb on the relative tangential velocity.
+      const Eigen::Vector3d velocity = relative(vs, pair, g.w);
+      const double approach = -velocity.dot(g.normal);
+      if (approach <= 0.0)
+        continue;
+      const Eigen::Vector3d tangential = velocity + approach * g.normal;
+      apply(vs, pair, g.w, g.normal, approach * g.normal + coulomb(tangential, friction_ * approach));
+    }
+  for (int k = 0; k < count; ++k)
+    report_.closest_after = std::min(report_.closest_after, geometry(pairs_[k], xs, starts).gap);
+}
+
+}  // namespace modal_mass_spring
