@@ -1,4 +1,4 @@
-// The explicit Newmark scheme of the paper.
+// The paper's explicit Newmark scheme and the implicit Newmark (HHT alpha) with its Newton solve.
 #include "dynamics/integrator.h"
 
 #include <algorithm>

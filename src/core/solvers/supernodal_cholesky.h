@@ -1,3 +1,4 @@
+// The supernodal Cholesky factor of the modal basis's shift-invert (internal).
 #pragma once
 
 #include <Eigen/Core>
