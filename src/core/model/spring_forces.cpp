@@ -1,4 +1,5 @@
-// The whole grid's spring forces, energy and tangents, summed from the spring law (spring_law.h) for 2D and 3D through a fixed-size template.
+// The whole grid's spring forces, energy and tangents, summed from the spring law (spring_law.h),
+// written once for 2D and 3D through a fixed-size template.
 #include "modal_mass_spring/spring_forces.h"
 
 #include <algorithm>
