@@ -204,7 +204,10 @@ public:
   double displacementAt(const State& s, int k) const override { return s.q[k]; }
   double velocityAt(const State& s, int k) const override { return s.v[k]; }
   double kineticEnergy(const State& s) const override;
-  void setAnchor(const Eigen::VectorXd& u_anchor) override { anchor_ = u_anchor; }
+  // Measured relative to the handles: the handle particles' mean displacement since the anchor is
+  // taken off every free particle's (the free dofs hold the whole motion, which handles carried
+  // 100 m are not diverged by; the modal methods' q holds none of the handles' static influence).
+  void setAnchor(const Eigen::VectorXd& u_anchor) override;
   double anchorDistanceSquared(const Eigen::VectorXd& q) const override;
   // The handle particles sit at their prescribed positions; their velocity damps the interior
   // through the coupling of Rayleigh damping, -beta K_ib v_b.
@@ -217,7 +220,11 @@ private:
   // Per particle: m (uniform - position y_ref), m position and 2 m spin, 3 x 3 blocks.
   void frameTerms(const FrameForces& frame, Eigen::VectorXd& load, SparseMatrix& linear,
                   SparseMatrix& gyroscopic) override;
+  // The handle particles' mean displacement (dimension values; empty without handles).
+  Eigen::VectorXd handleTranslation() const;
   Eigen::VectorXd anchor_;
+  Eigen::VectorXd anchor_translation_;  // handleTranslation() when the anchor was set
+  Eigen::VectorXd handle_displacement_;  // the prescribed handle dofs' displacement (empty: at rest)
   Eigen::VectorXd y_ref_;  // x_ref on the free dofs, once a frame moves
   // The contact pass's absolute end and start positions, kept between steps (no allocation a step).
   Eigen::VectorXd contact_x_, contact_start_;

@@ -128,6 +128,7 @@ double FullMethod::assign(const Eigen::VectorXd& u, const Eigen::VectorXd& v, Re
 
 void FullMethod::setHandleMotion(const HandleMotion& motion)
 {
+  handle_displacement_ = motion.displacement;
   Eigen::VectorXd reference = lin_.x_ref;
   const std::vector<int>& dofs = lin_.grid.handleDofs();
   if (motion.displacement.size() > 0)
@@ -179,9 +180,34 @@ void FullMethod::frameTerms(const FrameForces& frame, Eigen::VectorXd& load, Spa
 
 double FullMethod::kineticEnergy(const State& s) const { return 0.5 * s.v.cwiseAbs2().dot(lin_.mass); }
 
+Eigen::VectorXd FullMethod::handleTranslation() const
+{
+  const int dim = lin_.grid.dimension();
+  const Eigen::Index count = handle_displacement_.size() / dim;
+  if (count == 0)
+    return Eigen::VectorXd();
+  return handle_displacement_.reshaped(dim, count).rowwise().mean();
+}
+
+void FullMethod::setAnchor(const Eigen::VectorXd& u_anchor)
+{
+  anchor_ = u_anchor;
+  anchor_translation_ = handleTranslation();
+}
+
 double FullMethod::anchorDistanceSquared(const Eigen::VectorXd& q) const
 {
-  return (q - anchor_).cwiseAbs2().dot(lin_.mass);
+  const Eigen::VectorXd translation = handleTranslation();
+  if (translation.size() == 0)
+    return (q - anchor_).cwiseAbs2().dot(lin_.mass);
+  const int dim = lin_.grid.dimension();
+  Eigen::VectorXd moved = translation;
+  if (anchor_translation_.size() == dim)
+    moved -= anchor_translation_;
+  Eigen::VectorXd relative = q - anchor_;
+  for (Eigen::Index p = 0; p + dim <= relative.size(); p += dim)
+    relative.segment(p, dim) -= moved;
+  return relative.cwiseAbs2().dot(lin_.mass);
 }
 
 namespace

@@ -47,6 +47,9 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
   limit_ = params_.divergence_limit > 0.0 ? params_.divergence_limit
                                           : 100.0 * g.spacing * std::max(g.rows, g.cols);
   precompute(on_stage, on_iteration);
+  if (!params_.colliders.empty())
+    contact_ = std::make_unique<Contact>(grid_, params_.colliders,
+                                         resolveContactThickness(params_.contact_thickness, g.spacing));
 
   if (grid_.numHandleDofs() > 0)
     handle_coupling_ = modal_mass_spring::handleCoupling(grid_, x_ref_);
@@ -62,10 +65,6 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
       on_stage("cubature");
     prepareCubature();
   }
-  if (!params_.colliders.empty())
-    contact_ = std::make_unique<Contact>(grid_, params_.colliders,
-                                         params_.contact_thickness > 0.0 ? params_.contact_thickness
-                                                                         : kDefaultThicknessFraction * g.spacing);
   reset();
 }
 
@@ -124,6 +123,11 @@ void Simulation::precompute(const StageFn& on_stage, const IterationFn& on_itera
       x_start_ = data.equilibrium;
     equilibrium_ = data.equilibrium;
   }
+  // A start inside a collider is refused before the basis is built.
+  if (!params_.colliders.empty())
+    checkStartOutsideColliders(grid_, x_start_, params_.colliders,
+                               resolveContactThickness(params_.contact_thickness, g.spacing),
+                               "initial_state " + toString(params_.initial_state));
   // At a hanging equilibrium compressed springs would make K indefinite: their geometric part is
   // dropped so that no mode has a negative lambda^2. At rest no spring is compressed.
   stage("stiffness");

@@ -123,41 +123,41 @@ std::unique_ptr<Simulation> buildTimed(const GridParams& grid, const SimulationP
   return sim;
 }
 
-// Steps per timed run so that one run lasts about min_repeat_seconds.
+// Steps per timed run so that one run lasts about min_repeat_seconds, timed on the steps the method
+// takes: one that diverges is timed up to its divergence (its timed runs end there).
 int stepsPerRepeat(Simulation& sim, double min_repeat_seconds)
 {
   int calibration = 10;
-  double elapsed = 0.0;
+  double per_step = 0.0;
   while (true)
   {
     sim.reset();
     const auto start = Clock::now();
-    sim.step(calibration);
-    elapsed = seconds(start);
-    if (elapsed > 0.2 * min_repeat_seconds || calibration >= 1000000)
+    const StepResult result = sim.step(calibration);
+    const double elapsed = seconds(start);
+    per_step = elapsed / (result.steps_taken + (result.diverged ? 1 : 0));
+    if (result.diverged || elapsed > 0.2 * min_repeat_seconds || calibration >= 1000000)
       break;
     calibration *= 4;
   }
-  return std::max(10, static_cast<int>(std::min(1e7, calibration * min_repeat_seconds / std::max(elapsed, 1e-9))));
+  return std::max(10, static_cast<int>(std::min(1e7, min_repeat_seconds / std::max(per_step, 1e-9))));
 }
 
-// Seconds per step of one timed run of `steps` steps. A method may diverge (the linear one drifts
-// without bound along zero modes): it starts over and goes on, so every run has the same steps.
-double timedRun(Simulation& sim, int steps, bool& diverged)
+// Seconds per step of one timed run of up to `steps` steps. A run that diverges ends there (the linear
+// method drifts without bound along zero modes; a step too large diverges at once): its time is per
+// step up to and including the one that diverged, and diverged_step says which (the first of the
+// run is 1). Starting over and going on instead would time resets, millions of them for a method
+// that diverges at its first step.
+double timedRun(Simulation& sim, int steps, long& diverged_step)
 {
   sim.reset();
   const auto start = Clock::now();
-  for (int taken = 0; taken < steps;)
-  {
-    const StepResult result = sim.step(steps - taken);
-    taken += std::max(1, result.steps_taken);  // a first step that diverges still counts
-    if (result.diverged)
-    {
-      diverged = true;
-      sim.reset();
-    }
-  }
-  return seconds(start) / steps;
+  const StepResult result = sim.step(steps);
+  const double elapsed = seconds(start);
+  if (!result.diverged)
+    return elapsed / steps;
+  diverged_step = result.steps_taken + 1;
+  return elapsed / diverged_step;
 }
 
 }  // namespace
@@ -195,7 +195,7 @@ std::vector<CostRow> runCost(const ExperimentSetup& setup, const CostOptions& op
       std::vector<double> per_step;
       for (int r = 0; r < options.repeats; ++r)
       {
-        per_step.push_back(timedRun(*sim, row.steps_per_repeat, row.diverged));
+        per_step.push_back(timedRun(*sim, row.steps_per_repeat, row.diverged_step));
         report(progress, label + " " + row.method,
                (s + (m + (r + 1.0) / options.repeats) / options.methods.size()) / total);
       }
@@ -718,12 +718,13 @@ std::string windowsField(const std::vector<StableWindow>& windows)
 void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows)
 {
   precise(out) << "variant,method,dimension,rows,cols,particles,free_dofs,springs,num_modes,"
-                  "build_seconds,step_seconds,step_seconds_min,repeats,steps_per_repeat,diverged\n";
+                  "build_seconds,step_seconds,step_seconds_min,repeats,steps_per_repeat,diverged,diverged_step\n";
   for (const CostRow& r : rows)
     out << r.variant << ',' << r.method << ',' << r.dimension << ',' << r.rows << ',' << r.cols << ','
         << r.particles << ',' << r.free_dofs << ',' << r.springs << ',' << r.num_modes << ','
         << Field{r.build_seconds} << ',' << Field{r.step_seconds} << ',' << Field{r.step_seconds_min} << ','
-        << r.repeats << ',' << r.steps_per_repeat << ',' << (r.diverged ? 1 : 0) << '\n';
+        << r.repeats << ',' << r.steps_per_repeat << ',' << (r.diverged_step > 0 ? 1 : 0) << ',' << r.diverged_step
+        << '\n';
 }
 
 void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows)

@@ -198,7 +198,7 @@ def cases(configs):
         # ------------------------------------------------ wrong types
         setting("mass", "heavy"),
         setting("rows", "5.5"),
-        setting("rows", "2147483648"),
+        setting("rows", "2147483648", "[-2147483648, 2147483647]"),
         setting("bending", "3"),
         setting("fixed", "0"),
         setting("gravity", "{z: -9.81}"),
@@ -270,6 +270,36 @@ def cases(configs):
         config("colliders_frame", "colliders:\n  - {type: sphere, center: [0, 0, 0], radius: 0.1, frame: finger}\n",
                "colliders[0].frame"),
         config("contact_thickness_negative", "contact_thickness: -0.01\n", "contact_thickness"),
+        config("contact_thickness_ten", "contact_thickness: 10\n", "at most 1 x spacing = 0.1 m"),
+        config("contact_thickness_huge", "contact_thickness: 1e300\n", "'contact_thickness' = 1e+300"),
+        config("colliders_type_a_number", "colliders: [{type: 5}]\n", "'colliders[0].type' = 5: must be a string"),
+        config("colliders_duplicate_key",
+               "colliders:\n  - type: sphere\n    center: [0.2, 0, -0.6]\n    radius: 0.1\n    radius: 0.5\n",
+               "'colliders[0].radius' = (given twice)"),
+        config("colliders_coordinate_huge", "colliders:\n  - {type: plane, point: [0, 0, -1e300], normal: [0, 0, 1]}\n",
+               "'colliders[0].point'"),
+        config("colliders_radius_huge", "colliders:\n  - {type: sphere, center: [0.2, 0, -0.6], radius: 1e300}\n",
+               "'colliders[0].radius'"),
+        config("colliders_friction_a_map",
+               "colliders:\n  - {type: sphere, center: [0.2, 0, -0.6], radius: 0.1, friction: {mu: 1}}\n",
+               "must be a number (the Coulomb coefficient"),
+        # paper_2d.yaml is a 2D grid in the x-z plane: a surface that pushes along y is refused
+        config("colliders_2d_plane_normal_y", "colliders:\n  - {type: plane, point: [0, 0.05, 0], normal: [0, 1, 0]}\n",
+               "'colliders[0].normal'"),
+        config("colliders_2d_sphere_off_plane", "colliders:\n  - {type: sphere, center: [0.2, 0.05, -0.2], radius: 0.1}\n",
+               "'colliders[0].center'"),
+        config("colliders_2d_box_thin_along_y",
+               "colliders:\n  - {type: box, center: [0.2, 0, -0.2], half_extents: [0.5, 0.01, 0.5]}\n",
+               "'colliders[0].half_extents'"),
+        # the cloth hangs at its equilibrium, which ignores colliders, through the table
+        Case("cloth_table_starting_inside_the_table",
+             ["--quiet", "--config", str(pathlib.Path(configs).resolve() / "cloth_table.yaml"), "--output", OUT,
+              "--set", "initial_state=equilibrium", "--experiment", "accuracy", "--steps", "10", "--interval", "10",
+              "--sample", "10"],
+             "'colliders[0]' = a box"),
+        # a step so large that every method diverges at once: reported with its step, in seconds
+        tool("cost_diverging_at_the_first_step", "(diverged at step 1)", "--set", "time_step=0.5", "--experiment",
+             "cost", "--sizes", "5", "--repeats", "1", "--methods", "physical", code=0, writes=True),
     ]
     return table
 

@@ -405,5 +405,31 @@ TEST(Cost, ReportsEveryMethodAndSize)
     EXPECT_GT(r.step_seconds, 0.0);
     EXPECT_GT(r.build_seconds, 0.0);
     EXPECT_GE(r.steps_per_repeat, 10);
+    EXPECT_EQ(r.diverged_step, 0) << r.method;
   }
+}
+
+// A method that diverges at its first step (the paper's grid at a 0.5 s step) is reported as
+// diverged there, and the experiment ends: each timed run stops at the divergence instead of starting
+// over millions of times.
+TEST(Cost, AMethodThatDivergesAtOnceIsReportedWithItsStep)
+{
+  ExperimentSetup setup;
+  setup.sim.time_step = 0.5;
+  CostOptions options;
+  options.sizes = {5};
+  options.methods = {Method::Physical, Method::Full};
+  options.repeats = 2;
+  options.build_repeats = 1;
+  const std::vector<CostRow> rows = runCost(setup, options);
+  ASSERT_EQ(rows.size(), 2u);
+  for (const CostRow& r : rows)
+  {
+    EXPECT_EQ(r.diverged_step, 1) << r.method;
+    EXPECT_GT(r.step_seconds, 0.0) << r.method;
+  }
+  std::ostringstream csv;
+  writeCostCsv(csv, rows);
+  EXPECT_NE(csv.str().find(",diverged,diverged_step\n"), std::string::npos) << csv.str();
+  EXPECT_NE(csv.str().find(",1,1\n"), std::string::npos) << csv.str();
 }
