@@ -305,7 +305,7 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
     model_->setFrameForces(frameForcesOf(frame_current_));
   model_->setExternalForce(grid_.gatherFree(external_force_));
   projection_error_ = model_->assign(u, v, remainder);
-  model_->setAnchor(anchor_);
+  model_->setAnchor(anchor_, anchor_handles_);
   diverged_ = false;
   divergence_message_.clear();
 }
@@ -324,11 +324,12 @@ void Simulation::setPhysicalState(const Eigen::VectorXd& u_world, const Eigen::V
   Eigen::VectorXd u = u_world, v = v_world;
   toBody(u, v);
   anchor_ = u;
+  anchor_handles_ = handle_current_.displacement;
   install(params_.method, u, v, Remainder::Drop);
   // Distances are measured from the start as this method holds it: a modal method's projection of a
   // start far outside its modes has not diverged by being where the projection put it.
   anchor_ = bodyDisplacement();
-  model_->setAnchor(anchor_);
+  model_->setAnchor(anchor_, anchor_handles_);
   handles_moved_ = !handle_current_.atRest() || !frame_current_.atRest();
   start_energy_ = methodEnergy();
   energy_scale_ = base_energy_scale_ + kineticEnergy() + springEnergy(grid_, positions());
