@@ -119,6 +119,24 @@ double deepestOverRun(Simulation& sim, double seconds, const std::vector<Collide
 
 double largestMove(const Eigen::Matrix3Xd& a, const Eigen::Matrix3Xd& b) { return (a - b).colwise().norm().maxCoeff(); }
 
+// Whether a particle going from `from` (the collider at `start`) to `to` (at `end`) touches, by brute
+// force: within the thickness at the end, or its path relative to the collider (straight in the
+// collider's frame), sampled every 1/2000 of its length, inside the shape while it started outside.
+bool touchesByBruteForce(const Collider& c, const Eigen::Isometry3d& start, const Eigen::Isometry3d& end,
+                         const Eigen::Vector3d& from, const Eigen::Vector3d& to, double thickness)
+{
+  Eigen::Vector3d n;
+  if (signedDistance(c, end, to, n) < thickness)
+    return true;
+  const Eigen::Vector3d a = start.inverse() * from, b = end.inverse() * to;
+  if (signedDistance(c, Eigen::Isometry3d::Identity(), a, n) <= 0.0)
+    return false;
+  for (int k = 1; k <= 2000; ++k)
+    if (signedDistance(c, Eigen::Isometry3d::Identity(), a + (b - a) * (k / 2000.0), n) <= 0.0)
+      return true;
+  return false;
+}
+
 }  // namespace
 
 TEST(Collider, SignedDistancesOfEachShape)
@@ -258,18 +276,18 @@ TEST(Contact, OneColliderPassIsTheGeneralPassToTheBit)
     Eigen::VectorXd v_one = Eigen::VectorXd::Random(3 * particles), v_general = v_one;
     const Eigen::VectorXd mass = Eigen::VectorXd::Constant(3 * particles, 0.01);
     int touched = 0;
+    Eigen::Isometry3d previous = Eigen::Isometry3d::Identity();  // turned over step 0, then moving
     for (int step = 0; step < 4; ++step)
     {
-      const Eigen::Isometry3d pose = Eigen::Translation3d(0.0, 0.0, 0.01 * step) * turned;  // moves from step 1 on
+      const Eigen::Isometry3d pose = Eigen::Translation3d(0.0, 0.0, 0.01 * step) * turned;
       one.setPose(0, pose);
       general.setPose(0, pose);
       Eigen::VectorXd x_one = x_start + 0.01 * Eigen::VectorXd::Random(3 * particles), x_general = x_one;
       int brute_touching = 0;
       for (int p = 0; p < particles; ++p)
-      {
-        Eigen::Vector3d n;
-        brute_touching += signedDistance(shape, pose, x_one.segment<3>(3 * p), n) < thickness;
-      }
+        brute_touching +=
+            touchesByBruteForce(shape, previous, pose, x_start.segment<3>(3 * p), x_one.segment<3>(3 * p), thickness);
+      previous = pose;
       one.correctParticles(x_start, x_one, v_one, mass, 0.01);
       general.correctParticles(x_start, x_general, v_general, mass, 0.01);
       double brute_after = 0.0;
@@ -695,7 +713,9 @@ TEST(Contact, AStepThroughAThinColliderIsCaughtOnTheSideItCameFrom)
     EXPECT_NEAR(x[2], top[shape] + thickness, 1e-12) << "put back above, at the thickness";
     EXPECT_NEAR(v[2], 0.0, 1e-12) << "its approach removed";
     if (c.type == ColliderType::Box)
+    {
       EXPECT_NEAR(x[5], top[shape] + thickness, 1e-12) << "past the middle, still back on the top";
+    }
     EXPECT_DOUBLE_EQ(x[8], -0.05) << "a path beside it is left alone";
     EXPECT_DOUBLE_EQ(v[8], -100.0);
     ++shape;

@@ -138,7 +138,7 @@ TEST(Divergence, IsMeasuredRelativeToTheHandlesTranslation)
     Simulation sim(g, s);
     const StepResult result = carry(sim, static_cast<int>(duration / s.time_step));
     EXPECT_FALSE(result.diverged) << toString(method) << ": " << result.message;
-    EXPECT_NEAR(sim.points().row(0).mean(), 0.2 + distance, 0.05) << toString(method) << ": carried along";
+    EXPECT_NEAR(sim.points().row(0).mean(), 0.2 + distance, 0.2) << toString(method) << ": carried along, swinging";
     // Switched there, the other method measures from the same start as well.
     sim.setMethod(method == Method::Full ? Method::Physical : Method::Full);
     const StepResult after = sim.step(100);
