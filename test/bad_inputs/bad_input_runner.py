@@ -29,6 +29,7 @@ class Case:
     code: int = 2              # the expected exit code
     shell_prefix: str = ""     # e.g. "ulimit -v 300000; " (the case then runs through bash)
     writes: bool = False       # a run that must finish with a correct result: it may write its results
+    absent: str = ""           # text the output must not contain (e.g. "diverged" for such a run)
 
 
 def run_case(program, case, timeout):
@@ -56,6 +57,8 @@ def run_case(program, case, timeout):
             problems.append(f"exit code {result.returncode}, expected {case.code}")
         if case.named not in output:
             problems.append(f"the message does not name {case.named!r}")
+        if case.absent and case.absent in output:
+            problems.append(f"the output says {case.absent!r}")
         written = sorted(str(p.relative_to(work)) for p in work.rglob("*") if p not in before)
         if written and not case.writes:
             problems.append(f"wrote {', '.join(written)}")

@@ -297,6 +297,15 @@ def cases(configs):
               "--set", "initial_state=equilibrium", "--experiment", "accuracy", "--steps", "10", "--interval", "10",
               "--sample", "10"],
              "'colliders[0]' = a box"),
+        # a gripper carrying the sheet 100 m in 10 s (the default divergence_limit is 100 x its 0.3 m
+        # side): not a divergence, and `full` stays the reference
+        Case("handles_carried_100_m",
+             ["--quiet", "--config", "{work}/bad.yaml", "--output", OUT, "--experiment", "handles", "--methods",
+              "physical"],
+             "| carry    | physical |",
+             files={"bad.yaml": held.replace("name: lift", "name: carry").replace("[0, 0, 0.1]", "[100, 0, 0]")
+                    + "    move_time: 10\n"},
+             code=0, writes=True, absent="diverged"),
         # a step so large that every method diverges at once: reported with its step, in seconds
         tool("cost_diverging_at_the_first_step", "(diverged at step 1)", "--set", "time_step=0.5", "--experiment",
              "cost", "--sizes", "5", "--repeats", "1", "--methods", "physical", code=0, writes=True),
