@@ -1,8 +1,10 @@
 // Contact between the grid's particles and rigid colliders (plane, box, sphere, capsule) with
 // Coulomb friction, as a correction of each step's end state.
 //
-// After the integrator's step, every free particle closer to a collider than the contact thickness
-// is corrected twice, with a Coulomb cone each time:
+// After the integrator's step, every free particle closer to a collider than the contact thickness,
+// or whose straight path over the step (relative to the collider) entered a box, sphere or capsule
+// (then with the entry's normal and distance: a thin plate is not passed through), is corrected
+// twice, with a Coulomb cone each time:
 //   positions: pushed out along the normal to the thickness (the normal "impulse" is the push); the
 //     tangential slip over the step (relative to the collider's surface) is undone where mu times the
 //     push covers it (static friction), else shortened by mu times the push;

@@ -39,8 +39,8 @@ void requirePositive(const std::string& name, double value)
     rejectParameter(name, value, "must be a number > 0 and <= " + bound() + " (m)");
 }
 
-// On a 2D grid a collider's surface must push the particles only within the x-z plane: `value` (a
-// coordinate along y, or a direction's y part) must be 0.
+// On a 2D grid a collider's surface must push the particles only within the x-z plane: the y of `v`
+// (a point's, or a direction's) must be 0.
 void requireInPlane(const std::string& name, const Eigen::Vector3d& v, const std::string& what)
 {
   if (v.y() != 0.0)

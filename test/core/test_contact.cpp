@@ -2,7 +2,8 @@
 // above the friction angle against the closed form), a sheet dropped on each collider type under
 // both integrators, a sheet resting on a table, the reduced methods against `full` (on the modes and on
 // the skinning subspace, a sheet draped over a table edge), the force on a
-// handle, and bad colliders refused by name.
+// handle, thin colliders passed through in one step, and bad colliders (and a start inside one)
+// refused by name.
 #include "modal_mass_spring/contact.h"
 #include "modal_mass_spring/simulation.h"
 
