@@ -203,10 +203,10 @@ double FullMethod::anchorDistanceSquared(const Eigen::VectorXd& q) const
     moved = moved.size() == dim ? Eigen::VectorXd(moved - anchor_translation_) : Eigen::VectorXd(-anchor_translation_);
   if (moved.size() == 0)
     return (q - anchor_).cwiseAbs2().dot(lin_.mass);
-  Eigen::VectorXd relative = q - anchor_;
-  for (Eigen::Index p = 0; p + dim <= relative.size(); p += dim)
-    relative.segment(p, dim) -= moved;
-  return relative.cwiseAbs2().dot(lin_.mass);
+  double sum = 0.0;
+  for (Eigen::Index p = 0; p + dim <= q.size(); p += dim)
+    sum += (q.segment(p, dim) - anchor_.segment(p, dim) - moved).cwiseAbs2().dot(lin_.mass.segment(p, dim));
+  return sum;
 }
 
 namespace
