@@ -1,8 +1,10 @@
 // Contact between the grid's particles and rigid colliders (plane, box, sphere, capsule) with
 // Coulomb friction, as a correction of each step's end state.
 //
-// After the integrator's step, every free particle closer to a collider than the contact thickness
-// is corrected twice, with a Coulomb cone each time:
+// After the integrator's step, every free particle closer to a collider than the contact thickness,
+// or whose straight path over the step (relative to the collider) entered a box, sphere or capsule
+// (then with the entry's normal and distance: a thin plate is not passed through), is corrected
+// twice, with a Coulomb cone each time:
 //   positions: pushed out along the normal to the thickness (the normal "impulse" is the push); the
 //     tangential slip over the step (relative to the collider's surface) is undone where mu times the
 //     push covers it (static friction), else shortened by mu times the push;
@@ -57,11 +59,24 @@ struct Collider
 
 // The default contact thickness, as a fraction of the grid's spacing.
 constexpr double kDefaultThicknessFraction = 0.1;
+// The largest contact thickness, as a fraction of the grid's spacing: a particle that touches is
+// pushed out by up to the thickness in one step, and a push longer than a spring's rest length can
+// fold the cloth through itself.
+constexpr double kMaxThicknessFraction = 1.0;
+// Collider coordinates and sizes (m) beyond this are typing mistakes, as the node's `offset`.
+constexpr double kMaxColliderCoordinate = 1e6;
 
 // Throws std::invalid_argument (rejectParameter) naming `name` (e.g. "colliders[1].radius") for a
-// non-finite value, a zero plane normal, a size <= 0 (radius, half_extents), a capsule with a = b, a
-// negative friction.
-void validateCollider(const Collider& collider, const std::string& name);
+// non-finite value or a coordinate or size beyond kMaxColliderCoordinate, a zero plane normal, a size
+// <= 0 (radius, half_extents), a capsule with a = b, a negative friction; on a 2D grid (dimension 2,
+// particles in the x-z plane y = 0) also a collider that is not symmetric about that plane (a plane
+// whose normal has a y part, a sphere or capsule off it, a box off it or thinner along y than its
+// smaller half extent in the plane): its surface would push the particles along y, which a 2D grid
+// does not have.
+void validateCollider(const Collider& collider, const std::string& name, int dimension = 3);
+// What the key `key` of a collider map takes ("a number (...)", "a list of three numbers ..."), for
+// the sources' messages; for a key no collider has, the keys there are.
+std::string colliderFieldExpected(const std::string& key);
 // One element of the parameter `colliders` as a source read it: text values (type, frame) and
 // numeric ones (a scalar is a list of one), so that the node's and the tools' sources share one
 // reading. Keys: type (required); plane: point, normal; box: center, half_extents; sphere: center,
@@ -76,8 +91,21 @@ struct ColliderFields
 };
 Collider colliderFromFields(const ColliderFields& fields, const std::string& name);
 
-// contact_thickness: finite and >= 0 (0: kDefaultThicknessFraction of the spacing).
-void validateContactThickness(double thickness);
+// contact_thickness: finite, >= 0 (0: kDefaultThicknessFraction of the spacing) and at most
+// kMaxThicknessFraction of the spacing.
+void validateContactThickness(double thickness, double spacing);
+// The thickness contact_thickness gives (its default where it is 0).
+inline double resolveContactThickness(double thickness, double spacing)
+{
+  return thickness > 0.0 ? thickness : kDefaultThicknessFraction * spacing;
+}
+// Refuses (std::invalid_argument naming the collider, the particle and its depth) a start where a
+// free particle (neither fixed nor held) at `positions` (all dofs) lies inside a collider (at its
+// first pose, the identity; a collider with a `frame` is not placed yet and is skipped) by more than
+// a hundredth of `thickness`: the first step would throw it out, which is no motion of the cloth.
+// `start` says where the positions come from, for the message (e.g. "initial_state equilibrium").
+void checkStartOutsideColliders(const Grid& grid, const Eigen::VectorXd& positions,
+                                const std::vector<Collider>& colliders, double thickness, const std::string& start);
 
 // Signed distance from x (grid coordinates, 3D) to the collider's surface, at the collider's pose,
 // and the outward unit normal there.
@@ -140,9 +168,9 @@ public:
 
 private:
   struct Touch;  // one particle against one collider
-  // The touches of the free particles at positions x (free dofs), with the collider's surface
-  // velocity; fills penetration_before.
-  std::vector<Touch> detect(const Eigen::VectorXd& x, double dt);
+  // The touches of the free particles at positions x (free dofs) that started the step at x_start,
+  // with the collider's surface velocity; fills penetration_before.
+  std::vector<Touch> detect(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x);
   Eigen::Vector3d point(const Eigen::VectorXd& x, int particle) const;
 
   const Grid& grid_;

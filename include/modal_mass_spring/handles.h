@@ -62,6 +62,9 @@ struct FramePose
 // A frame (a handle's or a collider's) that turns more than this within one tick is flipping or
 // glitching: no gripper turns a quarter turn between two ticks.
 constexpr double kMaxFrameTurnPerTick = EIGEN_PI / 2.0;  // rad (90 degrees)
+// Likewise a frame that moves farther than this within one tick (15 m/s at 30 Hz): swept that far over
+// one tick's steps it would throw the cloth.
+constexpr double kMaxFrameJumpPerTick = 0.5;  // m
 
 struct RigidPointMotion
 {

@@ -40,5 +40,8 @@ SimulationParams loadSimulationParams(const ParameterSource& source);
 
 // The message for a present key of the wrong type, shared by the sources.
 std::string wrongType(const std::string& key, const std::string& expected);
+// The message for an integer parameter given a whole number outside int's range (`value` as
+// written), shared by the sources: the range, not a wrong type.
+std::string intOutOfRange(const std::string& key, const std::string& value);
 
 }  // namespace modal_mass_spring

@@ -362,6 +362,7 @@ private:
   Eigen::VectorXd x_start_;  // where reset() puts the grid
   Eigen::VectorXd u_start_;  // the same as a free-dof displacement from x_ref_
   Eigen::VectorXd anchor_;   // the run's start as its method held it: divergence is measured from here
+  Eigen::VectorXd anchor_handles_;  // the handle dofs' displacement then (empty: at rest)
   bool basis_built_ = false;
   Eigen::VectorXd equilibrium_;  // all dofs, when it was solved: stored in the cache with the bases
   ModalBasis basis_;            // the eigenbasis (`linear`)

@@ -39,7 +39,7 @@ public:
   // one) is a new placement: the collider is put there at the tick's start without a sweep
   // (placed(k)), as at a first pose, and follows the frame from there.
   void setTargets(const std::vector<std::optional<FramePose>>& poses, const std::vector<std::string>& problems);
-  static constexpr double kMaxJumpPerTick = 0.5;                  // m
+  static constexpr double kMaxJumpPerTick = kMaxFrameJumpPerTick;
   static constexpr double kMaxTurnPerTick = kMaxFrameTurnPerTick;
   // Frame collider k was placed anew by the last setTargets (a jump that stayed): to be put at
   // pose(k, 0) without a sweep (Simulation::placeCollider).

@@ -44,9 +44,11 @@ FramePose inverse(const FramePose& a)
   return i;
 }
 
-bool samePose(const FramePose& a, const FramePose& b)
+// `b` is within one tick's motion of `a`: a frame that jumped and stays there moves on from it.
+bool withinATick(const FramePose& a, const FramePose& b)
 {
-  return (a.translation - b.translation).norm() <= 1e-6 && a.rotation.angularDistance(b.rotation) <= 1e-6;
+  return (a.translation - b.translation).norm() <= HandleFrames::kMaxJumpPerTick &&
+         a.rotation.angularDistance(b.rotation) <= HandleFrames::kMaxTurnPerTick;
 }
 
 }  // namespace
@@ -63,12 +65,21 @@ std::string HandleFrames::refusal(const Handle& handle, const FramePose& pose) c
     if (off_plane > 1e-6)
       return "refused: it turns out of the 2D grid's x-z plane (a 2D grid's frame may only turn about y)";
   }
+  const double jump = (pose.translation - handle.current.translation).norm();
+  if (!(jump <= kMaxJumpPerTick))
+  {
+    std::snprintf(text, sizeof text,
+                  "refused: it jumped %.3g m since the last tick, above %.3g m (a glitching frame; kept near that pose "
+                  "for a tick, it is gripped anew)",
+                  jump, kMaxJumpPerTick);
+    return text;
+  }
   const double turn = handle.current.rotation.angularDistance(pose.rotation);
   if (turn > kMaxTurnPerTick)
   {
     std::snprintf(text, sizeof text,
                   "refused: it turned %.0f degrees since the last tick, above %.0f (a flipping or glitching frame; "
-                  "kept at that pose for a tick, it is gripped anew)",
+                  "kept near that pose for a tick, it is gripped anew)",
                   turn * 180.0 / kPi, kMaxTurnPerTick * 180.0 / kPi);
     return text;
   }
@@ -110,9 +121,9 @@ void HandleFrames::setTargets(const std::vector<std::optional<FramePose>>& poses
     }
     std::string why = refusal(handle, pose);
     const bool in_plane = why.empty() || why.find("x-z plane") == std::string::npos;
-    if (!why.empty() && in_plane && handle.refused_pose && samePose(*handle.refused_pose, pose))
+    if (!why.empty() && in_plane && handle.refused_pose && withinATick(*handle.refused_pose, pose))
     {
-      regrip(handle, pose);  // not a flip: the frame stays at its new pose
+      regrip(handle, pose);  // not a flip or a glitch: the frame stays at its new pose
       why.clear();
     }
     handle.refused_pose.reset();

@@ -34,11 +34,13 @@ public:
   // This tick's target pose of each frame in the fixed frame; nothing: not usable, held where it is,
   // for the reason in `problems` (empty or "": "not available"). A frame's first pose fixes its
   // particles' offsets (no motion on that tick). A pose the cloth cannot follow is refused and held:
-  // on a 2D grid one that turns the frame out of the x-z plane; on any grid one that turns it more
-  // than kMaxTurnPerTick since the last tick (a flipping or glitching frame). A refused large turn
-  // that stays (the same pose at the next tick) is a new grip: the particles keep where they are and
-  // follow the frame from there, as at a first lookup.
+  // on a 2D grid one that turns the frame out of the x-z plane; on any grid one that moves it more
+  // than kMaxJumpPerTick or turns it more than kMaxTurnPerTick since the last tick (a flipping or
+  // glitching frame: a TF sample 1e12 m away). A refused jump or turn that stays (the next tick's
+  // pose within those limits of it) is a new grip: the particles keep where they are and follow the
+  // frame from there, as at a first lookup.
   void setTargets(const std::vector<std::optional<FramePose>>& poses, const std::vector<std::string>& problems = {});
+  static constexpr double kMaxJumpPerTick = kMaxFrameJumpPerTick;
   static constexpr double kMaxTurnPerTick = kMaxFrameTurnPerTick;
   // The handle dofs' positions (grid coordinates), velocities and accelerations at the fraction s of
   // a tick lasting `duration` seconds, in Grid::handleDofs() order.

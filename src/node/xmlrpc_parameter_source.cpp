@@ -5,7 +5,9 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <cmath>
 #include <functional>
+#include <limits>
 #include <sstream>
 #include <stdexcept>
 
@@ -182,7 +184,19 @@ std::optional<int> XmlRpcParameterSource::getInt(const std::string& key) const
     return std::nullopt;
   const auto result = toInt(*value);
   if (!result)
+  {
+    // A whole number beyond int (roscpp reads one on the command line as a double): the range.
+    const auto number = toDouble(*value);
+    if (number && std::isfinite(*number) && *number == std::floor(*number) &&
+        (*number < std::numeric_limits<int>::min() || *number > std::numeric_limits<int>::max()))
+    {
+      std::ostringstream text;
+      text.precision(17);
+      text << *number;
+      throw std::invalid_argument(intOutOfRange(key, text.str()));
+    }
     throwWrongType(key, "an integer", *value);
+  }
   return result;
 }
 
@@ -339,17 +353,14 @@ std::optional<std::vector<Collider>> XmlRpcParameterSource::getColliderList(cons
         fields.text[it->first] = asString(field);
         continue;
       }
-      if (named)
-        throwWrongType(name + "." + it->first,
-                       it->first == "type" ? "a string: plane, box, sphere or capsule" : "a string (a TF frame id)", field);
-      if (field.getType() != XmlRpcValue::TypeArray)
-        throwWrongType(name + "." + it->first, "a number, a string or a list of numbers", field);
+      if (named || field.getType() != XmlRpcValue::TypeArray)
+        throwWrongType(name + "." + it->first, colliderFieldExpected(it->first), field);
       std::vector<double> numbers;
       for (int k = 0; k < field.size(); ++k)
       {
         const auto number = toDouble(field[k]);
         if (!number)
-          throwWrongType(name + "." + it->first, "a list of numbers", field);
+          throwWrongType(name + "." + it->first, colliderFieldExpected(it->first), field);
         numbers.push_back(*number);
       }
       fields.numbers[it->first] = numbers;

@@ -140,44 +140,44 @@ std::unique_ptr<Simulation> buildTimed(const GridParams& grid, const SimulationP
   return sim;
 }
 
-// Steps per timed run so that one run lasts about min_repeat_seconds.
+// Steps per timed run so that one run lasts about min_repeat_seconds, timed on the steps the method
+// takes: one that diverges is timed up to its divergence (its timed runs end there).
 int stepsPerRepeat(Simulation& sim, double min_repeat_seconds)
 {
   int calibration = 10;
-  double elapsed = 0.0;
+  double per_step = 0.0;
   while (true)
   {
     sim.reset();
     const auto start = Clock::now();
-    sim.step(calibration);
-    elapsed = seconds(start);
-    if (elapsed > 0.2 * min_repeat_seconds || calibration >= 1000000)
+    const StepResult result = sim.step(calibration);
+    const double elapsed = seconds(start);
+    per_step = elapsed / (result.steps_taken + (result.diverged ? 1 : 0));
+    if (result.diverged || elapsed > 0.2 * min_repeat_seconds || calibration >= 1000000)
       break;
     calibration *= 4;
   }
-  return std::max(10, static_cast<int>(std::min(1e7, calibration * min_repeat_seconds / std::max(elapsed, 1e-9))));
+  return std::max(10, static_cast<int>(std::min(1e7, min_repeat_seconds / std::max(per_step, 1e-9))));
 }
 
-// Seconds per step of one timed run of `steps` steps. A method may diverge (the linear one drifts
-// without bound along zero modes): it starts over and goes on, so every run has the same steps.
-// Wall time per step; the thread's CPU time per step goes to `cpu_seconds`.
-double timedRun(Simulation& sim, int steps, bool& diverged, double& cpu_seconds)
+// Seconds per step of one timed run of up to `steps` steps. A run that diverges ends there (the linear
+// method drifts without bound along zero modes; a step too large diverges at once): its time is per
+// step up to and including the one that diverged, and diverged_step says which (the first of the
+// run is 1). Starting over and going on instead would time resets, millions of them for a method
+// that diverges at its first step. Wall time per step; the thread's CPU time per step goes to
+// `cpu_seconds`.
+double timedRun(Simulation& sim, int steps, long& diverged_step, double& cpu_seconds)
 {
   sim.reset();
   const auto start = Clock::now();
   const double cpu_start = threadCpuSeconds();
-  for (int taken = 0; taken < steps;)
-  {
-    const StepResult result = sim.step(steps - taken);
-    taken += std::max(1, result.steps_taken);  // a first step that diverges still counts
-    if (result.diverged)
-    {
-      diverged = true;
-      sim.reset();
-    }
-  }
-  cpu_seconds = (threadCpuSeconds() - cpu_start) / steps;
-  return seconds(start) / steps;
+  const StepResult result = sim.step(steps);
+  const double elapsed = seconds(start), cpu = threadCpuSeconds() - cpu_start;
+  const long taken = result.diverged ? result.steps_taken + 1 : steps;
+  if (result.diverged)
+    diverged_step = taken;
+  cpu_seconds = cpu / taken;
+  return elapsed / taken;
 }
 
 }  // namespace
@@ -216,7 +216,7 @@ std::vector<CostRow> runCost(const ExperimentSetup& setup, const CostOptions& op
       for (int r = 0; r < options.repeats; ++r)
       {
         cpu_per_step.emplace_back();
-        per_step.push_back(timedRun(*sim, row.steps_per_repeat, row.diverged, cpu_per_step.back()));
+        per_step.push_back(timedRun(*sim, row.steps_per_repeat, row.diverged_step, cpu_per_step.back()));
         report(progress, label + " " + row.method,
                (s + (m + (r + 1.0) / options.repeats) / options.methods.size()) / total);
       }
@@ -750,13 +750,14 @@ void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows)
 {
   precise(out) << "variant,method,dimension,rows,cols,particles,free_dofs,springs,num_modes,"
                   "build_seconds,step_seconds,step_seconds_min,step_cpu_seconds,time_step,cpu_per_simulated_second,"
-                  "real_time_factor,repeats,steps_per_repeat,diverged\n";
+                  "real_time_factor,repeats,steps_per_repeat,diverged,diverged_step\n";
   for (const CostRow& r : rows)
     out << r.variant << ',' << r.method << ',' << r.dimension << ',' << r.rows << ',' << r.cols << ','
         << r.particles << ',' << r.free_dofs << ',' << r.springs << ',' << r.num_modes << ','
         << Field{r.build_seconds} << ',' << Field{r.step_seconds} << ',' << Field{r.step_seconds_min} << ','
         << Field{r.step_cpu_seconds} << ',' << Field{r.time_step} << ',' << Field{r.cpu_per_simulated_second} << ','
-        << Field{r.real_time_factor} << ',' << r.repeats << ',' << r.steps_per_repeat << ',' << (r.diverged ? 1 : 0) << '\n';
+        << Field{r.real_time_factor} << ',' << r.repeats << ',' << r.steps_per_repeat << ','
+        << (r.diverged_step > 0 ? 1 : 0) << ',' << r.diverged_step << '\n';
 }
 
 void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows)

@@ -66,7 +66,9 @@ struct CostRow
   double time_step = 0.0;            // s
   double cpu_per_simulated_second = 0.0, real_time_factor = 0.0;  // of step_cpu_seconds and time_step
   int repeats = 0, steps_per_repeat = 0;
-  bool diverged = false;             // a timed run diverged: its time covers fewer steps
+  // A timed run diverged: the step it diverged at (1: the first; the same in every run), and each run
+  // ended there, its time per step over the steps up to and including that one. 0: none diverged.
+  long diverged_step = 0;
 };
 
 std::vector<CostRow> runCost(const ExperimentSetup& setup, const CostOptions& options, const ProgressFn& progress = {});

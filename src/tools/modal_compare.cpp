@@ -919,7 +919,9 @@ void runCostExperiment(const Options& o, const std::vector<ExperimentSetup>& set
   for (const CostRow& r : rows)
     table.push_back({r.variant, std::to_string(r.rows) + "x" + std::to_string(r.cols), std::to_string(r.dimension),
                      std::to_string(r.free_dofs), std::to_string(r.num_modes), fmt(1e3 * r.build_seconds),
-                     r.method, fmt(1e6 * r.step_seconds) + (r.diverged ? " (diverged)" : ""),
+                     r.method,
+                     fmt(1e6 * r.step_seconds) +
+                         (r.diverged_step > 0 ? " (diverged at step " + std::to_string(r.diverged_step) + ")" : ""),
                      fmt(1e6 * r.step_cpu_seconds), fmt(r.cpu_per_simulated_second), fmt(r.real_time_factor)});
   printTable("cost (" + o.tag + "): median of " + std::to_string(o.cost.repeats) +
                  " timed runs; wall and this thread's CPU time per step, the CPU time per simulated second and "

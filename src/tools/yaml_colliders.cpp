@@ -3,6 +3,8 @@
 
 #include "modal_mass_spring/validation.h"
 
+#include <map>
+
 namespace modal_mass_spring
 {
 namespace
@@ -32,9 +34,16 @@ std::vector<Collider> parseColliders(const YAML::Node& node, const std::string& 
     if (!item.IsMap())
       rejectParameter(name, "'" + shown(item) + "'", "must be a map such as " + example.substr(1, example.size() - 2));
     ColliderFields fields;
+    std::map<std::string, int> lines;  // key -> line (1-based) where it first appears
     for (const auto& entry : item)
     {
       const std::string field = entry.first.as<std::string>();
+      const int line = entry.first.Mark().line + 1;
+      const auto [first, inserted] = lines.insert({field, line});
+      if (!inserted)
+        rejectParameter(name + "." + field, "(given twice)",
+                        "on lines " + std::to_string(first->second) + " and " + std::to_string(line) +
+                            "; each key of a collider must be given once");
       const YAML::Node value = entry.second;
       if (value.IsScalar())
       {
@@ -46,13 +55,13 @@ std::vector<Collider> parseColliders(const YAML::Node& node, const std::string& 
         continue;
       }
       if (!value.IsSequence())
-        rejectParameter(name + "." + field, "'" + shown(value) + "'", "must be a number, a string or a list of numbers");
+        rejectParameter(name + "." + field, "'" + shown(value) + "'", "must be " + colliderFieldExpected(field));
       std::vector<double> numbers;
       for (const YAML::Node& element : value)
       {
         double number = 0.0;
         if (!element.IsScalar() || !YAML::convert<double>::decode(element, number))
-          rejectParameter(name + "." + field, "'" + shown(value) + "'", "must be a list of numbers");
+          rejectParameter(name + "." + field, "'" + shown(value) + "'", "must be " + colliderFieldExpected(field));
         numbers.push_back(number);
       }
       fields.numbers[field] = numbers;

@@ -11,8 +11,9 @@
 namespace modal_mass_spring
 {
 
-// Throws std::invalid_argument naming `key[i].field` for an element that is not a map, a value that
-// is neither a scalar nor a list of numbers, and whatever colliderFromFields refuses.
+// Throws std::invalid_argument naming `key[i].field` for an element that is not a map, a key given
+// twice in one, a value that is neither a scalar nor a list of numbers, and whatever
+// colliderFromFields refuses.
 std::vector<Collider> parseColliders(const YAML::Node& node, const std::string& key);
 
 }  // namespace modal_mass_spring

@@ -4,10 +4,13 @@
 #include "modal_mass_spring/validation.h"
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <stdexcept>
+#include <type_traits>
 
 namespace modal_mass_spring
 {
@@ -136,6 +139,20 @@ std::string got(const YAML::Node& node)
   return ", got '" + text + "'";
 }
 
+// An integer parameter given a whole number beyond int: said with the range, not as a wrong type.
+template <typename T>
+void refuseOutOfRange(const std::string& key, const YAML::Node& node)
+{
+  if constexpr (std::is_same_v<T, int>)
+  {
+    double value = 0.0;
+    if (node.IsScalar() && YAML::convert<double>::decode(node, value) && std::isfinite(value) &&
+        value == std::floor(value) &&
+        (value < std::numeric_limits<int>::min() || value > std::numeric_limits<int>::max()))
+      throw std::invalid_argument(intOutOfRange(key, node.Scalar()));
+  }
+}
+
 }  // namespace
 
 template <typename T>
@@ -152,6 +169,7 @@ std::optional<T> YamlParameterSource::scalar(const std::string& key, const std::
   }
   catch (const YAML::Exception&)
   {
+    refuseOutOfRange<T>(key, node);
     throw std::invalid_argument(wrongType(key, expected) + got(node));
   }
 }
@@ -175,6 +193,7 @@ std::optional<std::vector<T>> YamlParameterSource::list(const std::string& key, 
     }
     catch (const YAML::Exception&)
     {
+      refuseOutOfRange<T>(key, item);
       throw std::invalid_argument(wrongType(key, expected) + got(node));
     }
   }

@@ -2,7 +2,8 @@
 """Runs a program on a table of bad inputs and writes one JUnit test case per input.
 
 Each case must end with the expected exit code (2 unless told otherwise), print a message that
-names what was wrong, not be killed by a signal, not hang, and write no file. A case runs in a
+names what was wrong (or, for an extreme input that must give a correct result, says it), not be
+killed by a signal, not hang, and write no file (unless it is such a run). A case runs in a
 fresh empty folder (its working directory), where its config files are written first; anything
 else found there afterwards, or in the folder the case names as its output, is a file it wrote.
 
@@ -27,6 +28,8 @@ class Case:
     files: dict = dataclasses.field(default_factory=dict)  # file name -> text, written into {work} first
     code: int = 2              # the expected exit code
     shell_prefix: str = ""     # e.g. "ulimit -v 300000; " (the case then runs through bash)
+    writes: bool = False       # a run that must finish with a correct result: it may write its results
+    absent: str = ""           # text the output must not contain (e.g. "diverged" for such a run)
 
 
 def run_case(program, case, timeout):
@@ -54,8 +57,10 @@ def run_case(program, case, timeout):
             problems.append(f"exit code {result.returncode}, expected {case.code}")
         if case.named not in output:
             problems.append(f"the message does not name {case.named!r}")
+        if case.absent and case.absent in output:
+            problems.append(f"the output says {case.absent!r}")
         written = sorted(str(p.relative_to(work)) for p in work.rglob("*") if p not in before)
-        if written:
+        if written and not case.writes:
             problems.append(f"wrote {', '.join(written)}")
         return problems, f"$ {' '.join(shlex.quote(c) for c in command)}\n{output}({seconds:.2f} s)\n"
 

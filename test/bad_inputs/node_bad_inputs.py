@@ -17,7 +17,8 @@ from roslib.packages import find_node
 
 NAN = float("nan")
 
-# (parameters set on the server, rosrun command-line arguments, the names the FATAL may give)
+# (parameters set on the server, rosrun command-line arguments, the names the FATAL may give[, text
+# the FATAL must hold: what is allowed])
 CASES = [
     ({"rows": 0}, [], ["rows"]),
     ({"rows": -3}, [], ["rows"]),
@@ -171,6 +172,21 @@ CASES = [
     ({"handle_formulation": "moving_frame", "fixed": [],
       "handles": [{"frame": "left", "particles": [0]}, {"frame": "right", "particles": [4]}]}, [],
      ["handle_formulation"]),  # two frames
+    ({}, ["_rows:=3000000000"], ["rows"], "[-2147483648, 2147483647]"),
+    ({"colliders": [{"type": 5}]}, [], ["colliders"], "must be a string: plane, box, sphere or capsule"),
+    ({"colliders": [{"type": "sphere", "center": [0.2, 0, -0.6], "radius": 0.1, "friction": True}]}, [],
+     ["colliders"], "must be a number (the Coulomb coefficient"),
+    ({"colliders": [{"type": "sphere", "center": [0.2, 0, 1e300], "radius": 0.1}]}, [], ["colliders"],
+     "[-1e+06, 1e+06]"),
+    ({"contact_thickness": 10.0}, [], ["contact_thickness"], "at most 1 x spacing = 0.1 m"),
+    # the paper's grid is 2D (the x-z plane): a surface that pushes along y is refused
+    ({"colliders": [{"type": "plane", "point": [0, 0.05, 0], "normal": [0, 1, 0]}]}, [], ["colliders"],
+     "its y must be 0 on a 2D grid"),
+    ({"colliders": [{"type": "sphere", "center": [0.2, 0.05, -0.2], "radius": 0.1}]}, [], ["colliders"],
+     "a sphere centred off the plane"),
+    # the grid starts inside the box
+    ({"colliders": [{"type": "box", "center": [0.2, 0, -0.2], "half_extents": [0.5, 0.5, 0.1]}]}, [], ["colliders"],
+     "m inside it (initial_state initial"),
     # A grid whose equilibrium and basis would take minutes: the node parameter fails at once.
     ({"rows": 600, "cols": 600, "dimension": 3, "num_modes": 30, "linearization": "equilibrium",
       "tf_particles": [360000]}, [], ["tf_particles"]),
@@ -195,7 +211,9 @@ class NodeBadInputs(unittest.TestCase):
         env = dict(os.environ, ROSCONSOLE_FORMAT="[${severity}] ${message}")
         self.assertGreaterEqual(len(CASES), 40)
         failures = []
-        for index, (params, args, names) in enumerate(CASES):
+        for index, case in enumerate(CASES):
+            params, args, names = case[:3]
+            allowed = case[3] if len(case) > 3 else None
             name = "bad_%02d" % index
             rospy.set_param("/" + name, dict(base, **params))
             what = "case %d: %s %s" % (index, params if len(str(params)) < 120 else "(large)", " ".join(args))
@@ -215,6 +233,8 @@ class NodeBadInputs(unittest.TestCase):
                 failures.append("%s: %d FATAL lines\n%s" % (what, len(fatal), output))
             elif not named(fatal[0], names):
                 failures.append("%s: the FATAL names none of %s: %s" % (what, names, fatal[0]))
+            elif allowed and allowed not in fatal[0]:
+                failures.append("%s: the FATAL does not say %r: %s" % (what, allowed, fatal[0]))
             elif re.search(r"grid \(\dD, \d+ particles", output):
                 failures.append("%s: built a simulation before refusing\n%s" % (what, output))
             else:

@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Rostest sweep of bad handle frames and live values on a running node (node_bad_tf.test): a 2D grid
 held at two corners by the frames `left` and `right` (constraint modes). This script broadcasts the
-frames and, phase by phase, makes one of them bad; each time the node must say so (a WARN on /rosout,
+frames and, phase by phase, makes one of them bad (out of the plane, flipping, stopped, a sample
+1e12 m away); each time the node must say so (a WARN on /rosout,
 ~status's `handles`) and keep a state a user would call good: finite, no particle collapsed onto
 another, nothing far from where the handles hold the grid, never DIVERGED."""
 import math
@@ -179,7 +180,19 @@ class BadFrames(unittest.TestCase):
         self.assertEqual(rospy.wait_for_message(NODE + "/status", Status, timeout=10.0).handles, "",
                          "back to following once it is broadcast again")
 
-    def test_4_a_large_live_alpha_on_a_moving_cloth(self):
+    def test_4_a_frame_sample_far_away_is_refused(self):
+        # One glitching TF sample 1e12 m away (about a tick long), then back: refused and held, never
+        # followed (it would throw the cloth 1e12 m and end the run).
+        def glitch():
+            self.frames.set("right", ((1e12, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)))
+            time.sleep(0.04)
+            self.frames.set("right", ((SIZE, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)))
+        statuses, warnings, clouds = self.watch(2.0, glitch)
+        check_good(self, statuses, clouds, "a sample 1e12 m away")
+        self.assertTrue(any("'right' refused: it jumped" in w for w in warnings), warnings)
+        time.sleep(1.0)
+
+    def test_5_a_large_live_alpha_on_a_moving_cloth(self):
         client = Client(NODE, timeout=30)
         start = client.get_configuration(timeout=30)
         # Swing the cloth: move `right` in and out for a second.

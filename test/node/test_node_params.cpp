@@ -837,6 +837,60 @@ TEST(HandleFrames, AFlippingFrameIsHeldAndALargeTurnThatStaysIsGrippedAnew)
     EXPECT_NEAR(x[3 * p] - x0[3 * p], 0.1, 1e-12) << "and they follow the frame from there";
 }
 
+// A handle frame that jumps farther than kMaxJumpPerTick within one tick (a TF sample 1e12 m away)
+// is refused and its particles hold; back where it was, it is followed again; a jump that stays (the
+// next tick's pose within a tick's motion of it) is a new grip, without moving the particles.
+TEST(HandleFrames, AJumpingFrameIsHeldAndAJumpThatStaysIsGrippedAnew)
+{
+  GridParams grid_params;
+  grid_params.rows = 3;
+  grid_params.cols = 3;
+  grid_params.dimension = 3;
+  grid_params.handles = {{0, 2}};
+  const Grid grid(grid_params);
+  HandleFrames frames({{"gripper", {0, 2}}}, grid, grid.initialPositions(), Eigen::Vector3d::Zero());
+  auto at = [](double x) {
+    FramePose pose;
+    pose.translation = Eigen::Vector3d(x, 0.0, 0.0);
+    return pose;
+  };
+  frames.setTargets({at(0.0)});
+  frames.finishTick(1.0);
+  Eigen::VectorXd x0, x, v, a;
+  frames.motion(0.1, 1.0, x0, v, a);
+  frames.setTargets({at(0.4)});  // 0.4 m in a tick: followed
+  EXPECT_EQ(frames.status(), "");
+  frames.finishTick(1.0);
+  frames.motion(0.1, 1.0, x0, v, a);
+
+  frames.setTargets({at(1e12)});  // a glitch
+  EXPECT_NE(frames.status().find("held: frame 'gripper' refused: it jumped 1e+12 m since the last tick, above 0.5 m"),
+            std::string::npos) << frames.status();
+  ASSERT_EQ(frames.refusals().size(), 1u);
+  frames.motion(0.1, 1.0, x, v, a);
+  EXPECT_LT((x - x0).norm(), 1e-12) << "held where they were";
+  EXPECT_LT(v.norm() + a.norm(), 1e-12);
+  frames.finishTick(1.0);
+  frames.setTargets({at(0.45)});  // back: followed from where it was held
+  EXPECT_EQ(frames.status(), "");
+  frames.motion(0.1, 1.0, x, v, a);
+  EXPECT_NEAR(x[0] - x0[0], 0.05, 1e-12);
+  frames.finishTick(1.0);
+  frames.motion(0.1, 1.0, x0, v, a);
+
+  frames.setTargets({at(5.0)});  // a jump that stays
+  EXPECT_FALSE(frames.status().empty());
+  frames.finishTick(1.0);
+  frames.setTargets({at(5.1)});
+  EXPECT_EQ(frames.status(), "") << "gripped anew";
+  frames.motion(0.1, 1.0, x, v, a);
+  EXPECT_LT((x - x0).norm(), 1e-12) << "a new grip does not move the particles";
+  frames.finishTick(1.0);
+  frames.setTargets({at(5.2)});
+  frames.motion(0.1, 1.0, x, v, a);
+  EXPECT_NEAR(x[0] - x0[0], 0.1, 1e-12) << "and they follow the frame from there";
+}
+
 // The one frame's motion for the moving-frame formulation moves the handle particles exactly as
 // motion() does: the same lookups, the same interpolation, in grid coordinates.
 TEST(HandleFrames, OneFrameMotionIsTheParticlesMotion)

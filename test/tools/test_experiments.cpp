@@ -470,8 +470,34 @@ TEST(Cost, ReportsEveryMethodAndSize)
     EXPECT_EQ(r.time_step, setup.sim.time_step);
     EXPECT_DOUBLE_EQ(r.cpu_per_simulated_second, r.step_cpu_seconds / setup.sim.time_step);
     EXPECT_DOUBLE_EQ(r.real_time_factor, setup.sim.time_step / r.step_cpu_seconds);
+    EXPECT_EQ(r.diverged_step, 0) << r.method;
   }
   std::ostringstream csv;
   writeCostCsv(csv, rows);
   EXPECT_NE(csv.str().find("step_cpu_seconds,time_step,cpu_per_simulated_second,real_time_factor,"), std::string::npos);
+}
+
+// A method that diverges at its first step (the paper's grid at a 0.5 s step) is reported as
+// diverged there, and the experiment ends: each timed run stops at the divergence instead of starting
+// over millions of times.
+TEST(Cost, AMethodThatDivergesAtOnceIsReportedWithItsStep)
+{
+  ExperimentSetup setup;
+  setup.sim.time_step = 0.5;
+  CostOptions options;
+  options.sizes = {5};
+  options.methods = {Method::Physical, Method::Full};
+  options.repeats = 2;
+  options.build_repeats = 1;
+  const std::vector<CostRow> rows = runCost(setup, options);
+  ASSERT_EQ(rows.size(), 2u);
+  for (const CostRow& r : rows)
+  {
+    EXPECT_EQ(r.diverged_step, 1) << r.method;
+    EXPECT_GT(r.step_seconds, 0.0) << r.method;
+  }
+  std::ostringstream csv;
+  writeCostCsv(csv, rows);
+  EXPECT_NE(csv.str().find(",diverged,diverged_step\n"), std::string::npos) << csv.str();
+  EXPECT_NE(csv.str().find(",1,1\n"), std::string::npos) << csv.str();
 }

@@ -1,4 +1,5 @@
 // The YAML parameter source: the node's names and types, wrong types refused, unknown keys ignored.
+#include "yaml_colliders.h"
 #include "yaml_parameter_source.h"
 
 #include <gtest/gtest.h>
@@ -178,4 +179,45 @@ TEST(YamlParameterSource, UnknownKeysAreThoseNeitherTheCoreNorTheNodeReads)
   loadGridParams(source);
   loadSimulationParams(source);
   EXPECT_EQ(source.unknownKeys(), (std::vector<std::string>{"stifness", "num_mode"}));
+}
+
+// An integer beyond 32 bits is refused with the range, not as a wrong type; a whole number written as
+// a float in range is still a wrong type.
+TEST(YamlParameterSource, AnIntegerBeyondIntNamesTheRange)
+{
+  for (const std::string value : {"2147483648", "-99999999999", "1e12"})
+  {
+    const auto source = YamlParameterSource::fromString("rows: " + value + "\nfixed: [0, " + value + "]\n");
+    const std::string why = invalidArgument([&] { source.getInt("rows"); });
+    EXPECT_NE(why.find("'rows' = " + value + ": must be an integer in [-2147483648, 2147483647]"), std::string::npos)
+        << why;
+    const std::string list = invalidArgument([&] { source.getIntList("fixed"); });
+    EXPECT_NE(list.find("[-2147483648, 2147483647]"), std::string::npos) << list;
+  }
+  const auto real = YamlParameterSource::fromString("rows: 5.5\n");
+  EXPECT_NE(invalidArgument([&] { real.getInt("rows"); }).find("wrong type"), std::string::npos);
+}
+
+// A collider map: a key given twice is refused with both lines (not resolved to the last); a type
+// given as a number is named as such (not "absent"); a value of the wrong shape says what its key takes.
+TEST(YamlParameterSource, CollidersRefuseDuplicateKeysAndSayWhatEachKeyTakes)
+{
+  auto colliders = [](const std::string& text) {
+    return parseColliders(YAML::Load(text), "colliders");
+  };
+  std::string why = invalidArgument([&] {
+    colliders("- type: sphere\n  center: [0, 0, 0]\n  radius: 0.1\n  radius: 0.2\n");
+  });
+  EXPECT_NE(why.find("'colliders[0].radius' = (given twice): on lines 3 and 4"), std::string::npos) << why;
+  why = invalidArgument([&] { colliders("[{type: 5}]"); });
+  EXPECT_NE(why.find("'colliders[0].type' = 5: must be a string: plane, box, sphere or capsule"), std::string::npos)
+      << why;
+  why = invalidArgument([&] { colliders("[{type: sphere, center: [0, 0, 0], radius: 0.1, friction: {a: 1}}]"); });
+  EXPECT_NE(why.find("'colliders[0].friction'"), std::string::npos) << why;
+  EXPECT_NE(why.find("must be a number"), std::string::npos) << why;
+  EXPECT_EQ(why.find("a string"), std::string::npos) << why;
+  why = invalidArgument([&] { colliders("[{type: sphere, center: [0, 0, 1e300], radius: 0.1}]"); });
+  EXPECT_NE(why.find("'colliders[0].center'"), std::string::npos) << why;
+  EXPECT_NE(why.find("[-1e+06, 1e+06]"), std::string::npos) << why;
+  EXPECT_EQ(colliders("[{type: sphere, center: [0, 0, 1e6], radius: 0.1}]").size(), 1u);
 }

@@ -20,16 +20,32 @@ std::string text(const Eigen::Vector3d& v)
   return s.str();
 }
 
+std::string bound()
+{
+  std::ostringstream s;
+  s << kMaxColliderCoordinate;
+  return s.str();
+}
+
 void requireFinite(const std::string& name, const Eigen::Vector3d& v)
 {
-  if (!v.allFinite())
-    rejectParameter(name, text(v), "must be three finite numbers (m)");
+  if (!v.allFinite() || v.cwiseAbs().maxCoeff() > kMaxColliderCoordinate)
+    rejectParameter(name, text(v), "must be three finite numbers in [-" + bound() + ", " + bound() + "] (m)");
 }
 
 void requirePositive(const std::string& name, double value)
 {
-  if (!std::isfinite(value) || value <= 0.0)
-    rejectParameter(name, value, "must be a finite number > 0 (m)");
+  if (!std::isfinite(value) || value <= 0.0 || value > kMaxColliderCoordinate)
+    rejectParameter(name, value, "must be a number > 0 and <= " + bound() + " (m)");
+}
+
+// On a 2D grid a collider's surface must push the particles only within the x-z plane: the y of `v`
+// (a point's, or a direction's) must be 0.
+void requireInPlane(const std::string& name, const Eigen::Vector3d& v, const std::string& what)
+{
+  if (v.y() != 0.0)
+    rejectParameter(name, text(v), "its y must be 0 on a 2D grid (" + what +
+                                       " would push the particles along y, which a 2D grid in the x-z plane does not have)");
 }
 
 // The correction that Coulomb friction with the bound `limit` (>= 0) makes to a tangential quantity
@@ -72,10 +88,11 @@ ColliderType parseColliderType(const std::string& text, const std::string& name)
   rejectParameter(name, "'" + text + "'", "must be one of plane, box, sphere, capsule");
 }
 
-void validateCollider(const Collider& c, const std::string& name)
+void validateCollider(const Collider& c, const std::string& name, int dimension)
 {
   if (!std::isfinite(c.friction) || c.friction < 0.0)
     rejectParameter(name + ".friction", c.friction, "must be a finite Coulomb coefficient >= 0");
+  const bool planar = dimension == 2;
   switch (c.type)
   {
     case ColliderType::Plane:
@@ -83,16 +100,30 @@ void validateCollider(const Collider& c, const std::string& name)
       requireFinite(name + ".normal", c.normal);
       if (!(c.normal.norm() > 1e-12))
         rejectParameter(name + ".normal", text(c.normal), "must be a non-zero vector (the side the cloth stays on)");
+      if (planar)
+        requireInPlane(name + ".normal", c.normal, "a plane whose normal has a y part");
       break;
     case ColliderType::Box:
       requireFinite(name + ".center", c.center);
       requireFinite(name + ".half_extents", c.half_extents);
-      if (!(c.half_extents.minCoeff() > 0.0))
-        rejectParameter(name + ".half_extents", text(c.half_extents), "must be three numbers > 0 (m)");
+      if (!(c.half_extents.minCoeff() > 0.0) || c.half_extents.maxCoeff() > kMaxColliderCoordinate)
+        rejectParameter(name + ".half_extents", text(c.half_extents), "must be three numbers > 0 and <= " + bound() + " (m)");
+      if (planar)
+      {
+        requireInPlane(name + ".center", c.center, "a box off the plane");
+        // A particle inside is pushed out through the nearest face: a y face where the box is thinner
+        // along y than its depth in the plane (at most the smaller in-plane half extent).
+        if (c.half_extents.y() < std::min(c.half_extents.x(), c.half_extents.z()))
+          rejectParameter(name + ".half_extents", text(c.half_extents),
+                          "its y must be at least the smaller of its x and z on a 2D grid (a thinner box would push the "
+                          "particles inside it out along y, which a 2D grid in the x-z plane does not have)");
+      }
       break;
     case ColliderType::Sphere:
       requireFinite(name + ".center", c.center);
       requirePositive(name + ".radius", c.radius);
+      if (planar)
+        requireInPlane(name + ".center", c.center, "a sphere centred off the plane");
       break;
     case ColliderType::Capsule:
       requireFinite(name + ".a", c.a);
@@ -100,12 +131,43 @@ void validateCollider(const Collider& c, const std::string& name)
       requirePositive(name + ".radius", c.radius);
       if (!((c.b - c.a).norm() > 0.0))
         rejectParameter(name + ".b", text(c.b), "must differ from a (a capsule's segment; use a sphere for a point)");
+      if (planar)
+      {
+        requireInPlane(name + ".a", c.a, "a capsule off the plane");
+        requireInPlane(name + ".b", c.b, "a capsule off the plane");
+      }
       break;
   }
 }
 
+std::string colliderFieldExpected(const std::string& key)
+{
+  if (key == "type")
+    return "a string: plane, box, sphere or capsule";
+  if (key == "frame")
+    return "a string (a TF frame id)";
+  if (key == "friction")
+    return "a number (the Coulomb coefficient, >= 0)";
+  if (key == "radius")
+    return "a number (m, > 0)";
+  if (key == "point" || key == "normal" || key == "center" || key == "half_extents" || key == "a" || key == "b")
+    return "a list of three numbers [x, y, z] (m)";
+  return "not a key of a collider (the keys: type, frame, friction; point, normal (plane); center, half_extents "
+         "(box); center, radius (sphere); a, b, radius (capsule))";
+}
+
 Collider colliderFromFields(const ColliderFields& f, const std::string& name)
 {
+  if (f.numbers.count("type"))
+  {
+    const std::vector<double>& value = f.numbers.at("type");
+    std::ostringstream given;
+    if (value.size() == 1)
+      given << value[0];
+    else
+      given << "a list of " << value.size() << " numbers";
+    rejectParameter(name + ".type", given.str(), "must be " + colliderFieldExpected("type"));
+  }
   const auto type_text = f.text.find("type");
   if (type_text == f.text.end())
     rejectParameter(name + ".type", "(absent)", "every collider needs a type: plane, box, sphere or capsule");
@@ -130,13 +192,13 @@ Collider colliderFromFields(const ColliderFields& f, const std::string& name)
   for (const auto& [key, value] : f.text)
     if (key != "type" && key != "frame")
       rejectParameter(name + "." + key, "'" + value + "'",
-                      known(vectors, key) || known(scalars, key) ? "must be a number or a list of numbers"
+                      known(vectors, key) || known(scalars, key) ? "must be " + colliderFieldExpected(key)
                                                                  : "is not a key of a " + toString(c.type) + " (its keys: " + allowed + ")");
   for (const auto& [key, value] : f.numbers)
   {
     const std::string field = name + "." + key;
     if (key == "type" || key == "frame")
-      rejectParameter(field, value.empty() ? 0.0 : value[0], "must be a string");
+      rejectParameter(field, value.empty() ? 0.0 : value[0], "must be " + colliderFieldExpected(key));
     if (known(vectors, key))
     {
       if (value.size() != 3)
@@ -179,11 +241,17 @@ Collider colliderFromFields(const ColliderFields& f, const std::string& name)
   return c;
 }
 
-void validateContactThickness(double thickness)
+void validateContactThickness(double thickness, double spacing)
 {
-  if (!std::isfinite(thickness) || thickness < 0.0)
-    rejectParameter("contact_thickness", thickness,
-                    "must be a finite number of metres >= 0 (0: a tenth of the spacing)");
+  if (!std::isfinite(thickness) || thickness < 0.0 || thickness > kMaxThicknessFraction * spacing)
+  {
+    std::ostringstream allowed;
+    allowed << "must be a number of metres >= 0 (0: a tenth of the spacing) and at most " << kMaxThicknessFraction
+            << " x spacing = " << kMaxThicknessFraction * spacing
+            << " m (a touching particle is pushed out by up to the thickness in one step; further than a spring's "
+               "length folds the cloth)";
+    rejectParameter("contact_thickness", thickness, allowed.str());
+  }
 }
 
 namespace
@@ -266,6 +334,114 @@ namespace
   return d;
 }
 
+// The first t in [0, 1] where a0 + t (a1 - a0) reaches the sphere of `radius` about the origin, from
+// a0 outside it; false when it does not.
+bool sphereEntry(const Eigen::Vector3d& a0, const Eigen::Vector3d& a1, double radius, double& t)
+{
+  const Eigen::Vector3d dir = a1 - a0;
+  const double a = dir.squaredNorm(), b = a0.dot(dir), c = a0.squaredNorm() - radius * radius;
+  if (c <= 0.0 || a <= 0.0 || b >= 0.0)  // inside, still, or moving away
+    return false;
+  const double disc = b * b - a * c;
+  if (disc < 0.0)
+    return false;
+  t = c / (-b + std::sqrt(disc));  // the smaller root, without cancellation
+  return t <= 1.0;
+}
+
+// Where the segment from a0 (outside the shape) to a1, both in the collider's frame, first enters the
+// shape: the entry's outward normal n and n . (a1 - entry) (<= 0: how far beyond the surface the
+// segment ends, on the side it came from). False when it does not enter it or a0 is inside. A
+// plane's half-space is never passed through (a particle beyond it is inside at any depth).
+bool shapeEntry(const Collider& c, const Eigen::Vector3d& a0, const Eigen::Vector3d& a1, double& distance,
+                Eigen::Vector3d& n)
+{
+  const Eigen::Vector3d dir = a1 - a0;
+  double t = 0.0;
+  switch (c.type)
+  {
+    case ColliderType::Plane:
+      return false;
+    case ColliderType::Box:
+    {
+      // Slabs: the latest entry into the three slabs before the earliest exit.
+      const Eigen::Vector3d q = a0 - c.center;
+      if ((q.cwiseAbs() - c.half_extents).maxCoeff() <= 0.0)
+        return false;
+      double enter = -std::numeric_limits<double>::infinity(), exit = std::numeric_limits<double>::infinity();
+      int axis = -1;
+      for (int k = 0; k < 3; ++k)
+      {
+        if (dir[k] == 0.0)
+        {
+          if (std::abs(q[k]) > c.half_extents[k])
+            return false;
+          continue;
+        }
+        double t1 = (-c.half_extents[k] - q[k]) / dir[k], t2 = (c.half_extents[k] - q[k]) / dir[k];
+        if (t1 > t2)
+          std::swap(t1, t2);
+        if (t1 > enter)
+        {
+          enter = t1;
+          axis = k;
+        }
+        exit = std::min(exit, t2);
+      }
+      if (axis < 0 || enter > exit || enter < 0.0 || enter > 1.0)
+        return false;
+      n = Eigen::Vector3d::Zero();
+      n[axis] = dir[axis] > 0.0 ? -1.0 : 1.0;
+      distance = n.dot(dir) * (1.0 - enter);
+      return true;
+    }
+    case ColliderType::Sphere:
+    {
+      if (!sphereEntry(a0 - c.center, a1 - c.center, c.radius, t))
+        return false;
+      n = (a0 + t * dir - c.center).normalized();
+      distance = n.dot(dir) * (1.0 - t);
+      return true;
+    }
+    case ColliderType::Capsule:
+    {
+      // The union of the two end spheres and the side of the cylinder between them: the first entry
+      // into any (an entry through a flat end of the cylinder is inside an end sphere, entered earlier).
+      const Eigen::Vector3d axis = c.b - c.a;
+      const double length = axis.norm();
+      const Eigen::Vector3d u = axis / length;
+      const Eigen::Vector3d p = a0 - c.a;
+      const double along = std::clamp(p.dot(u), 0.0, length);
+      if ((p - along * u).norm() <= c.radius)
+        return false;  // a0 inside
+      double best = std::numeric_limits<double>::infinity();
+      Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+      for (const Eigen::Vector3d& end : {c.a, c.b})
+        if (sphereEntry(a0 - end, a1 - end, c.radius, t) && t < best)
+        {
+          best = t;
+          centre = end;
+        }
+      const Eigen::Vector3d p_perp = p - p.dot(u) * u, d_perp = dir - dir.dot(u) * u;
+      if (sphereEntry(p_perp, p_perp + d_perp, c.radius, t) && t < best)
+      {
+        const double s = (p + t * dir).dot(u);
+        if (s >= 0.0 && s <= length)
+        {
+          best = t;
+          centre = c.a + s * u;
+        }
+      }
+      if (!(best <= 1.0))
+        return false;
+      n = (a0 + best * dir - centre).normalized();
+      distance = n.dot(dir) * (1.0 - best);
+      return true;
+    }
+  }
+  return false;
+}
+
 // A collider at its pose for one step, in the forms every particle's test needs: computed once per
 // step, not once per particle (the inverse pose, the plane's unit normal, the step's motion).
 struct Placed
@@ -274,7 +450,7 @@ struct Placed
   Eigen::Isometry3d pose, to_local;  // the pose and its inverse
   Eigen::Vector3d unit_normal;       // plane
   bool still = true;                 // the collider did not move over the step
-  Eigen::Isometry3d step_back;       // else its motion over the step, inverted
+  Eigen::Isometry3d step, step_back; // else its motion over the step, and that inverted
   // Every point closer to the surface than the thickness lies in `reach` (grid coordinates), so a
   // particle outside it is rejected with six comparisons; a plane is unbounded (no reach).
   bool bounded = false;
@@ -288,7 +464,7 @@ struct Placed
   Placed(const Collider& c, const Eigen::Isometry3d& at, const Eigen::Isometry3d& start, double thickness)
     : collider(&c), pose(at), to_local(at.inverse()), unit_normal(c.normal.normalized())
   {
-    const Eigen::Isometry3d step = at * start.inverse();
+    step = at * start.inverse();
     still = step.isApprox(Eigen::Isometry3d::Identity(), 0.0);
     step_back = step.inverse();
     auto size = [](const Eigen::Vector3d& v) { return v.cwiseAbs().maxCoeff(); };
@@ -343,6 +519,34 @@ struct Placed
     return localDistance(*collider, unit_normal, to_local * x, limit, local_normal);
   }
   Eigen::Vector3d normal(const Eigen::Vector3d& local_normal) const { return pose.linear() * local_normal; }
+
+  // Whether a particle that went from `from` to `at` over the step (grid coordinates) touches: its
+  // distance d below the thickness at the end, or its path through the shape. Contact is continuous:
+  // the path is the straight segment relative to the collider (the start carried by the collider's
+  // motion over the step), and where it entered the shape from outside, d and the normal are the
+  // entry's (d = n . (end - entry)), so a particle that passed through a thin plate or ended past the
+  // middle of one is put back on the side it came from. Its distance at the end bounds how far it
+  // can be from the shape on the way: a path shorter than that entered nothing (a resting particle
+  // needs no sweep).
+  [[gnu::always_inline]] inline bool touches(const Eigen::Vector3d& from, const Eigen::Vector3d& at, double thickness,
+                                             double& d, Eigen::Vector3d& local_normal) const
+  {
+    const Eigen::Vector3d start = still ? from : Eigen::Vector3d(step * from);
+    if (bounded && !reach.contains(at) && !reach.intersects(Eigen::AlignedBox3d(start.cwiseMin(at), start.cwiseMax(at))))
+      return false;
+    d = distance(at, thickness, local_normal);
+    if (!bounded || (d >= 0.0 && (at - start).squaredNorm() <= d * d))
+      return d < thickness;
+    double entry_d = 0.0;
+    Eigen::Vector3d entry_n;
+    if (shapeEntry(*collider, to_local * start, to_local * at, entry_d, entry_n))
+    {
+      d = entry_d;
+      local_normal = entry_n;
+      return true;
+    }
+    return d < thickness;
+  }
 };
 
 }  // namespace
@@ -355,6 +559,49 @@ double signedDistance(const Collider& c, const Eigen::Isometry3d& pose, const Ei
                                  std::numeric_limits<double>::infinity(), n);
   normal = pose.linear() * n;
   return d;
+}
+
+void checkStartOutsideColliders(const Grid& grid, const Eigen::VectorXd& positions,
+                                const std::vector<Collider>& colliders, double thickness, const std::string& start)
+{
+  const Eigen::Matrix3Xd points = grid.toPoints(positions);
+  for (size_t c = 0; c < colliders.size(); ++c)
+  {
+    const Collider& collider = colliders[c];
+    if (!collider.frame.empty())
+      continue;  // placed at its frame's first pose, later
+    double deepest = 0.0;
+    int particle = -1;
+    for (int p = 0; p < grid.numParticles(); ++p)
+    {
+      if (grid.isFixed(p) || grid.isHandle(p))
+        continue;
+      Eigen::Vector3d unused;
+      const double depth = -signedDistance(collider, Eigen::Isometry3d::Identity(), points.col(p), unused);
+      if (depth > deepest)
+      {
+        deepest = depth;
+        particle = p;
+      }
+    }
+    // Round-off in placing a sheet on a surface stays far below a hundredth of the thickness.
+    if (particle < 0 || deepest <= 0.01 * thickness)
+      continue;
+    std::ostringstream value, allowed;
+    value << "a " << toString(collider.type);
+    switch (collider.type)
+    {
+      case ColliderType::Plane: value << " through " << text(collider.point) << ", normal " << text(collider.normal); break;
+      case ColliderType::Box: value << " at " << text(collider.center) << ", half_extents " << text(collider.half_extents); break;
+      case ColliderType::Sphere: value << " at " << text(collider.center) << ", radius " << collider.radius; break;
+      case ColliderType::Capsule: value << " from " << text(collider.a) << " to " << text(collider.b) << ", radius " << collider.radius; break;
+    }
+    allowed << "free particle " << particle << " starts " << deepest << " m inside it (" << start
+            << " places it at " << text(points.col(particle)) << " m; the start ignores colliders); the cloth must start "
+            << "outside every collider (the first step would throw it out): move the collider or the grid, or start "
+            << "from another state (initial_state)";
+    rejectParameter("colliders[" + std::to_string(c) + "]", value.str(), allowed.str());
+  }
 }
 
 struct Contact::Touch
@@ -438,11 +685,9 @@ OnePassResult onePass(const Placed& placed, double thickness, const Eigen::Vecto
   for (int p = 0; p < particles; ++p)
   {
     const Eigen::Vector3d at = Eigen::Map<const Eigen::Vector3d>(xs + 3 * p);
-    if (one.bounded && !one.reach.contains(at))
-      continue;
     Eigen::Vector3d local_n;
-    const double d = one.distance(at, thickness, local_n);
-    if (d >= thickness)
+    double d = 0.0;
+    if (!one.touches(Eigen::Map<const Eigen::Vector3d>(starts + 3 * p), at, thickness, d, local_n))
       continue;
     const Eigen::Vector3d n = one.normal(local_n);
     before = std::max(before, -d);
@@ -483,7 +728,7 @@ Eigen::Vector3d Contact::point(const Eigen::VectorXd& x, int particle) const
   return pointOf(x, particle, grid_.dimension());
 }
 
-std::vector<Contact::Touch> Contact::detect(const Eigen::VectorXd& x, double /*dt*/)
+std::vector<Contact::Touch> Contact::detect(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x)
 {
   std::vector<Touch> touches;
   report_ = ContactReport{};
@@ -498,11 +743,9 @@ std::vector<Contact::Touch> Contact::detect(const Eigen::VectorXd& x, double /*d
     for (int p = 0; p < particles; ++p)
     {
       const Eigen::Vector3d at = point(x, p);
-      if (placed.bounded && !placed.reach.contains(at))
-        continue;
       Eigen::Vector3d local_n;
-      const double d = placed.distance(at, thickness_, local_n);
-      if (d >= thickness_)
+      double d = 0.0;
+      if (!placed.touches(point(x_start, p), at, thickness_, d, local_n))
         continue;
       report_.penetration_before = std::max(report_.penetration_before, -d);
       ++report_.touching[c];
@@ -559,17 +802,16 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
   for (int p = 0; p < particles; ++p)
   {
     const Eigen::Vector3d at = pointOf(x, p, dim);  // touches are found where the step left the particle
+    const Eigen::Vector3d from = pointOf(x_start, p, dim);  // and along its path there
     int touching = 0;
     bool corrected = false;  // an earlier collider's correction moved the particle
     double first_distance = 0.0;
     for (int k = 0; k < count; ++k)
     {
       const Placed& placed_k = placed[k];
-      if (placed_k.bounded && !placed_k.reach.contains(at))
-        continue;
       Eigen::Vector3d local_n;
-      double d = placed_k.distance(at, thickness_, local_n);
-      if (d >= thickness_)
+      double d = 0.0;
+      if (!placed_k.touches(from, at, thickness_, d, local_n))
         continue;
       Eigen::Vector3d n = placed_k.normal(local_n);
       const int c = index[k];
@@ -631,7 +873,7 @@ void Contact::correctModal(const Eigen::VectorXd& x_start, const Eigen::VectorXd
                            const Eigen::VectorXd& mass, const Eigen::MatrixXd& phi, Eigen::VectorXd& q, Eigen::VectorXd& qv, double dt)
 {
   const int dim = grid_.dimension();
-  const std::vector<Touch> touches = detect(x, dt);
+  const std::vector<Touch> touches = detect(x_start, x);
   if (touches.empty())
     return;
   const int r = static_cast<int>(phi.cols());

@@ -128,6 +128,7 @@ double FullMethod::assign(const Eigen::VectorXd& u, const Eigen::VectorXd& v, Re
 
 void FullMethod::setHandleMotion(const HandleMotion& motion)
 {
+  handle_displacement_ = motion.displacement;
   Eigen::VectorXd reference = lin_.x_ref;
   const std::vector<int>& dofs = lin_.grid.handleDofs();
   if (motion.displacement.size() > 0)
@@ -179,9 +180,33 @@ void FullMethod::frameTerms(const FrameForces& frame, Eigen::VectorXd& load, Spa
 
 double FullMethod::kineticEnergy(const State& s) const { return 0.5 * s.v.cwiseAbs2().dot(lin_.mass); }
 
+Eigen::VectorXd FullMethod::handleTranslation(const Eigen::VectorXd& handle_displacement) const
+{
+  const int dim = lin_.grid.dimension();
+  const Eigen::Index count = handle_displacement.size() / dim;
+  if (count == 0)
+    return Eigen::VectorXd();
+  return handle_displacement.reshaped(dim, count).rowwise().mean();
+}
+
+void FullMethod::setAnchor(const Eigen::VectorXd& u_anchor, const Eigen::VectorXd& handles_anchor)
+{
+  anchor_ = u_anchor;
+  anchor_translation_ = handleTranslation(handles_anchor);
+}
+
 double FullMethod::anchorDistanceSquared(const Eigen::VectorXd& q) const
 {
-  return (q - anchor_).cwiseAbs2().dot(lin_.mass);
+  const int dim = lin_.grid.dimension();
+  Eigen::VectorXd moved = handleTranslation(handle_displacement_);
+  if (anchor_translation_.size() == dim)
+    moved = moved.size() == dim ? Eigen::VectorXd(moved - anchor_translation_) : Eigen::VectorXd(-anchor_translation_);
+  if (moved.size() == 0)
+    return (q - anchor_).cwiseAbs2().dot(lin_.mass);
+  double sum = 0.0;
+  for (Eigen::Index p = 0; p + dim <= q.size(); p += dim)
+    sum += (q.segment(p, dim) - anchor_.segment(p, dim) - moved).cwiseAbs2().dot(lin_.mass.segment(p, dim));
+  return sum;
 }
 
 namespace
@@ -251,7 +276,7 @@ void ModalMethod::setOffset(const Eigen::VectorXd& offset)
   offset_ = offset;
   updateReference();
   if (anchor_.size() > 0)
-    setAnchor(anchor_);
+    setAnchor(anchor_, Eigen::VectorXd());
   if (frame_projection_)
   {
     frame_projection_->w_stale = true;
@@ -464,7 +489,7 @@ const Eigen::VectorXd& ModalMethod::psiV() const
   return psi_v_;
 }
 
-void ModalMethod::setAnchor(const Eigen::VectorXd& u_anchor)
+void ModalMethod::setAnchor(const Eigen::VectorXd& u_anchor, const Eigen::VectorXd& /*handles_anchor*/)
 {
   anchor_ = u_anchor;
   const Eigen::VectorXd from_anchor = offset_ - anchor_;

@@ -121,9 +121,10 @@ public:
   virtual double displacementAt(const State& s, int k) const = 0;
   virtual double velocityAt(const State& s, int k) const = 0;
   virtual double kineticEnergy(const State& s) const = 0;
-  // Sets the displacement that distances are measured from (the start of the run), and measures a
-  // state's mass-weighted squared distance |u(q) - anchor|_M^2 from it, in O(size of q).
-  virtual void setAnchor(const Eigen::VectorXd& u_anchor) = 0;
+  // Sets the displacement that distances are measured from (the start of the run), with the handle
+  // dofs' displacement then (empty: at rest), and measures a state's mass-weighted squared distance
+  // |u(q) - anchor|_M^2 from it, in O(size of q).
+  virtual void setAnchor(const Eigen::VectorXd& u_anchor, const Eigen::VectorXd& handles_anchor) = 0;
   virtual double anchorDistanceSquared(const Eigen::VectorXd& q) const = 0;
   // Kinetic plus potential energy in this method's own measure, the one its dynamics conserve
   // without damping: the physical energy for `full` and `physical`, the quadratic model's for
@@ -208,7 +209,10 @@ public:
   double displacementAt(const State& s, int k) const override { return s.q[k]; }
   double velocityAt(const State& s, int k) const override { return s.v[k]; }
   double kineticEnergy(const State& s) const override;
-  void setAnchor(const Eigen::VectorXd& u_anchor) override { anchor_ = u_anchor; }
+  // Measured relative to the handles: the handle particles' mean displacement since the anchor is
+  // taken off every free particle's (the free dofs hold the whole motion, which handles carried
+  // 100 m are not diverged by; the modal methods' q holds none of the handles' static influence).
+  void setAnchor(const Eigen::VectorXd& u_anchor, const Eigen::VectorXd& handles_anchor) override;
   double anchorDistanceSquared(const Eigen::VectorXd& q) const override;
   // The handle particles sit at their prescribed positions; their velocity damps the interior
   // through the coupling of Rayleigh damping, -beta K_ib v_b.
@@ -222,7 +226,11 @@ private:
   // Per particle: m (uniform - position y_ref), m position and 2 m spin, 3 x 3 blocks.
   void frameTerms(const FrameForces& frame, Eigen::VectorXd& load, SparseMatrix& linear,
                   SparseMatrix& gyroscopic) override;
+  // The handle particles' mean displacement (dimension values; empty without handles or at rest).
+  Eigen::VectorXd handleTranslation(const Eigen::VectorXd& handle_displacement) const;
   Eigen::VectorXd anchor_;
+  Eigen::VectorXd anchor_translation_;  // the handles' at the anchor
+  Eigen::VectorXd handle_displacement_;  // the prescribed handle dofs' displacement (empty: at rest)
   Eigen::VectorXd y_ref_;  // x_ref on the free dofs, once a frame moves
   // The contact pass's absolute end and start positions, kept between steps (no allocation a step).
   Eigen::VectorXd contact_x_, contact_start_;
@@ -244,7 +252,7 @@ public:
   double velocityAt(const State& s, int k) const override;
   // Phi is mass-orthonormal: 1/2 V^T V is the kinetic energy of u' = Phi V.
   double kineticEnergy(const State& s) const override { return 0.5 * s.v.squaredNorm(); }
-  void setAnchor(const Eigen::VectorXd& u_anchor) override;
+  void setAnchor(const Eigen::VectorXd& u_anchor, const Eigen::VectorXd& handles_anchor) override;
   double anchorDistanceSquared(const Eigen::VectorXd& q) const override;
   void setHandleMotion(const HandleMotion& motion) override;
   // The touching particles' impulses through Phi (Contact::correctModal): O(n r) to find them.

@@ -1,6 +1,7 @@
 // Parameter names and types shared by the node and the tools.
 #include "modal_mass_spring/parameters.h"
 
+#include <limits>
 #include <stdexcept>
 
 namespace modal_mass_spring
@@ -9,6 +10,13 @@ namespace modal_mass_spring
 std::string wrongType(const std::string& key, const std::string& expected)
 {
   return "invalid parameter '" + key + "': wrong type, must be " + expected;
+}
+
+std::string intOutOfRange(const std::string& key, const std::string& value)
+{
+  return "invalid parameter '" + key + "' = " + value + ": must be an integer in [" +
+         std::to_string(std::numeric_limits<int>::min()) + ", " + std::to_string(std::numeric_limits<int>::max()) +
+         "] (a whole number beyond 32-bit int)";
 }
 
 GridParams loadGridParams(const ParameterSource& s)

@@ -48,6 +48,9 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
   limit_ = params_.divergence_limit > 0.0 ? params_.divergence_limit
                                           : 100.0 * g.spacing * std::max(g.rows, g.cols);
   precompute(on_stage, on_iteration);
+  if (!params_.colliders.empty())
+    contact_ = std::make_unique<Contact>(grid_, params_.colliders,
+                                         resolveContactThickness(params_.contact_thickness, g.spacing));
 
   if (grid_.numHandleDofs() > 0)
     handle_coupling_ = modal_mass_spring::handleCoupling(grid_, x_ref_);
@@ -127,6 +130,11 @@ void Simulation::precompute(const StageFn& on_stage, const IterationFn& on_itera
       x_start_ = data.equilibrium;
     equilibrium_ = data.equilibrium;
   }
+  // A start inside a collider is refused before the basis is built.
+  if (!params_.colliders.empty())
+    checkStartOutsideColliders(grid_, x_start_, params_.colliders,
+                               resolveContactThickness(params_.contact_thickness, g.spacing),
+                               "initial_state " + toString(params_.initial_state));
   // At a hanging equilibrium compressed springs would make K indefinite: their geometric part is
   // dropped so that no mode has a negative lambda^2. At rest no spring is compressed.
   stage("stiffness");
@@ -338,7 +346,7 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
     model_->setFrameForces(frameForcesOf(frame_current_));
   model_->setExternalForce(grid_.gatherFree(external_force_));
   projection_error_ = model_->assign(u, v, remainder);
-  model_->setAnchor(anchor_);
+  model_->setAnchor(anchor_, anchor_handles_);
   diverged_ = false;
   divergence_message_.clear();
 }
@@ -359,11 +367,12 @@ void Simulation::setPhysicalState(const Eigen::VectorXd& u_world, const Eigen::V
   Eigen::VectorXd u = u_world, v = v_world;
   toBody(u, v);
   anchor_ = u;
+  anchor_handles_ = handle_current_.displacement;
   install(params_.method, u, v, Remainder::Drop);
   // Distances are measured from the start as this method holds it: a modal method's projection of a
   // start far outside its modes has not diverged by being where the projection put it.
   anchor_ = bodyDisplacement();
-  model_->setAnchor(anchor_);
+  model_->setAnchor(anchor_, anchor_handles_);
   handles_moved_ = !handle_current_.atRest() || !frame_current_.atRest();
   start_energy_ = methodEnergy();
   energy_scale_ = base_energy_scale_ + kineticEnergy() + springEnergy(grid_, positions());

@@ -185,8 +185,8 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
                       "one TF frame); handles moving apart need constraint_modes or auto");
   }
   for (size_t i = 0; i < p.colliders.size(); ++i)
-    validateCollider(p.colliders[i], "colliders[" + std::to_string(i) + "]");
-  validateContactThickness(p.contact_thickness);
+    validateCollider(p.colliders[i], "colliders[" + std::to_string(i) + "]", grid.dimension);
+  validateContactThickness(p.contact_thickness, grid.spacing);
   if (!p.colliders.empty() && p.handle_formulation == HandleFormulation::MovingFrame)
     rejectParameter("handle_formulation", "moving_frame",
                     "cannot be used with colliders (contact is resolved in world coordinates); use auto or constraint_modes");

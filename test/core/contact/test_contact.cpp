@@ -2,7 +2,8 @@
 // above the friction angle against the closed form), a sheet dropped on each collider type under
 // both integrators, a sheet resting on a table, the reduced methods against `full` (on the modes and on
 // the skinning subspace, a sheet draped over a table edge), the force on a
-// handle, and bad colliders refused by name.
+// handle, thin colliders passed through in one step, and bad colliders (and a start inside one)
+// refused by name.
 #include "modal_mass_spring/contact.h"
 #include "modal_mass_spring/simulation.h"
 
@@ -118,6 +119,24 @@ double deepestOverRun(Simulation& sim, double seconds, const std::vector<Collide
 }
 
 double largestMove(const Eigen::Matrix3Xd& a, const Eigen::Matrix3Xd& b) { return (a - b).colwise().norm().maxCoeff(); }
+
+// Whether a particle going from `from` (the collider at `start`) to `to` (at `end`) touches, by brute
+// force: within the thickness at the end, or its path relative to the collider (straight in the
+// collider's frame), sampled every 1/2000 of its length, inside the shape while it started outside.
+bool touchesByBruteForce(const Collider& c, const Eigen::Isometry3d& start, const Eigen::Isometry3d& end,
+                         const Eigen::Vector3d& from, const Eigen::Vector3d& to, double thickness)
+{
+  Eigen::Vector3d n;
+  if (signedDistance(c, end, to, n) < thickness)
+    return true;
+  const Eigen::Vector3d a = start.inverse() * from, b = end.inverse() * to;
+  if (signedDistance(c, Eigen::Isometry3d::Identity(), a, n) <= 0.0)
+    return false;
+  for (int k = 1; k <= 2000; ++k)
+    if (signedDistance(c, Eigen::Isometry3d::Identity(), a + (b - a) * (k / 2000.0), n) <= 0.0)
+      return true;
+  return false;
+}
 
 }  // namespace
 
@@ -258,18 +277,18 @@ TEST(Contact, OneColliderPassIsTheGeneralPassToTheBit)
     Eigen::VectorXd v_one = Eigen::VectorXd::Random(3 * particles), v_general = v_one;
     const Eigen::VectorXd mass = Eigen::VectorXd::Constant(3 * particles, 0.01);
     int touched = 0;
+    Eigen::Isometry3d previous = Eigen::Isometry3d::Identity();  // turned over step 0, then moving
     for (int step = 0; step < 4; ++step)
     {
-      const Eigen::Isometry3d pose = Eigen::Translation3d(0.0, 0.0, 0.01 * step) * turned;  // moves from step 1 on
+      const Eigen::Isometry3d pose = Eigen::Translation3d(0.0, 0.0, 0.01 * step) * turned;
       one.setPose(0, pose);
       general.setPose(0, pose);
       Eigen::VectorXd x_one = x_start + 0.01 * Eigen::VectorXd::Random(3 * particles), x_general = x_one;
       int brute_touching = 0;
       for (int p = 0; p < particles; ++p)
-      {
-        Eigen::Vector3d n;
-        brute_touching += signedDistance(shape, pose, x_one.segment<3>(3 * p), n) < thickness;
-      }
+        brute_touching +=
+            touchesByBruteForce(shape, previous, pose, x_start.segment<3>(3 * p), x_one.segment<3>(3 * p), thickness);
+      previous = pose;
       one.correctParticles(x_start, x_one, v_one, mass, 0.01);
       general.correctParticles(x_start, x_general, v_general, mass, 0.01);
       double brute_after = 0.0;
@@ -653,4 +672,187 @@ TEST(Contact, APlacedColliderIsNotSweptToItsNewPose)
   EXPECT_LT(placed.velocity().cwiseAbs().maxCoeff(), 0.05);
   EXPECT_GT(swept.velocity().cwiseAbs().maxCoeff(), 10.0);
   EXPECT_THROW(placed.placeCollider(1, into), std::invalid_argument);
+}
+
+// Contact is continuous: a particle whose step passes through a thin collider (a 2 mm plate, a
+// 1 mm-radius rod, a 5 mm ball) is put back on the side it came from, at the thickness, its approach
+// removed; one ending past the middle of a plate is not pushed out through the far side; a path
+// beside the collider is left alone. The end-point test alone misses every one of these.
+TEST(Contact, AStepThroughAThinColliderIsCaughtOnTheSideItCameFrom)
+{
+  const Grid grid(flatSheet());
+  const double thickness = 1e-3;
+  Collider plate;
+  plate.type = ColliderType::Box;
+  plate.half_extents = Eigen::Vector3d(0.5, 0.5, 0.001);
+  Collider rod;
+  rod.type = ColliderType::Capsule;
+  rod.a = Eigen::Vector3d(-0.5, 0.0, 0.0);
+  rod.b = Eigen::Vector3d(0.5, 0.0, 0.0);
+  rod.radius = 0.001;
+  Collider ball;
+  ball.type = ColliderType::Sphere;
+  ball.radius = 0.005;
+  const double top[] = {0.001, 0.001, 0.005};
+  int shape = 0;
+  for (const Collider& c : {plate, rod, ball})
+  {
+    SCOPED_TRACE(toString(c.type));
+    Contact contact(grid, {c}, thickness);
+    // Straight down through it, ending 5 cm below; ending just past the plate's middle (0.4 mm below
+    // it); and beside it, through nothing.
+    Eigen::VectorXd x_start(9), x(9);
+    x_start << 0.0, 0.0, 0.05, 0.0, 0.0, 0.05, 0.0, 0.6, 0.05;
+    x << 0.0, 0.0, -0.05, 0.0, 0.0, -0.0004, 0.0, 0.6, -0.05;
+    Eigen::VectorXd v = Eigen::VectorXd::Zero(9);
+    v[2] = v[5] = v[8] = -100.0;
+    const Eigen::VectorXd mass = Eigen::VectorXd::Constant(9, 0.01);
+    Eigen::Vector3d n;
+    ASSERT_GE(signedDistance(c, Eigen::Isometry3d::Identity(), x.segment<3>(0), n), thickness)
+        << "the end alone does not touch";
+    contact.correctParticles(x_start, x, v, mass, 1e-3);
+    EXPECT_NEAR(x[2], top[shape] + thickness, 1e-12) << "put back above, at the thickness";
+    EXPECT_NEAR(v[2], 0.0, 1e-12) << "its approach removed";
+    if (c.type == ColliderType::Box)
+    {
+      EXPECT_NEAR(x[5], top[shape] + thickness, 1e-12) << "past the middle, still back on the top";
+    }
+    EXPECT_DOUBLE_EQ(x[8], -0.05) << "a path beside it is left alone";
+    EXPECT_DOUBLE_EQ(v[8], -100.0);
+    ++shape;
+  }
+}
+
+// A sheet falling at 100 m/s^2 onto a 2 mm plate: each step travels further than the plate and twice
+// the thickness (a discrete check at each step's end would let it through); no particle ever gets
+// below the plate, in `full` and through the basis.
+TEST(Contact, AFallingSheetDoesNotTunnelThroughAThinPlate)
+{
+  GridParams g;
+  g.rows = g.cols = 3;
+  g.dimension = 3;
+  g.gravity = Eigen::Vector3d(0.0, 0.0, -100.0);  // the top row fixed at z = 0, the bottom row at -0.2
+  Collider plate;
+  plate.type = ColliderType::Box;
+  plate.center = Eigen::Vector3d(0.1, 0.0, -0.3);
+  plate.half_extents = Eigen::Vector3d(1.0, 1.0, 0.001);
+  for (Method method : {Method::Full, Method::Physical})
+  {
+    SCOPED_TRACE(toString(method));
+    SimulationParams s = withColliders(method, IntegratorKind::Explicit, 2e-3, {plate});
+    s.num_modes = 18;  // every free dof
+    s.contact_thickness = 1e-4;
+    Simulation sim(g, s);
+    double fastest = 0.0, lowest = 0.0;
+    for (int k = 0; k < 500; ++k)
+    {
+      const Eigen::Matrix3Xd before = sim.points();
+      const StepResult r = sim.step();
+      ASSERT_FALSE(r.diverged) << r.message;
+      const Eigen::Matrix3Xd after = sim.points();
+      fastest = std::max(fastest, largestMove(before, after));
+      lowest = std::min(lowest, after.row(2).minCoeff());
+    }
+    EXPECT_GT(fastest, 2.0 * plate.half_extents.z() + 2.0 * s.contact_thickness) << "a step jumps the plate";
+    EXPECT_GT(lowest, -0.3 - plate.half_extents.z()) << "never below the plate";
+    EXPECT_GT(lowest, -0.3 + plate.half_extents.z() - 1e-3) << "held on its top";
+  }
+}
+
+// Contact's parameters: contact_thickness at most the spacing; collider coordinates and sizes within
+// [-1e6, 1e6] m (as the node's offset); a collider type given as a number named as such.
+TEST(Contact, ThicknessAndCoordinatesAreBoundedAndATypeMustBeAString)
+{
+  const GridParams g = flatSheet();
+  SimulationParams s = withColliders(Method::Full, IntegratorKind::Explicit, 1e-3, {plane(-1.0)});
+  for (double thickness : {10.0, 1e300, 1.01 * g.spacing})
+  {
+    s.contact_thickness = thickness;
+    const std::string why = refusal([&] { Simulation sim(g, s); });
+    EXPECT_TRUE(contains(why, "'contact_thickness'") && contains(why, "at most 1 x spacing")) << why;
+  }
+  s.contact_thickness = g.spacing;  // the bound itself is allowed
+  EXPECT_EQ(refusal([&] { Simulation sim(g, s); }), "");
+  s.contact_thickness = 0.0;
+  Collider far = plane(-1.0);
+  far.point.z() = -1e300;
+  s.colliders = {far};
+  EXPECT_TRUE(contains(refusal([&] { Simulation sim(g, s); }), "colliders[0].point")) << refusal([&] { Simulation sim(g, s); });
+  Collider huge;
+  huge.type = ColliderType::Sphere;
+  huge.center = Eigen::Vector3d(0.0, 0.0, -2e6);
+  huge.radius = 1e300;
+  s.colliders = {huge};
+  EXPECT_TRUE(contains(refusal([&] { Simulation sim(g, s); }), "colliders[0].center"));
+  huge.center.z() = -10.0;
+  s.colliders = {huge};
+  EXPECT_TRUE(contains(refusal([&] { Simulation sim(g, s); }), "colliders[0].radius"));
+  ColliderFields numbered;
+  numbered.numbers["type"] = {5.0};
+  const std::string why = refusal([&] { colliderFromFields(numbered, "colliders[0]"); });
+  EXPECT_TRUE(contains(why, "'colliders[0].type' = 5: must be a string")) << why;
+}
+
+// On a 2D grid (the x-z plane) a collider whose surface pushes along y is refused by name: a plane
+// whose normal has a y part, a sphere or capsule centred off the plane, a box off it or thinner along
+// y than in the plane. The same shapes in the plane are accepted.
+TEST(Contact, A2DGridRefusesCollidersThatPushAlongY)
+{
+  const GridParams g;  // the paper's 5 x 5, 2D, 0.4 m tall from z = 0
+  auto refused = [&](const Collider& c) {
+    SimulationParams s = methodParams(Method::Full, 4, 1e-3);
+    s.colliders = {c};
+    return refusal([&] { Simulation sim(g, s); });
+  };
+  Collider wall = plane(0.0, Eigen::Vector3d::UnitY());
+  wall.point = Eigen::Vector3d(0.0, 0.05, 0.0);
+  EXPECT_TRUE(contains(refused(wall), "colliders[0].normal")) << refused(wall);
+  wall.normal = Eigen::Vector3d(1.0, 0.2, 0.0);
+  EXPECT_TRUE(contains(refused(wall), "colliders[0].normal")) << refused(wall);
+  Collider ball;
+  ball.type = ColliderType::Sphere;
+  ball.center = Eigen::Vector3d(0.2, 0.05, -0.2);
+  ball.radius = 0.1;
+  EXPECT_TRUE(contains(refused(ball), "colliders[0].center")) << refused(ball);
+  Collider rod;
+  rod.type = ColliderType::Capsule;
+  rod.a = Eigen::Vector3d(0.0, 0.0, -0.6);
+  rod.b = Eigen::Vector3d(0.4, 0.01, -0.6);
+  rod.radius = 0.05;
+  EXPECT_TRUE(contains(refused(rod), "colliders[0].b")) << refused(rod);
+  Collider slab;
+  slab.type = ColliderType::Box;
+  slab.center = Eigen::Vector3d(0.2, 0.0, -0.7);
+  slab.half_extents = Eigen::Vector3d(0.5, 0.01, 0.1);
+  EXPECT_TRUE(contains(refused(slab), "colliders[0].half_extents")) << refused(slab);
+  slab.half_extents.y() = 0.1;
+  slab.center.y() = 0.02;
+  EXPECT_TRUE(contains(refused(slab), "colliders[0].center")) << refused(slab);
+  slab.center.y() = 0.0;
+  ball.center.y() = 0.0;
+  ball.center.z() = -0.7;
+  rod.b.y() = 0.0;
+  for (const Collider& c : {plane(-0.6, Eigen::Vector3d(0.3, 0.0, 1.0)), slab, ball, rod})
+    EXPECT_EQ(refused(c), "") << toString(c.type);
+}
+
+// A cloth that starts inside a collider (here hanging at its equilibrium, which ignores colliders,
+// through a table) is refused before the first step, naming the collider, the particle and its
+// depth; a collider on a TF frame is not placed at the start and does not count.
+TEST(Contact, AStartInsideAColliderIsRefusedNamingTheColliderAndTheDepth)
+{
+  const GridParams g;  // 2D, the bottom row at z = -0.4 unloaded
+  Collider table;
+  table.type = ColliderType::Box;
+  table.center = Eigen::Vector3d(0.2, 0.0, -0.56);
+  table.half_extents = Eigen::Vector3d(0.5, 0.5, 0.15);  // its top at z = -0.41
+  SimulationParams s = methodParams(Method::Full, 4, 1e-3);
+  s.colliders = {plane(-2.0), table};
+  EXPECT_EQ(refusal([&] { Simulation sim(g, s); }), "") << "unloaded, the grid is above the table";
+  s.initial_state = InitialState::Equilibrium;  // it hangs lower
+  const std::string why = refusal([&] { Simulation sim(g, s); });
+  EXPECT_TRUE(contains(why, "'colliders[1]' = a box at [0.2, 0, -0.56]")) << why;
+  EXPECT_TRUE(contains(why, "m inside it (initial_state equilibrium")) << why;
+  s.colliders[1].frame = "table";  // placed at its frame's first pose, later
+  EXPECT_EQ(refusal([&] { Simulation sim(g, s); }), "");
 }
