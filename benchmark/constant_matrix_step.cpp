@@ -25,6 +25,7 @@
 // (from X*'s state at the window's start) gets from the converged run over the window.
 //   constant_matrix_step --config config/compare/cloth_drag_50.yaml --steps 400 --iterations 10
 //     [--matrix laplacian|equilibrium] [--skip N] [--set key=value ...]
+#include "experiments.h"
 #include "handle_scenarios.h"
 #include "yaml_parameter_source.h"
 
@@ -36,8 +37,6 @@
 #include <valgrind/callgrind.h>
 
 #include <Eigen/Cholesky>
-
-#include <time.h>
 
 #include <algorithm>
 #include <cmath>
@@ -51,13 +50,6 @@ using namespace modal_mass_spring;
 
 namespace
 {
-
-double threadCpuSeconds()
-{
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 // The reduced system over the cubature's springs T, built from a Simulation of method `cubature`.
 struct ConstantMatrixStep

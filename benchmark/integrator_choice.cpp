@@ -9,6 +9,7 @@
 // The push: 0.05 N out of the sheet, opposite ways on the two bottom corners, for the first 0.2 s.
 #include "modal_mass_spring/cubature.h"
 #include "modal_mass_spring/simulation.h"
+#include "experiments.h"
 #include "yaml_parameter_source.h"
 
 #include <Eigen/Eigenvalues>
@@ -17,7 +18,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <ctime>
 #include <exception>
 #include <memory>
 #include <string>
@@ -27,13 +27,6 @@ using namespace modal_mass_spring;
 
 namespace
 {
-
-double cpuSeconds()
-{
-  timespec t;
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 struct Run
 {
@@ -105,9 +98,9 @@ int main(int argc, char** argv)
           sim.setExternalForce(Eigen::VectorXd::Zero(push.size()));
         for (int j = 0; j < per_sample && !sim.diverged(); ++j)
         {
-          const double start = cpuSeconds();
+          const double start = threadCpuSeconds();
           steps += sim.step(1).steps_taken;
-          step_seconds += cpuSeconds() - start;
+          step_seconds += threadCpuSeconds() - start;
           newton = std::max(newton, sim.lastNewtonIterations());
         }
         run.samples.push_back(sim.positions());

@@ -6,6 +6,7 @@
 //     '--toggle-collect=modal_mass_spring::Simulation::step(int)'
 //     step_breakdown --config FILE --method cubature --skip 800 --steps 200 [--set key=value ...]
 // docs/benchmarks.md, "Where a reduced step's time goes", reads the inclusive costs per function.
+#include "experiments.h"
 #include "handle_scenarios.h"
 #include "yaml_colliders.h"
 #include "yaml_parameter_source.h"
@@ -17,8 +18,6 @@
 
 #include <valgrind/callgrind.h>
 
-#include <time.h>
-
 #include <cstdio>
 #include <iostream>
 #include <stdexcept>
@@ -29,13 +28,6 @@ using namespace modal_mass_spring;
 
 namespace
 {
-
-double threadCpuSeconds()
-{
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 int run(int argc, char** argv)
 {

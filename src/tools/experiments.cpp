@@ -28,14 +28,6 @@ double seconds(Clock::time_point start)
   return std::chrono::duration<double>(Clock::now() - start).count();
 }
 
-// This thread's CPU time (s): what a step costs whatever else shares the machine's cores.
-double threadCpuSeconds()
-{
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
-
 double median(std::vector<double> values)
 {
   if (values.empty())
@@ -52,6 +44,13 @@ void report(const ProgressFn& progress, const std::string& label, double fractio
 }
 
 }  // namespace
+
+double threadCpuSeconds()
+{
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
 
 double cpuPerSimulatedSecond(double step_cpu_seconds, double time_step)
 {

@@ -35,6 +35,9 @@ struct ExperimentSetup
 // other varied setting equal, `integrator` explicit. Nullptr when there is none.
 const ExperimentSetup* explicitTwin(const ExperimentSetup& setup, const std::vector<ExperimentSetup>& setups);
 
+// This thread's CPU time (s): what a step costs whatever else shares the machine's cores.
+double threadCpuSeconds();
+
 // CPU seconds per simulated second of a step of `time_step` s that took `step_cpu_seconds` of CPU: the
 // figure that compares steps of different sizes; its inverse is the real-time factor the CPU allows
 // (above 1: faster than real time). NaN unless both are positive and finite.
