@@ -12,6 +12,7 @@ drag (launch/cloth_table.launch scenario:=drag), in a loop: lowered by ~lower me
 fold (launch/fold.launch), once: after ~hold seconds, over a half circle of ~radius metres in the
     y-z plane towards -y in ~seconds (a corner of a towel lying on a table carried over its middle
     onto the other half), ending ~clearance metres above where it started; then held there.
+hold (launch/rollout_demo.launch): still at ~start (a planner's rollouts move the frame in simulation only).
 circle (test/node/handles*.test): on a circle of ~radius metres in the x-z plane once every
     ~period seconds, turning by up to ~angle radians.
 
@@ -120,6 +121,11 @@ def fail(message):
     sys.exit(1)
 
 
+class Hold:
+    def at(self, t):
+        return (0.0, 0.0, 0.0), 0.0
+
+
 def motion_from_params():
     name = rospy.get_param("~motion", "wave")
     if name == "wave":
@@ -132,7 +138,9 @@ def motion_from_params():
     if name == "fold":
         return Fold(param("radius", 0.25, True), param("seconds", 4.0, True), param("clearance", 0.01),
                     param("hold", 1.0))
-    fail("~motion = %r: must be one of wave, drag, fold, circle" % (name,))
+    if name == "hold":
+        return Hold()
+    fail("~motion = %r: must be one of wave, drag, fold, circle, hold" % (name,))
 
 
 def main():

@@ -11,6 +11,7 @@ packages=(
   libvisualization-msgs-dev libsensor-msgs-dev python3-sensor-msgs libros-rosgraph-msgs-dev
   libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure libstd-srvs-dev libstd-msgs-dev libdiagnostic-updater-dev
   libdiagnostic-msgs-dev libinteractive-markers-dev librostest-dev python3-rostest python3-roslaunch
+  libactionlib-dev libactionlib-msgs-dev ros-actionlib-msgs python3-actionlib python3-actionlib-msgs
   libeigen3-dev libspectra-dev libsuitesparse-dev libopenblas-dev libgtest-dev googletest libbenchmark-dev libyaml-cpp-dev
   python3-rosservice python3-rostopic python3-rosbag python3-rosnode python3-rosparam rosbash
   python3-std-srvs python3-std-msgs python3-visualization-msgs python3-geometry-msgs

@@ -149,6 +149,9 @@ public:
   // The step was taken: the poses it went to are now the current ones.
   void commit();
   void reset() { moved_ = false; }
+  // A saved contact state put back (Simulation::restoreState): each collider's pose, at rest over the
+  // next step, whether it is active, and whether one moved since the reset. Sizes checked by the caller.
+  void restore(const std::vector<Eigen::Isometry3d>& poses, const std::vector<bool>& active, bool moved);
   const ContactReport& report() const { return report_; }
 
   // `full`: corrects the free dofs' end positions x (absolute) and velocities v, given the start

@@ -122,6 +122,33 @@ struct StepResult
   std::string message;  // why a step was refused, empty otherwise
 };
 
+// Everything a simulation's next steps depend on besides its parameters, as values: what
+// Simulation::saveState copies out and restoreState puts back, into the same simulation or another one
+// built with the same grid and parameters (a planner's rollouts, a replay).
+struct SimulationState
+{
+  Method method = Method::Full;
+  double time_step = 0.0;  // s
+  long step_count = 0;     // the time is step_count x time_step
+  State coordinates;       // the method's q, v, a
+  Eigen::VectorXd offset;  // a modal method's frozen offset (free dofs); empty for `full`
+  HandleMotion handles;    // the handles' motion the state was stepped to
+  FrameMotion frame;       // B's (at rest without a moving frame)
+  // Per collider: its pose (grid coordinates), whether it is active (a frame's before its first pose
+  // is not); and whether one moved since the start of the run.
+  std::vector<Eigen::Isometry3d> collider_poses;
+  std::vector<bool> colliders_active;
+  bool colliders_moved = false;
+  Eigen::VectorXd external_force;  // on every dof
+  // The divergence check's reference: the start of the run (free-dof and handle displacement), its
+  // energy and energy scale, whether handles moved since; and whether the state diverged, and why.
+  Eigen::VectorXd anchor, anchor_handles;
+  double start_energy = 0.0, energy_scale = 0.0;
+  bool handles_moved = false;
+  bool diverged = false;
+  std::string divergence_message;
+};
+
 class Simulation
 {
 public:
@@ -271,6 +298,14 @@ public:
 
   // Takes up to `steps` steps; stops at the first that diverges and keeps the state before it.
   StepResult step(int steps = 1);
+
+  // The whole state (SimulationState), and that state put back: the steps that follow are those
+  // that followed it (bit for bit with the same handle and collider motions). restoreState switches
+  // method and time step to the state's (building the basis when needed) and throws
+  // std::invalid_argument naming the field, changing nothing, for one whose size does not fit this
+  // grid and method, a non-finite value or a time step validateParameters refuses.
+  SimulationState saveState() const;
+  void restoreState(const SimulationState& state);
 
   // The colliders' contact (null without colliders): their poses, and what the last step did.
   const Contact* contact() const { return contact_.get(); }

@@ -186,6 +186,20 @@ FrameMotion HandleFrames::frameMotion(double duration, double s) const
   return interpolateFrameMotion(inGrid(handle.start_pose), inGrid(handle.current), inGrid(handle.target), duration, s);
 }
 
+void HandleFrames::drive(Simulation& simulation, double duration, double s) const
+{
+  if (handles_.empty())
+    return;
+  if (simulation.handleFormulation() == HandleFormulation::MovingFrame)
+  {
+    simulation.setHandleFrameMotion(frameMotion(duration, s));
+    return;
+  }
+  Eigen::VectorXd x, v, a;
+  motion(duration, s, x, v, a);
+  simulation.setHandleMotion(x, v, a);
+}
+
 void HandleFrames::finishTick(double s)
 {
   for (auto& handle : handles_)
@@ -193,6 +207,12 @@ void HandleFrames::finishTick(double s)
     handle.current.translation = (1.0 - s) * handle.current.translation + s * handle.target.translation;
     handle.current.rotation = handle.current.rotation.slerp(s, handle.target.rotation);
   }
+}
+
+void HandleFrames::place(size_t h, const FramePose& pose)
+{
+  if (handles_[h].found)
+    handles_[h].current = handles_[h].target = pose;
 }
 
 void HandleFrames::reset()

@@ -4,6 +4,7 @@
 
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/handles.h"
+#include "modal_mass_spring/simulation.h"
 #include "node_params.h"
 
 #include <Eigen/Core>
@@ -26,6 +27,7 @@ public:
   // origin is in the fixed frame the poses are given in.
   HandleFrames(const std::vector<HandleParam>& handles, const Grid& grid, const Eigen::VectorXd& x_ref,
                const Eigen::Vector3d& grid_offset);
+  HandleFrames() = default;  // no handles
 
   bool empty() const { return handles_.empty(); }
   const std::string& frame(size_t h) const { return handles_[h].frame; }
@@ -49,6 +51,10 @@ public:
   // fraction s of the tick relative to its pose at the first lookup, in grid coordinates, from the
   // same interpolation as motion(); at rest before the first lookup.
   FrameMotion frameMotion(double duration, double s) const;
+  // Hands `simulation` its handles' motion at the fraction s of a tick lasting `duration` seconds, as
+  // its handle formulation takes it: the frame's motion (frameMotion) in the moving frame, every
+  // handle particle's (motion) with constraint modes. Throws what the simulation refuses.
+  void drive(Simulation& simulation, double duration, double s) const;
   // The tick's stepping ended at the fraction s: the handles are there now.
   void finishTick(double s);
   // Back to the start (Simulation::reset puts the handles at rest at x_ref); offsets are kept.
@@ -65,6 +71,9 @@ public:
   // Where handle h's frame is now (the fixed frame; the pose its particles follow, held while the frame
   // is missing); meaningful once everFound(h).
   const FramePose& current(size_t h) const { return handles_[h].current; }
+  // Puts handle h's frame at `pose` now, with no motion over the next tick (a state restored with
+  // its frames' poses); offsets are kept. A frame never looked up is left as it is.
+  void place(size_t h, const FramePose& pose);
 
 private:
   struct Handle
@@ -84,7 +93,7 @@ private:
   // Takes the particles' offsets anew at `pose`, where they are now (no jump).
   static void regrip(Handle& handle, const FramePose& pose);
 
-  int dimension_;
+  int dimension_ = 3;
   Eigen::Vector3d grid_offset_;
   std::vector<Handle> handles_;
 };

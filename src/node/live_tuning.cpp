@@ -223,6 +223,7 @@ void SimulationNode::swapRebuilt()
   // A cubature trained in the background reads the running simulation: the swap waits for it.
   if (rebuilt_.empty() || training_)
     return;
+  ++live_builds_;  // the rollouts' workers are built anew for the new parameters
   for (size_t k = 0; k < tracks_.size() && k < rebuilt_.size(); ++k)
   {
     Track& track = tracks_[k];

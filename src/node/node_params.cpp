@@ -206,6 +206,9 @@ NodeParams loadNodeParams(const NodeParameterSource& s, const GridParams& grid, 
                                  "unstable; 0: no dragging)");
   p.poke_impulse = nonNegative(s, "poke_impulse", defaultPokeImpulse(grid), maxPokeImpulse(grid),
                                " N s (the grid's momentum at 10 m/s; 0: no poking)");
+  p.rollout_threads = intInRange(s, "rollout_threads", p.rollout_threads, 1, 64);
+  p.rollout_max_horizon = positive(s, "rollout_max_horizon", p.rollout_max_horizon, 3600.0, " s");
+  p.rollout_max_candidates = intInRange(s, "rollout_max_candidates", p.rollout_max_candidates, 1, 100000);
   // Any path: one that cannot be written is a warning at start-up, not an error.
   p.cache_dir = s.getString("cache_dir").value_or(defaultCacheDirectory());
   return p;

@@ -73,6 +73,11 @@ struct NodeParams
   // (N s) of a /clicked_point poke; 0 turns either off. Defaults from the grid (drag_and_poke.h).
   double drag_stiffness = 0.0;
   double poke_impulse = 0.0;
+  // ~rollout: its worker threads (each with a simulation of its own), the longest horizon (s) and the
+  // most candidates a goal may ask for.
+  int rollout_threads = 2;
+  double rollout_max_horizon = 10.0;
+  int rollout_max_candidates = 256;
 };
 
 // Reads and validates the node's own parameters, each named once here with its range; defaults that

@@ -149,6 +149,9 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
              frames.c_str(), params.fixed_frame.c_str());
     ROS_INFO("%s", describeHandleFormulation(config_.grid, config_.simulation, handleFrames(params.handles)).c_str());
   }
+  get_state_srv_ = service_nh.advertiseService("get_state", &SimulationNode::getState, this);
+  set_state_srv_ = service_nh.advertiseService("set_state", &SimulationNode::setState, this);
+  startRollouts();
   apply_force_sub_ = private_nh_.subscribe("apply_force", 10, &SimulationNode::applyForce, this);
   startInteraction();
   service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
@@ -166,6 +169,9 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
 
 SimulationNode::~SimulationNode()
 {
+  rollout_cancel_ = true;  // running rollouts stop within a step
+  if (rollout_server_)
+    rollout_server_->shutdown();
   if (service_spinner_)
     service_spinner_->stop();
   timer_.stop();
@@ -444,29 +450,18 @@ void SimulationNode::setHandleMotion(double duration, double s)
 {
   if (handle_frames_->empty())
     return;
-  if (primary().simulation->handleFormulation() == HandleFormulation::MovingFrame)
+  try
   {
-    // Every track simulates in the frame: its motion, from the same interpolation.
-    const FrameMotion motion = handle_frames_->frameMotion(duration, s);
-    try
-    {
-      for (Track& track : tracks_)
-        if (!track.simulation->diverged())
-          track.simulation->setHandleFrameMotion(motion);
-    }
-    catch (const std::invalid_argument& error)
-    {
-      // A 2D grid's frame that turns out of the grid's plane: held where it was.
-      ROS_WARN_THROTTLE(5.0, "handle frame '%s' refused, its particles hold where they are: %s",
-                        handle_frames_->frame(0).c_str(), error.what());
-    }
-    return;
+    for (Track& track : tracks_)
+      if (!track.simulation->diverged())
+        handle_frames_->drive(*track.simulation, duration, s);
   }
-  Eigen::VectorXd x, v, a;
-  handle_frames_->motion(duration, s, x, v, a);
-  for (Track& track : tracks_)
-    if (!track.simulation->diverged())
-      track.simulation->setHandleMotion(x, v, a);
+  catch (const std::invalid_argument& error)
+  {
+    // A 2D grid's frame that turns out of the grid's plane: held where it was.
+    ROS_WARN_THROTTLE(5.0, "handle frame '%s' refused, its particles hold where they are: %s",
+                      handle_frames_->frame(0).c_str(), error.what());
+  }
 }
 
 bool SimulationNode::stepAll()

@@ -8,6 +8,9 @@
 #include "handle_frames.h"
 #include "warning_throttle.h"
 #include "modal_mass_spring/ApplyForce.h"
+#include "modal_mass_spring/GetState.h"
+#include "modal_mass_spring/RolloutAction.h"
+#include "modal_mass_spring/SetState.h"
 #include "modal_mass_spring/SetMethod.h"
 #include "modal_mass_spring/SimulationConfig.h"
 #include "modal_mass_spring/Status.h"
@@ -15,6 +18,7 @@
 #include "modal_mass_spring/simulation.h"
 #include "node_params.h"
 
+#include <actionlib/server/simple_action_server.h>
 #include <boost/thread/recursive_mutex.hpp>
 #include <diagnostic_updater/diagnostic_updater.h>
 #include <dynamic_reconfigure/server.h>
@@ -157,6 +161,14 @@ private:
   bool pause(std_srvs::SetBool::Request& request, std_srvs::SetBool::Response& response);
   bool step(Step::Request& request, Step::Response& response);
 
+  // Saving and restoring the state, and rollouts of candidate handle motions on simulations of their
+  // own (rollout_server.cpp): the goal is checked and the start copied under the lock, the rollouts
+  // run without it while the live simulation steps on.
+  bool getState(GetState::Request& request, GetState::Response& response);
+  bool setState(SetState::Request& request, SetState::Response& response);
+  void startRollouts();
+  void executeRollout(const RolloutGoalConstPtr& goal);
+
   // External forces (services.cpp): ~apply_force messages (checked, turned into the fixed frame with
   // tf2, summed) and ~clear_forces; every track gets the same total.
   void applyForce(const ApplyForce::ConstPtr& message);
@@ -268,6 +280,15 @@ private:
   std::thread training_thread_;
   mutable std::mutex progress_mutex_;
   std::string training_progress_;
+
+  // ~rollout: its workers' simulations (only the action's thread touches them), built for the live
+  // simulation of live_builds_ (counted by swapRebuilt), and the cancel flag of the running goal.
+  ros::ServiceServer get_state_srv_, set_state_srv_;
+  long live_builds_ = 0;  // with mutex_
+  std::vector<std::unique_ptr<Simulation>> rollout_workers_;
+  long rollout_workers_build_ = -1;
+  std::atomic<bool> rollout_cancel_{false};
+  std::unique_ptr<actionlib::SimpleActionServer<RolloutAction>> rollout_server_;
 
   ros::Timer timer_;
   ros::WallTimer wall_timer_;  // under use_sim_time: the node makes the clock, so it cannot wait on it

@@ -645,6 +645,13 @@ void Contact::place(int i, const Eigen::Isometry3d& pose)
 
 void Contact::commit() { start_poses_ = poses_; }
 
+void Contact::restore(const std::vector<Eigen::Isometry3d>& poses, const std::vector<bool>& active, bool moved)
+{
+  poses_ = start_poses_ = poses;
+  active_ = active;
+  moved_ = moved;
+}
+
 namespace
 {
 

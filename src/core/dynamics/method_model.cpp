@@ -105,6 +105,8 @@ void MethodModel::setState(const Eigen::VectorXd& q, const Eigen::VectorXd& v)
   integrator_->initialize(loaded_, state_);
 }
 
+void MethodModel::restore(const State& state, const Eigen::VectorXd&) { state_ = state; }
+
 FullMethod::FullMethod(const LinearizedGrid& linearized, const IntegratorSettings& settings)
   : MethodModel(Method::Full, linearized, std::make_unique<FullForceModel>(linearized.grid, linearized.x_ref))
 {
@@ -282,6 +284,12 @@ void ModalMethod::setOffset(const Eigen::VectorXd& offset)
     frame_projection_->w_stale = true;
     applyFrame();  // the frame's forces at q = 0 act at x_ref + offset
   }
+}
+
+void ModalMethod::restore(const State& state, const Eigen::VectorXd& offset)
+{
+  setOffset(offset.size() > 0 ? offset : Eigen::VectorXd::Zero(lin_.basis.phi.rows()));
+  MethodModel::restore(state, offset);
 }
 
 void ModalMethod::projectFrame()

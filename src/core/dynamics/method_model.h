@@ -147,6 +147,11 @@ public:
   void commit() { std::swap(state_, next_); }
   const State& state() const { return state_; }
   const State& next() const { return next_; }
+  // The frozen offset (free dofs; empty for `full`), and a saved state put back as it was: q, v, a and
+  // the offset, with no projection and no acceleration recomputed (a step's contact correction
+  // leaves a as the forces gave it, which the next step starts from).
+  virtual Eigen::VectorXd offset() const { return Eigen::VectorXd(); }
+  virtual void restore(const State& state, const Eigen::VectorXd& offset);
   // Corrects next() for contact with the colliders (Contact), before commit(): per particle for
   // `full`, through the basis for the modal methods. The acceleration is left as the forces gave it.
   virtual void correctContacts(Contact& contact) = 0;
@@ -255,6 +260,8 @@ public:
   void setAnchor(const Eigen::VectorXd& u_anchor, const Eigen::VectorXd& handles_anchor) override;
   double anchorDistanceSquared(const Eigen::VectorXd& q) const override;
   void setHandleMotion(const HandleMotion& motion) override;
+  Eigen::VectorXd offset() const override { return offset_; }
+  void restore(const State& state, const Eigen::VectorXd& offset) override;
   // The touching particles' impulses through Phi (Contact::correctModal): O(n r) to find them.
   void correctContacts(Contact& contact) override;
 

@@ -689,6 +689,108 @@ StepResult Simulation::step(int steps)
   return result;
 }
 
+SimulationState Simulation::saveState() const
+{
+  SimulationState s;
+  s.method = method();
+  s.time_step = params_.time_step;
+  s.step_count = step_count_;
+  s.coordinates = model_->state();
+  s.offset = model_->offset();
+  s.handles = handle_current_;
+  s.frame = frame_current_;
+  if (contact_)
+  {
+    for (int i = 0; i < static_cast<int>(contact_->colliders().size()); ++i)
+    {
+      s.collider_poses.push_back(contact_->pose(i));
+      s.colliders_active.push_back(contact_->active(i));
+    }
+    s.colliders_moved = contact_->moved();
+  }
+  s.external_force = external_force_;
+  s.anchor = anchor_;
+  s.anchor_handles = anchor_handles_;
+  s.start_energy = start_energy_;
+  s.energy_scale = energy_scale_;
+  s.handles_moved = handles_moved_;
+  s.diverged = diverged_;
+  s.divergence_message = divergence_message_;
+  return s;
+}
+
+void Simulation::restoreState(const SimulationState& s)
+{
+  // Everything is checked before anything changes.
+  SimulationParams changed = params_;
+  changed.time_step = s.time_step;
+  validateParameters(grid_.params(), changed);
+  if (self_collision_ && s.method != Method::Full)
+    rejectParameter("state.method", toString(s.method), kSelfCollisionMethods);
+  if (s.method != Method::Full)
+    buildBasis();
+  const Eigen::Index free_dofs = u_start_.size();
+  const Eigen::Index coordinates = s.method == Method::Full  ? free_dofs
+                                   : s.method == Method::Linear ? basis_.phi.cols()
+                                                                 : physical_basis_.phi.cols();
+  auto check = [](const std::string& name, const Eigen::VectorXd& values, Eigen::Index size, bool may_be_empty) {
+    if (values.size() != size && !(may_be_empty && values.size() == 0))
+      rejectParameter("state." + name, std::to_string(values.size()) + " values",
+                      "must have " + std::to_string(size) + " values" + (may_be_empty ? " (or none)" : ""));
+    if (!values.allFinite())
+      rejectParameter("state." + name, "a non-finite value", "must be finite");
+  };
+  check("coordinates", s.coordinates.q, coordinates, false);
+  check("velocities", s.coordinates.v, coordinates, false);
+  check("accelerations", s.coordinates.a, coordinates, false);
+  check("offset", s.offset, s.method == Method::Full ? 0 : free_dofs, true);
+  const Eigen::Index handle_dofs = grid_.numHandleDofs();
+  check("handles.displacement", s.handles.displacement, handle_dofs, true);
+  check("handles.velocity", s.handles.velocity, handle_dofs, true);
+  check("handles.acceleration", s.handles.acceleration, handle_dofs, true);
+  check("external_force", s.external_force, external_force_.size(), false);
+  check("anchor", s.anchor, free_dofs, true);
+  check("anchor_handles", s.anchor_handles, handle_dofs, true);
+  const size_t colliders = contact_ ? contact_->colliders().size() : 0;
+  if (s.collider_poses.size() != colliders || s.colliders_active.size() != colliders)
+    rejectParameter("state.collider_poses", std::to_string(s.collider_poses.size()) + " poses",
+                    "must have one per collider: " + std::to_string(colliders));
+  for (size_t i = 0; i < colliders; ++i)
+    if (!s.collider_poses[i].matrix().allFinite())
+      rejectParameter("state.collider_poses[" + std::to_string(i) + "]", "a non-finite value", "must be finite");
+  if (s.step_count < 0)
+    rejectParameter("state.step_count", s.step_count, "must be >= 0");
+
+  if (s.time_step != params_.time_step)
+    setTimeStep(s.time_step);
+  handle_current_ = handle_target_ = s.handles;
+  handle_pending_ = false;
+  frame_current_ = frame_target_ = s.frame;
+  frame_pending_ = false;
+  external_force_ = s.external_force;
+  if (contact_)
+    contact_->restore(s.collider_poses, s.colliders_active, s.colliders_moved);
+  if (s.method != method())
+    setMethod(s.method);
+  // The method's forces see the state's handles, frame and load before its coordinates go back:
+  // setting them recomputes the acceleration, which restore() then replaces with the saved one.
+  model_->setExternalForce(grid_.gatherFree(external_force_));
+  if (grid_.numHandleDofs() > 0)
+    model_->setHandleMotion(handle_current_);
+  if (formulation_ == HandleFormulation::MovingFrame)
+    model_->setFrameForces(frameForcesOf(frame_current_));
+  model_->restore(s.coordinates, s.offset);
+  anchor_ = s.anchor;
+  anchor_handles_ = s.anchor_handles;
+  model_->setAnchor(anchor_, anchor_handles_);
+  start_energy_ = s.start_energy;
+  energy_scale_ = s.energy_scale;
+  handles_moved_ = s.handles_moved;
+  step_count_ = s.step_count;
+  diverged_ = s.diverged;
+  divergence_message_ = s.divergence_message;
+}
+
 namespace
 {
 

@@ -1,0 +1,104 @@
+#!/usr/bin/env python3
+"""Rostest checker of ~get_state, ~set_state and ~rollout (test/node/rollouts.test): paused, the node
+steps 300 steps from a saved state; restored, it steps the same positions again; a rollout from that
+state with the frame held where it is gives them too, on the node's own worker simulations; bad goals
+are refused by name."""
+import math
+import unittest
+
+import actionlib
+import rospy
+import rostest
+from actionlib_msgs.msg import GoalStatus
+from geometry_msgs.msg import Pose
+from modal_mass_spring.msg import HandleTrajectory, RolloutAction, RolloutCandidate, RolloutGoal
+from modal_mass_spring.srv import GetState, SetState, Step
+from std_srvs.srv import SetBool
+
+NODE = "/modal_mass_spring"
+STEPS = 300
+
+
+def largest_distance(a, b):
+    return max(math.sqrt((p.x - q.x) ** 2 + (p.y - q.y) ** 2 + (p.z - q.z) ** 2) for p, q in zip(a, b))
+
+
+class Rollouts(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("check_rollouts")
+        rospy.wait_for_message(NODE + "/status", rospy.AnyMsg, timeout=60.0)
+        cls.get_state = rospy.ServiceProxy(NODE + "/get_state", GetState)
+        cls.set_state = rospy.ServiceProxy(NODE + "/set_state", SetState)
+        cls.step = rospy.ServiceProxy(NODE + "/step", Step)
+        cls.pause = rospy.ServiceProxy(NODE + "/pause", SetBool)
+        cls.client = actionlib.SimpleActionClient(NODE + "/rollout", RolloutAction)
+        assert cls.client.wait_for_server(rospy.Duration(30.0))
+        # The gripper frame found and the cloth swinging from it, then held for the checks.
+        rospy.sleep(1.5)
+        cls.pause(True)
+
+    def rollout(self, goal):
+        feedback = []
+        self.client.send_goal(goal, feedback_cb=feedback.append)
+        self.assertTrue(self.client.wait_for_result(rospy.Duration(60.0)))
+        return self.client.get_state(), self.client.get_result(), feedback
+
+    def test_state_restored_and_rolled_out_replays_the_steps(self):
+        saved = self.get_state().state
+        self.assertEqual(saved.method, "full")
+        self.assertEqual(saved.handle_frames, ["gripper"])
+        self.assertTrue(self.step(STEPS).step_count > 0)
+        stepped = self.get_state().state
+        self.assertGreater(largest_distance(saved.positions, stepped.positions), 1e-4, "the cloth must move")
+
+        reply = self.set_state(saved)
+        self.assertTrue(reply.success, reply.message)
+        self.step(STEPS)
+        self.assertLess(largest_distance(self.get_state().state.positions, stepped.positions), 1e-9)
+
+        horizon = STEPS * saved.time_step
+        goal = RolloutGoal(use_state=True, state=saved, horizon=horizon, sample_times=[horizon],
+                           candidates=[RolloutCandidate()] * 3)
+        status, result, feedback = self.rollout(goal)
+        self.assertEqual(status, GoalStatus.SUCCEEDED, result.message)
+        self.assertEqual([o.candidate for o in result.outcomes], [0, 1, 2])
+        self.assertEqual(sorted(f.candidate for f in feedback), [0, 1, 2])
+        for outcome in result.outcomes:
+            self.assertFalse(outcome.diverged, outcome.message)
+            sample = outcome.samples[-1]
+            self.assertLess(largest_distance(sample.positions, stepped.positions), 1e-9)
+            self.assertEqual(len(sample.handle_wrenches), 1)
+            self.assertEqual(len(sample.contact_forces), 1)
+        # The live run was not touched.
+        self.assertLess(largest_distance(self.get_state().state.positions, stepped.positions), 1e-9)
+
+    def test_bad_goals_refused_by_name(self):
+        state = self.get_state().state
+        pose = state.handle_frame_poses[0]
+        lowered = Pose(position=pose.position, orientation=pose.orientation)
+        moved = RolloutCandidate(handles=[HandleTrajectory(frame="gripper", times=[0.5], poses=[lowered])])
+        unknown = RolloutCandidate(handles=[HandleTrajectory(frame="elbow", times=[0.5], poses=[lowered])])
+        nan_pose = Pose(position=pose.position, orientation=pose.orientation)
+        nan_pose.position.z = float("nan")
+        nan = RolloutCandidate(handles=[HandleTrajectory(frame="gripper", times=[0.5], poses=[nan_pose])])
+        cases = [
+            (RolloutGoal(horizon=1.0, candidates=[]), "candidates", "rollout_max_candidates = 5"),
+            (RolloutGoal(horizon=1.0, candidates=[moved] * 6), "candidates", "rollout_max_candidates = 5"),
+            (RolloutGoal(horizon=0.0, candidates=[moved]), "horizon", "rollout_max_horizon = 2 s"),
+            (RolloutGoal(horizon=3.0, candidates=[moved]), "horizon", "rollout_max_horizon = 2 s"),
+            (RolloutGoal(horizon=1.0, candidates=[unknown]), "candidates[0].handles[0].frame", "'gripper'"),
+            (RolloutGoal(horizon=1.0, candidates=[nan]), "candidates[0].handles[0].poses[0]", "finite"),
+            (RolloutGoal(horizon=1.0, method="fastest", candidates=[moved]), "method", "physical"),
+        ]
+        for goal, name, allowed in cases:
+            status, result, feedback = self.rollout(goal)
+            self.assertEqual(status, GoalStatus.ABORTED, result.message)
+            self.assertIn(name, result.message)
+            self.assertIn(allowed, result.message)
+            self.assertEqual(result.outcomes, [])
+            self.assertEqual(feedback, [])
+
+
+if __name__ == "__main__":
+    rostest.rosrun("modal_mass_spring", "rollouts", Rollouts)
