@@ -7,7 +7,7 @@ deviation) of the particles' heights at the horizon. Nothing moves the live clot
 the node's own copies of the simulation.
 
 rosrun modal_mass_spring rollout_planner.py --candidates 64 --horizon 2 [--node /modal_mass_spring]
-    [--seed 1] [--method full] [--max_lower 1.0] [--max_carry 1.0]
+    [--seed 1] [--method full] [--time_step 0.001] [--max_lower 1.0] [--max_carry 1.0]
 Its last line: rollouts: N candidates x S s simulated in W s wall (R times real time); best candidate K"""
 import argparse
 import math
@@ -60,6 +60,7 @@ def main():
     parser.add_argument("--node", default="/modal_mass_spring")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--method", default="", help="empty: the node's default for rollouts")
+    parser.add_argument("--time_step", type=float, default=0.0, help="s; 0: the live simulation's")
     parser.add_argument("--max_lower", type=float, default=1.0, help="m: the deepest the grippers go down")
     parser.add_argument("--max_carry", type=float, default=1.0, help="m: the farthest they go along +y")
     args = parser.parse_args(rospy.myargv()[1:])
@@ -80,7 +81,7 @@ def main():
     poses = [state.handle_frame_poses[state.handle_frames.index(f)] for f in frames]
     plans = [(rng.uniform(0.0, args.max_lower), rng.uniform(0.0, args.max_carry)) for _ in range(args.candidates)]
     waypoints = max(4, int(math.ceil(4.0 * max(args.max_lower, args.max_carry))))
-    goal = RolloutGoal(method=args.method, horizon=args.horizon, sample_times=[args.horizon],
+    goal = RolloutGoal(method=args.method, time_step=args.time_step, horizon=args.horizon, sample_times=[args.horizon],
                        candidates=[candidate(frames, poses, lower, carry, args.horizon, waypoints)
                                    for lower, carry in plans])
     start = time.monotonic()

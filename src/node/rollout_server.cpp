@@ -4,8 +4,10 @@
 #include "simulation_node.h"
 #include "state_messages.h"
 
+#include <algorithm>
 #include <chrono>
 #include <mutex>
+#include <sstream>
 #include <string>
 
 namespace modal_mass_spring
@@ -189,6 +191,7 @@ void SimulationNode::executeRollout(const RolloutGoalConstPtr& goal)
   // The workers' simulations, built once for the live simulation's parameters (the cache serves
   // their bases), then restored to each candidate's start.
   const auto start = std::chrono::steady_clock::now();
+  double built = 0.0;  // s: building the workers' simulations (the first goal's)
   try
   {
     if (rollout_workers_build_ != build || rollout_workers_.size() != static_cast<size_t>(limits.threads))
@@ -197,6 +200,7 @@ void SimulationNode::executeRollout(const RolloutGoalConstPtr& goal)
       for (int k = 0; k < limits.threads; ++k)
         rollout_workers_.push_back(buildSimulation(grid, params, false, "building rollout worker " + std::to_string(k)));
       rollout_workers_build_ = build;
+      built = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     }
     rolloutStart(*rollout_workers_.front(), request);  // a start that does not fit is refused here
   }
@@ -219,6 +223,7 @@ void SimulationNode::executeRollout(const RolloutGoalConstPtr& goal)
   int finished = 0;
   const int total = static_cast<int>(request.candidates.size());
   std::vector<CandidateOutcome> outcomes;
+  double cpu = 0.0;
   try
   {
     outcomes = runRollouts(workers, request, rollout_cancel_, [&](const CandidateOutcome& outcome) {
@@ -228,7 +233,7 @@ void SimulationNode::executeRollout(const RolloutGoalConstPtr& goal)
       feedback.total = total;
       feedback.diverged = outcome.diverged;
       rollout_server_->publishFeedback(feedback);
-    });
+    }, &cpu);
   }
   catch (const std::exception& error)
   {
@@ -241,9 +246,13 @@ void SimulationNode::executeRollout(const RolloutGoalConstPtr& goal)
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   for (const CandidateOutcome& outcome : outcomes)
     result.outcomes.push_back(outcomeMessage(outcome));
-  result.message = std::to_string(outcomes.size()) + " of " + std::to_string(total) + " candidates x " +
-                   std::to_string(request.horizon) + " s simulated with " + toString(request.method) + " in " +
-                   std::to_string(wall) + " s wall on " + std::to_string(workers.size()) + " threads";
+  const long diverged = std::count_if(outcomes.begin(), outcomes.end(), [](const auto& o) { return o.diverged; });
+  std::ostringstream message;
+  message << outcomes.size() << " of " << total << " candidates (" << diverged << " diverged) x " << request.horizon
+          << " s simulated with " << toString(request.method) << " at time_step " << request.time_step << " s in "
+          << wall << " s wall on " << workers.size() << " threads, " << cpu << " s of their CPU"
+          << (built > 0.0 ? " (" + std::to_string(built) + " s of it building their simulations)" : std::string());
+  result.message = message.str();
   if (rollout_cancel_)
   {
     result.success = false;

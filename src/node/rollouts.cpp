@@ -1,6 +1,8 @@
 // Rollouts of candidate handle motions on worker simulations.
 #include "rollouts.h"
 
+#include "thread_cpu.h"
+
 #include "modal_mass_spring/parameter_error.h"
 
 #include <sys/resource.h>
@@ -235,7 +237,8 @@ CandidateOutcome runCandidate(Simulation& simulation, const SimulationState& sta
 
 std::vector<CandidateOutcome> runRollouts(const std::vector<Simulation*>& workers, const RolloutRequest& request,
                                         const std::atomic<bool>& cancel,
-                                        const std::function<void(const CandidateOutcome&)>& on_finished)
+                                        const std::function<void(const CandidateOutcome&)>& on_finished,
+                                        double* cpu_seconds)
 {
   std::atomic<size_t> next{0};
   std::mutex mutex;
@@ -244,6 +247,7 @@ std::vector<CandidateOutcome> runRollouts(const std::vector<Simulation*>& worker
   auto work = [&](Simulation& simulation) {
     // Below the live simulation's thread: the live rate comes first on a busy machine.
     setpriority(PRIO_PROCESS, static_cast<id_t>(syscall(SYS_gettid)), 10);
+    const double cpu_start = threadCpuSeconds();
     try
     {
       const SimulationState start = rolloutStart(simulation, request);
@@ -263,6 +267,9 @@ std::vector<CandidateOutcome> runRollouts(const std::vector<Simulation*>& worker
       std::lock_guard<std::mutex> lock(mutex);
       failure = error.what();
     }
+    std::lock_guard<std::mutex> lock(mutex);
+    if (cpu_seconds)
+      *cpu_seconds += threadCpuSeconds() - cpu_start;
   };
   std::vector<std::thread> threads;
   for (Simulation* simulation : workers)

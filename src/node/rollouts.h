@@ -91,9 +91,10 @@ SimulationState rolloutStart(Simulation& simulation, const RolloutRequest& reque
 // Runs every candidate on one thread per simulation of `workers` (each built with the live
 // simulation's grid and parameters), told to on_finished (from the worker's thread, one call at a
 // time) as each finishes. Stops within one step of `cancel`; returns the finished candidates in
-// the request's order.
+// the request's order, and adds the workers' CPU time (s) to `cpu_seconds` when given.
 std::vector<CandidateOutcome> runRollouts(const std::vector<Simulation*>& workers, const RolloutRequest& request,
                                         const std::atomic<bool>& cancel,
-                                        const std::function<void(const CandidateOutcome&)>& on_finished = {});
+                                        const std::function<void(const CandidateOutcome&)>& on_finished = {},
+                                        double* cpu_seconds = nullptr);
 
 }  // namespace modal_mass_spring

@@ -1,6 +1,7 @@
 // The node adds nothing numerical: it steps the core Simulation on a timer and shows its state (what
 // it publishes is assembled in status.cpp; its services are in services.cpp).
 #include "simulation_node.h"
+#include "thread_cpu.h"
 
 #include "modal_mass_spring/Status.h"
 #include "startup_report.h"
@@ -29,14 +30,6 @@ using Clock = std::chrono::steady_clock;
 double secondsSince(Clock::time_point start)
 {
   return std::chrono::duration<double>(Clock::now() - start).count();
-}
-
-// This thread's CPU time (s): what a step costs whatever else shares the machine's cores.
-double threadCpuSeconds()
-{
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
 }
 
 // Polls a StartupProgress from its own thread while the simulation is built.
