@@ -244,6 +244,10 @@ TEST(NodeParams, EveryNodeParameterHasARangeCheck)
       {{{"show_labels", 1}}, "invalid parameter 'show_labels': wrong type"},
       {{{"show_shadow", std::string("yes")}}, "invalid parameter 'show_shadow': wrong type"},
       {{{"methods", std::string("full")}}, "invalid parameter 'methods': wrong type, must be a list of names"},
+      {{{"rollout_threads", 0}}, "invalid parameter 'rollout_threads' = 0: must be an integer in [1, 64]"},
+      {{{"rollout_max_horizon", 0.0}}, "invalid parameter 'rollout_max_horizon' = 0: must be a number > 0 and <= 3600 s"},
+      {{{"rollout_max_horizon", kNaN}}, "invalid parameter 'rollout_max_horizon' = nan"},
+      {{{"rollout_max_candidates", 0}}, "invalid parameter 'rollout_max_candidates' = 0: must be an integer in [1, 100000]"},
       // Wrong types: the source names the key.
       {{{"color_by_strain", 1}}, "invalid parameter 'color_by_strain': wrong type, must be true or false"},
       {{{"fixed_frame", 3}}, "invalid parameter 'fixed_frame': wrong type, must be a string"},
