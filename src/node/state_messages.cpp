@@ -63,14 +63,14 @@ SavedState stateMessage(const SimulationState& state, const HandleFrames& frames
   m.handle_displacement = values(state.handles.displacement);
   m.handle_velocity = values(state.handles.velocity);
   m.handle_acceleration = values(state.handles.acceleration);
+  // B's motion in the order of msg/SavedState.msg: translation, rotation row by row, the rest.
   const FrameMotion& f = state.frame;
-  for (const Eigen::Vector3d& v : {f.translation})
-    m.frame_motion.insert(m.frame_motion.end(), v.data(), v.data() + 3);
+  m.frame_motion.assign(f.translation.data(), f.translation.data() + 3);
   for (int r = 0; r < 3; ++r)
     for (int c = 0; c < 3; ++c)
       m.frame_motion.push_back(f.rotation(r, c));
-  for (const Eigen::Vector3d& v : {f.velocity, f.acceleration, f.angular_velocity, f.angular_acceleration})
-    m.frame_motion.insert(m.frame_motion.end(), v.data(), v.data() + 3);
+  for (const Eigen::Vector3d* v : {&f.velocity, &f.acceleration, &f.angular_velocity, &f.angular_acceleration})
+    m.frame_motion.insert(m.frame_motion.end(), v->data(), v->data() + 3);
   for (const Eigen::Isometry3d& pose : state.collider_poses)
   {
     FramePose p;
