@@ -194,7 +194,14 @@ void SimulationNode::executeRollout(const RolloutGoalConstPtr& goal)
   double built = 0.0;  // s: building the workers' simulations (the first goal's)
   try
   {
-    if (rollout_workers_build_ != build || rollout_workers_.size() != static_cast<size_t>(limits.threads))
+    // Self-collision is tuned live without a rebuild: workers built with other settings are built anew.
+    const auto tunedSince = [&params](const Simulation& worker) {
+      const SimulationParams& p = worker.params();
+      return p.self_collision != params.self_collision || p.self_collision_thickness != params.self_collision_thickness ||
+             p.self_friction != params.self_friction;
+    };
+    if (rollout_workers_build_ != build || rollout_workers_.size() != static_cast<size_t>(limits.threads) ||
+        tunedSince(*rollout_workers_.front()))
     {
       rollout_workers_.clear();
       for (int k = 0; k < limits.threads; ++k)
