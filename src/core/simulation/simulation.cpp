@@ -749,7 +749,7 @@ void Simulation::restoreState(const SimulationState& s)
   check("handles.velocity", s.handles.velocity, handle_dofs, true);
   check("handles.acceleration", s.handles.acceleration, handle_dofs, true);
   check("external_force", s.external_force, external_force_.size(), false);
-  check("anchor", s.anchor, free_dofs, true);
+  check("anchor", s.anchor, free_dofs, false);
   check("anchor_handles", s.anchor_handles, handle_dofs, true);
   const size_t colliders = contact_ ? contact_->colliders().size() : 0;
   if (s.collider_poses.size() != colliders || s.colliders_active.size() != colliders)

@@ -112,6 +112,9 @@ TEST(SimulationState, BadStateRefusedByNameChangingNothing)
   bad.coordinates.v[0] = std::nan("");
   EXPECT_TRUE(contains(refusal([&] { sim.restoreState(bad); }), "state.velocities"));
   bad = sim.saveState();
+  bad.anchor.resize(0);
+  EXPECT_TRUE(contains(refusal([&] { sim.restoreState(bad); }), "state.anchor"));
+  bad = sim.saveState();
   bad.time_step = -1.0;
   EXPECT_TRUE(contains(refusal([&] { sim.restoreState(bad); }), "time_step"));
   EXPECT_EQ(sim.positions(), before);
