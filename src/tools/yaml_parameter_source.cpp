@@ -18,7 +18,8 @@ namespace modal_mass_spring
 const std::set<std::string> kNodeParameters{
     "real_time_factor", "publish_rate",    "fixed_frame",  "grid_frame",        "tf_particles",      "offset",
     "color_by_strain",  "strain_scale",    "particle_diameter", "spring_width", "status_log_period", "diagnostic_period",
-    "cache_dir",        "rollout_threads", "rollout_max_horizon", "rollout_max_candidates",
+    "cache_dir",        "rollout_threads", "rollout_max_horizon", "rollout_max_candidates", "show_particles",
+    "show_springs",
     "handles"};  // the node moves their particles with TF frames; the tool does not read them
 
 const std::set<std::string> kToolParameters{"handle_scenarios", "colliders"};
