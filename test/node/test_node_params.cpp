@@ -984,7 +984,8 @@ TEST(NodeParams, EveryShippedNodeConfigLoads)
   }
   std::sort(loaded.begin(), loaded.end());
   EXPECT_EQ(loaded, (std::vector<std::string>{"cloth.yaml", "cloth_drag.yaml", "cloth_large.yaml", "cloth_table.yaml",
-                                              "fold.yaml", "held_cloth.yaml", "paper_2d.yaml", "paper_3d.yaml"}));
+                                              "fold.yaml", "held_cloth.yaml", "paper_2d.yaml", "paper_3d.yaml",
+                                              "rollout_demo.yaml"}));
 }
 
 }  // namespace
