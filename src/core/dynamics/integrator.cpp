@@ -301,7 +301,7 @@ bool ImplicitNewmark::solveConstant(ForceModel& model, const State& s, State& ne
   int stored = 0, oldest = 0;
   Eigen::VectorXd f, previous_f, previous_g, accepted_step;
   double accepted_potential = std::numeric_limits<double>::infinity();
-  for (last_iterations_ = 1; last_iterations_ <= max_iterations_; ++last_iterations_)
+  for (last_iterations_ = 1; last_iterations_ <= kConstantMatrixIterations * max_iterations_; ++last_iterations_)
   {
     double residual_norm = residual(model, s, next);
     double potential = incremental(next.q);

@@ -119,7 +119,10 @@ public:
   bool constantMatrix() const { return constant_matrix_; }
 
 private:
-  static constexpr int kAndersonDepth = 5;
+  // Anderson mixing's depth, chosen by measurement (docs/benchmarks.md); the constant matrix
+  // converges linearly, so it may take this many times Newton's iterations.
+  static constexpr int kAndersonDepth = 10;
+  static constexpr int kConstantMatrixIterations = 10;
   static constexpr int kMaxHalvings = 4;
   void setStepSize(double h);
   bool advance(ForceModel& model, const State& s, State& next, double h, int depth);
