@@ -103,6 +103,8 @@ public:
   // sum over T of w_s D_s^T K_s D_s, D_s = Phi_j - Phi_i the spring's rows.
   void tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k) override;
   double energy(const Eigen::VectorXd& modal) override;
+  // sum over T of w_s k_s D_s^T D_s: the Laplacian of the weighted springs, at least the tangent above.
+  bool constantStiffness(SparseMatrix& l) override;
 
   // With handles: moves the reference with them in O(|T| x handle dofs), or O(|T|) for a motion that
   // is one affine map of all handles (a turned clamp), where setReference is O(all springs) and its

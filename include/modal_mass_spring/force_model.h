@@ -40,6 +40,10 @@ public:
   // K(q) as the springs' blocks, for products J p without assembling K (the full model); nullptr for a
   // model without springs of its own coordinates.
   virtual const SpringTangent* springTangent(const Eigen::VectorXd&) { return nullptr; }
+  // A constant stiffness L >= K(q) for every q (the springs' Laplacian in these coordinates): an
+  // implicit step solved with L in place of K descends at every iteration, with a matrix factorised
+  // once (projective dynamics' global step). False for a model without one.
+  virtual bool constantStiffness(SparseMatrix&) { return false; }
 
 protected:
   double roundoff_ = 0.0;
@@ -85,6 +89,7 @@ public:
   double energy(const Eigen::VectorXd& u) override;
   int blockSize() const override { return grid_.dimension(); }
   const SpringTangent* springTangent(const Eigen::VectorXd& u) override;
+  bool constantStiffness(SparseMatrix& l) override;
 
 private:
   void setPositions(const Eigen::VectorXd& u);  // x_ = x_ref + u
@@ -118,6 +123,7 @@ public:
   void tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k) override;
   double energy(const Eigen::VectorXd& modal) override;
   bool isLinear() const override { return true; }
+  bool constantStiffness(SparseMatrix& l) override;
 
 private:
   const Grid& grid_;
@@ -142,6 +148,8 @@ public:
   // Phi^T K(x) Phi at x = x_ref + Phi X, K(x) Phi summed spring by spring.
   void tangentStiffness(const Eigen::VectorXd& modal, SparseMatrix& k) override;
   double energy(const Eigen::VectorXd& modal) override;
+  // Phi^T L Phi
+  bool constantStiffness(SparseMatrix& l) override;
 
 private:
   void setPositions(const Eigen::VectorXd& modal);  // x_ = x_ref + Phi X

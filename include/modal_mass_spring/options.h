@@ -28,6 +28,14 @@ enum class IntegratorKind
   Implicit,  // Newmark average acceleration with Newton iterations
 };
 
+// How the implicit integrator solves a step.
+enum class ImplicitSolver
+{
+  Newton,          // Newton with the exact tangent: few iterations, each a new tangent and factorisation
+  ConstantMatrix,  // the springs' constant Laplacian in place of the tangent, factorised once: more
+                   // iterations, each a force evaluation and two triangular solves
+};
+
 // Where a run (and a reset) starts.
 enum class InitialState
 {
@@ -64,6 +72,9 @@ Linearization parseLinearization(const std::string& name);
 std::string toString(IntegratorKind integrator);
 IntegratorKind parseIntegrator(const std::string& name);
 std::string toString(InitialState initial_state);
+// "newton", "constant_matrix"
+std::string toString(ImplicitSolver solver);
+ImplicitSolver parseImplicitSolver(const std::string& name);
 InitialState parseInitialState(const std::string& name);
 // "linear_modes", "modal_derivatives", "skinning"
 std::string toString(BasisKind basis);

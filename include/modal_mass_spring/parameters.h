@@ -30,7 +30,7 @@ public:
 // the ranges themselves are checked when the Simulation is built.
 //   rows, cols, spacing, dimension, mass, structural_stiffness, shear_stiffness, bending,
 //   bending_stiffness, fixed, gravity, rotation_deg, method, num_modes, alpha, beta, time_step,
-//   divergence_limit, linearization, integrator, initial_state, newton_max_iterations,
+//   divergence_limit, linearization, integrator, initial_state, newton_max_iterations, implicit_solver,
 //   equilibrium_max_iterations, hht_alpha, energy_tolerance,
 //   memory_limit_gb, basis, num_derivative_modes, num_skinning_weights, cubature_tolerance, cubature_max_springs,
 //   cubature_training_poses, cubature_max_training_poses, cubature_pose_size, cubature_seed,

@@ -43,7 +43,8 @@ struct SimulationParams
   Linearization linearization = Linearization::Rest;
   IntegratorKind integrator = IntegratorKind::Explicit;
   InitialState initial_state = InitialState::Initial;
-  int newton_max_iterations = 50;  // per implicit solve
+  int newton_max_iterations = 50;  // per implicit solve (Newton's or the constant matrix's iterations)
+  ImplicitSolver implicit_solver = ImplicitSolver::Newton;
   // Newton iterations of the static equilibrium before it is refused (linearization or
   // initial_state 'equilibrium'): a 100 x 100 cloth hanging from its flat vertical sheet takes 3 to
   // 20; config/cloth.yaml, released at 30 degrees and buckling as it hangs, 60 to 400 (its path hangs

@@ -34,6 +34,11 @@ SparseMatrix tangentStiffness(const Grid& grid, const Eigen::VectorXd& x,
                               CompressedSprings compressed = CompressedSprings::Keep,
                               int* num_dropped = nullptr);
 
+// The springs' Laplacian sum_s k_s G_s^T G_s on the free dofs (G_s x = x_i - x_j, each dof
+// direction alike): constant, and at least K(x) at every x (a spring's Hessian is k_s along it and
+// k_s (1 - L / l) < k_s across), so an implicit step solved with it in place of K descends.
+SparseMatrix springLaplacian(const Grid& grid);
+
 // K(x) assembled again and again on one grid: its pattern and where each spring's entries land in its
 // values are found once, so an assembly writes the values in place (an assembly from triplets, sorting
 // 36 per spring, costs several times more).

@@ -56,6 +56,12 @@ const SpringTangent* FullForceModel::springTangent(const Eigen::VectorXd& u)
   return spring_tangent_.get();
 }
 
+bool FullForceModel::constantStiffness(SparseMatrix& l)
+{
+  l = springLaplacian(grid_);
+  return true;
+}
+
 double FullForceModel::energy(const Eigen::VectorXd& u)
 {
   double cached = 0.0;
@@ -147,6 +153,19 @@ void PhysicalModalForceModel::tangentStiffness(const Eigen::VectorXd& modal, Spa
   tangentTimesBasis(grid_, x_, phi_t_, k_phi_t_);
   const Eigen::MatrixXd reduced = k_phi_t_ * basis_.phi;
   k = reduced.sparseView();
+}
+
+bool LinearModalForceModel::constantStiffness(SparseMatrix& l)
+{
+  tangentStiffness(Eigen::VectorXd(), l);
+  return true;
+}
+
+bool PhysicalModalForceModel::constantStiffness(SparseMatrix& l)
+{
+  const Eigen::MatrixXd l_phi = springLaplacian(grid_) * basis_.phi;
+  l = (basis_.phi.transpose() * l_phi).sparseView();
+  return true;
 }
 
 }  // namespace modal_mass_spring

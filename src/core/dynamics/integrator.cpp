@@ -1,6 +1,8 @@
 // The paper's explicit Newmark scheme and the implicit Newmark (HHT alpha) with its Newton solve.
 #include "dynamics/integrator.h"
 
+#include <Eigen/QR>
+
 #include <algorithm>
 #include <limits>
 #include <stdexcept>
@@ -127,6 +129,7 @@ void ImplicitNewmark::gyroscopicChanged()
 {
   damping_ = gyroscopic_ ? SparseMatrix(system_.damping + *gyroscopic_) : system_.damping;
   h_ = 0.0;  // the inertia term holds C + G: built again at the next step
+  constant_h_ = 0.0;
   inertia_mapped_ = false;
 }
 
@@ -199,6 +202,8 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
   };
 
   const bool symmetric = !gyroscopic_ && model.isSymmetric();
+  if (constant_matrix_ && symmetric && !model.isLinear() && factorConstant(model))
+    return solveConstant(model, s, next, incremental);
   linear_solver_.setBlockSize(model.blockSize());
   for (last_iterations_ = 1; last_iterations_ <= max_iterations_; ++last_iterations_)
   {
@@ -254,6 +259,96 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
       residual(model, s, next);
       return residual_norm <= std::sqrt(tolerance_) * (force_.norm() + inertial_norm_) + roundoff(model, next);
     }
+  }
+  return false;
+}
+
+bool ImplicitNewmark::factorConstant(ForceModel& model)
+{
+  if (constant_h_ == h_)
+    return true;
+  if (constant_stiffness_.rows() != model.size() && !model.constantStiffness(constant_stiffness_))
+    return false;
+  const SparseMatrix matrix = inertia_ + (1.0 + alpha_) * constant_stiffness_;
+  constant_dense_ = model.blockSize() == 1;  // modal coordinates: small and dense
+  bool ok;
+  if (constant_dense_)
+  {
+    dense_factor_.compute(Eigen::MatrixXd(matrix));
+    ok = dense_factor_.info() == Eigen::Success;
+  }
+  else
+  {
+    sparse_factor_.compute(matrix);
+    ok = sparse_factor_.info() == Eigen::Success;
+  }
+  constant_h_ = ok ? h_ : 0.0;
+  return ok;
+}
+
+Eigen::VectorXd ImplicitNewmark::solveConstantMatrix(const Eigen::VectorXd& rhs) const
+{
+  return constant_dense_ ? Eigen::VectorXd(dense_factor_.solve(rhs)) : Eigen::VectorXd(sparse_factor_.solve(rhs));
+}
+
+bool ImplicitNewmark::solveConstant(ForceModel& model, const State& s, State& next,
+                                    const std::function<double(const Eigen::VectorXd&)>& incremental)
+{
+  // The fixed-point map q -> g(q) = q + f(q), f = -J_c^-1 R(q). Anderson mixing takes the g of the
+  // combination of the last iterates whose f is smallest (least squares over their differences).
+  const Eigen::Index n = next.q.size();
+  Eigen::MatrixXd delta_f(n, kAndersonDepth), delta_g(n, kAndersonDepth);
+  int stored = 0, oldest = 0;
+  Eigen::VectorXd f, previous_f, previous_g, accepted_step;
+  double accepted_potential = std::numeric_limits<double>::infinity();
+  for (last_iterations_ = 1; last_iterations_ <= kConstantMatrixIterations * max_iterations_; ++last_iterations_)
+  {
+    double residual_norm = residual(model, s, next);
+    double potential = incremental(next.q);
+    if (potential > accepted_potential && accepted_step.size() > 0)
+    {
+      // The mixed iterate went uphill: back to the plain step from the last accepted one, which
+      // descends (J_c >= J), and the history starts again.
+      next.q = accepted_step;
+      residual_norm = residual(model, s, next);
+      potential = incremental(next.q);
+      stored = 0;
+      oldest = 0;
+      previous_f.resize(0);
+    }
+    const double target = tolerance_ * (force_.norm() + inertial_norm_) + roundoff(model, next);
+    if (residual_norm <= target)
+      return true;
+    f = -solveConstantMatrix(residual_);
+    if (!f.allFinite())
+      return false;
+    if (f.norm() <= 1e-10 * (next.q - s.q).norm())
+    {
+      next.q += f;
+      residual(model, s, next);
+      return true;
+    }
+    const Eigen::VectorXd g = next.q + f;
+    accepted_potential = potential;
+    accepted_step = g;
+    if (previous_f.size() > 0)
+    {
+      delta_f.col(oldest) = f - previous_f;
+      delta_g.col(oldest) = g - previous_g;
+      oldest = (oldest + 1) % kAndersonDepth;
+      stored = std::min(stored + 1, kAndersonDepth);
+    }
+    previous_f = f;
+    previous_g = g;
+    if (stored == 0)
+    {
+      next.q = g;
+      continue;
+    }
+    const Eigen::VectorXd gamma = delta_f.leftCols(stored).colPivHouseholderQr().solve(f);
+    next.q = g - delta_g.leftCols(stored) * gamma;
+    if (!next.q.allFinite())
+      next.q = g;
   }
   return false;
 }

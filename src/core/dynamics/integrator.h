@@ -7,10 +7,12 @@
 #include "modal_mass_spring/state.h"
 #include "solvers/tangent_solver.h"
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <Eigen/SparseCholesky>
 #include <Eigen/SparseLU>
 
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -94,6 +96,10 @@ enum class NewtonStart
 // (recursively, down to 1/16); a step that still does not converge is refused, never taken.
 // A gyroscopic G or a force whose tangent is not symmetric (a turning frame's) makes R no gradient:
 // Newton then solves with a sparse LU and its line search asks for a smaller |R|.
+// With a constant matrix (setConstantMatrix), each iteration solves with the model's constant
+// stiffness L >= K in place of the tangent, factorised once per step size: no tangent is built, and
+// every iteration descends G (projective dynamics' global step, Liu et al. 2013); Anderson mixing
+// of the last iterates (Walker and Ni 2011) is kept where it descends too (Peng et al. 2018).
 class ImplicitNewmark : public Integrator
 {
 public:
@@ -107,13 +113,27 @@ public:
   void setNewtonStart(NewtonStart start) { start_ = start; }
   // The largest relative linear residual |R + J delta| / |R| of an inexact Newton direction.
   void setMaxForcing(double forcing) { max_forcing_ = forcing; }
+  // Solves with the model's constant stiffness where it has one and R is a gradient (no gyroscopic
+  // or non-symmetric force), Newton's tangent otherwise.
+  void setConstantMatrix(bool on) { constant_matrix_ = on; }
+  bool constantMatrix() const { return constant_matrix_; }
 
 private:
+  // Anderson mixing's depth, chosen by measurement (docs/benchmarks.md); the constant matrix
+  // converges linearly, so it may take this many times Newton's iterations.
+  static constexpr int kAndersonDepth = 10;
+  static constexpr int kConstantMatrixIterations = 10;
   static constexpr int kMaxHalvings = 4;
   void setStepSize(double h);
   bool advance(ForceModel& model, const State& s, State& next, double h, int depth);
   // One Newton solve of a step of size h_.
   bool solve(ForceModel& model, const State& s, State& next);
+  // The same step by iterations with the constant matrix; `incremental` is G.
+  bool solveConstant(ForceModel& model, const State& s, State& next,
+                     const std::function<double(const Eigen::VectorXd&)>& incremental);
+  // Factorises inertia + (1 + alpha) L for the step size h_, unless done; false where the model has no L.
+  bool factorConstant(ForceModel& model);
+  Eigen::VectorXd solveConstantMatrix(const Eigen::VectorXd& rhs) const;
   // The Newton direction -J^-1 R at next.q (empty when J cannot be factorised); with a symmetric J it
   // may leave a residual |R + J delta| up to `slack`.
   Eigen::VectorXd direction(ForceModel& model, const State& next, bool symmetric, double slack);
@@ -155,6 +175,14 @@ private:
   Eigen::VectorXd old_terms_;  // alpha (C v - F(q)): the HHT part of R from the start of the step
   Eigen::VectorXd predicted_;  // y = q + h v + h^2 (1/2 - beta) a: q' = y + beta h^2 a
   double inertial_norm_ = 0.0;  // |M a' + C v'| at the last residual
+  // The constant matrix: L from the model (at the first use), its sum with the inertia factorised
+  // dense (modal coordinates) or sparse, for the step size constant_h_ (0: none).
+  bool constant_matrix_ = false;
+  SparseMatrix constant_stiffness_;
+  double constant_h_ = 0.0;
+  bool constant_dense_ = false;
+  Eigen::LLT<Eigen::MatrixXd> dense_factor_;
+  Eigen::SimplicialLLT<SparseMatrix> sparse_factor_;
 };
 
 }  // namespace modal_mass_spring

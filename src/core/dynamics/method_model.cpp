@@ -89,8 +89,12 @@ void MethodModel::configure(const IntegratorSettings& settings)
   settings_ = settings;
   MassDamping system = massDamping(settings.alpha, settings.beta);
   if (settings.kind == IntegratorKind::Implicit)
-    integrator_ = std::make_unique<ImplicitNewmark>(std::move(system), settings.time_step, settings.newton_max_iterations,
-                                                    settings.hht_alpha);
+  {
+    auto implicit = std::make_unique<ImplicitNewmark>(std::move(system), settings.time_step,
+                                                      settings.newton_max_iterations, settings.hht_alpha);
+    implicit->setConstantMatrix(settings.solver == ImplicitSolver::ConstantMatrix);
+    integrator_ = std::move(implicit);
+  }
   else
     integrator_ = std::make_unique<ExplicitNewmark>(std::move(system), settings.time_step);
   integrator_->setGyroscopic(frame_.none ? nullptr : &frame_gyroscopic_);

@@ -73,6 +73,7 @@ public:
   {
     return linear_ ? nullptr : inner_.springTangent(q);
   }
+  bool constantStiffness(SparseMatrix& l) override { return !linear_ && inner_.constantStiffness(l); }
   // A force -L q linear in q (a turning frame's Euler and centrifugal forces), L kept by the caller;
   // null: none. It has no potential in energy(): the energy check is off while a frame moves.
   void setLinearTerm(const SparseMatrix* l) { linear_ = l; }
@@ -91,6 +92,7 @@ struct IntegratorSettings
   int newton_max_iterations = 50;
   double hht_alpha = 0.0;          // the implicit integrator's HHT alpha
   double alpha = 0.0, beta = 0.0;  // Rayleigh damping alpha M + beta K(x_ref)
+  ImplicitSolver solver = ImplicitSolver::Newton;
 };
 
 // What a method does with the part of a displacement its coordinates cannot hold.

@@ -369,4 +369,28 @@ SparseMatrix tangentStiffness(const Grid& grid, const Eigen::VectorXd& x, Compre
   return tangentStiffnessDim<3>(grid, x, compressed, num_dropped);
 }
 
+SparseMatrix springLaplacian(const Grid& grid)
+{
+  const int dim = grid.dimension();
+  std::vector<Eigen::Triplet<double>> triplets;
+  triplets.reserve(grid.springs().size() * 4 * dim);
+  for (const Spring& s : grid.springs())
+    for (int c = 0; c < dim; ++c)
+    {
+      const int i = grid.freeIndex(dim * s.i + c), j = grid.freeIndex(dim * s.j + c);
+      if (i >= 0)
+        triplets.emplace_back(i, i, s.stiffness);
+      if (j >= 0)
+        triplets.emplace_back(j, j, s.stiffness);
+      if (i >= 0 && j >= 0)
+      {
+        triplets.emplace_back(i, j, -s.stiffness);
+        triplets.emplace_back(j, i, -s.stiffness);
+      }
+    }
+  SparseMatrix l(grid.numFreeDofs(), grid.numFreeDofs());
+  l.setFromTriplets(triplets.begin(), triplets.end());
+  return l;
+}
+
 }  // namespace modal_mass_spring

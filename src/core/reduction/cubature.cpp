@@ -650,4 +650,15 @@ void CubatureForceModel::tangentStiffness(const Eigen::VectorXd& modal, SparseMa
   k = reduced_.sparseView();
 }
 
+bool CubatureForceModel::constantStiffness(SparseMatrix& l)
+{
+  Eigen::VectorXd stiffness(diff_t_.cols());
+  for (size_t t = 0; t < springs_.size(); ++t)
+    stiffness.segment(static_cast<Eigen::Index>(t) * dim_, dim_).setConstant(weights_[static_cast<Eigen::Index>(t)] *
+                                                                             springs_[t].stiffness);
+  const Eigen::MatrixXd laplacian = diff_t_ * stiffness.asDiagonal() * diff_t_.transpose();
+  l = laplacian.sparseView();
+  return true;
+}
+
 }  // namespace modal_mass_spring

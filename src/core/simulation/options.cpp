@@ -23,6 +23,7 @@ int parseName(const std::string& parameter, const std::string& name, const std::
 const std::vector<std::string> kLinearizations{"rest", "equilibrium"};
 const std::vector<std::string> kIntegrators{"explicit", "implicit"};
 const std::vector<std::string> kInitialStates{"initial", "equilibrium"};
+const std::vector<std::string> kImplicitSolvers{"newton", "constant_matrix"};
 const std::vector<std::string> kBases{"linear_modes", "modal_derivatives", "skinning"};
 const std::vector<std::string> kHandleFormulations{"auto", "constraint_modes", "moving_frame"};
 
@@ -45,6 +46,11 @@ std::string toString(IntegratorKind value) { return kIntegrators[static_cast<int
 IntegratorKind parseIntegrator(const std::string& name)
 {
   return static_cast<IntegratorKind>(parseName("integrator", name, kIntegrators));
+}
+std::string toString(ImplicitSolver value) { return kImplicitSolvers[static_cast<int>(value)]; }
+ImplicitSolver parseImplicitSolver(const std::string& name)
+{
+  return static_cast<ImplicitSolver>(parseName("implicit_solver", name, kImplicitSolvers));
 }
 std::string toString(InitialState value) { return kInitialStates[static_cast<int>(value)]; }
 InitialState parseInitialState(const std::string& name)

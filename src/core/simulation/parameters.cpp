@@ -59,6 +59,8 @@ SimulationParams loadSimulationParams(const ParameterSource& s)
     p.integrator = parseIntegrator(*name);
   if (const auto name = s.getString("initial_state"))
     p.initial_state = parseInitialState(*name);
+  if (const auto name = s.getString("implicit_solver"))
+    p.implicit_solver = parseImplicitSolver(*name);
   p.newton_max_iterations = s.getInt("newton_max_iterations").value_or(p.newton_max_iterations);
   p.equilibrium_max_iterations = s.getInt("equilibrium_max_iterations").value_or(p.equilibrium_max_iterations);
   p.hht_alpha = s.getDouble("hht_alpha").value_or(p.hht_alpha);

@@ -290,7 +290,8 @@ void Simulation::setCubature(Cubature cubature)
 IntegratorSettings Simulation::integratorSettings() const
 {
   return IntegratorSettings{params_.integrator, params_.time_step, params_.newton_max_iterations,
-                            params_.hht_alpha,  params_.alpha,     params_.beta};
+                            params_.hht_alpha,  params_.alpha,     params_.beta,
+                            params_.implicit_solver};
 }
 
 void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder)

@@ -1,10 +1,13 @@
-// The modal force models (linear, physical) against central differences of their energy and force.
+// The force models against central differences of their energy and force, and their constant
+// stiffness against their tangent.
 #include "modal_mass_spring/force_model.h"
 #include "modal_mass_spring/simulation.h"
 
 #include "test_support.h"
 
 #include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
 
 #include <cstdlib>
 #include <vector>
@@ -51,5 +54,41 @@ TEST(ForceModels, ModalForceIsMinusEnergyGradientAndTangentIsMinusForceJacobian)
     const double cached = model->energy(q);
     model->force(0.5 * q, f);
     EXPECT_EQ(model->energy(q), cached);
+  }
+}
+
+// Each model's constant stiffness L is at least its tangent at a large deformation with compressed
+// and stretched springs (L - K positive semidefinite), so a step solved with L descends.
+TEST(ForceModels, ConstantStiffnessBoundsTheTangent)
+{
+  GridParams g = paper3D();
+  g.bending = true;
+  SimulationParams s;
+  s.num_modes = 12;
+  s.method = Method::Cubature;
+  s.linearization = Linearization::Equilibrium;
+  Simulation sim(g, s);
+  ASSERT_NE(sim.cubature(), nullptr);
+  const Eigen::VectorXd& x_ref = sim.linearizationPositions();
+  FullForceModel full(sim.grid(), x_ref);
+  PhysicalModalForceModel physical(sim.grid(), sim.basis(), x_ref);
+  CubatureForceModel cubature(sim.grid(), sim.basis(), x_ref, *sim.cubature());
+  std::srand(5);
+  const Eigen::VectorXd modal = 0.05 * Eigen::VectorXd::Random(s.num_modes);
+  const Eigen::VectorXd free = 0.05 * Eigen::VectorXd::Random(sim.grid().numFreeDofs());
+  for (auto [model, q] : {std::pair<ForceModel*, Eigen::VectorXd>{&full, free}, {&physical, modal}, {&cubature, modal}})
+  {
+    SparseMatrix k, l;
+    model->tangentStiffness(q, k);
+    ASSERT_TRUE(model->constantStiffness(l));
+    const Eigen::MatrixXd tangent(k), constant(l);
+    if (model == &full)
+    {
+      // Indefinite here (compressed springs): the bound still holds.
+      EXPECT_LT(Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(tangent).eigenvalues().minCoeff(), 0.0);
+    }
+    const Eigen::VectorXd gap = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(constant - tangent).eigenvalues();
+    EXPECT_GT(gap.minCoeff(), -1e-9 * constant.norm()) << "size " << model->size();
+    EXPECT_LT((constant - constant.transpose()).norm(), 1e-12 * constant.norm());
   }
 }
