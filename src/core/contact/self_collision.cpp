@@ -277,19 +277,21 @@ SelfCollision::Geometry SelfCollision::geometry(const Pair& pair, const double* 
   return g;
 }
 
-void SelfCollision::detect(const Eigen::VectorXd& x)
+void SelfCollision::listCandidates(const Eigen::VectorXd& x)
 {
-  pairs_.clear();
+  candidates_.clear();
   const int count = static_cast<int>(particle_of_.size());
+  group_start_.assign(count + 1, 0);
+  built_at_ = x;
   const int cols = grid_.params().cols;
   const double* xs = x.data();
   auto at = [xs](int slot) { return Eigen::Map<const Eigen::Vector3d>(xs + 3 * slot); };
   auto slotAt = [&](int row, int col) { return slot_of_[row * cols + col]; };
   const bool triangles = primitive_ == SelfPrimitive::Triangles;
-  // A triangle within the thickness of a particle has its first corner within the thickness plus its
-  // longest edge.
-  // Around each cell, a sphere through its farthest corner from the corners' mean: a particle farther
-  // than the thickness from it is that far from both triangles (the cheap test before the exact one).
+  const double listed = (1.0 + kSkin) * thickness_;
+  // A triangle within `listed` of a particle has its first corner within `listed` plus its longest
+  // edge. Around each cell, a sphere through its farthest corner from the corners' mean: a particle
+  // farther than `listed` from it is that far from both triangles (the cheap test before the exact one).
   double longest = 0.0;
   if (triangles)
   {
@@ -303,15 +305,16 @@ void SelfCollision::detect(const Eigen::VectorXd& x)
         const Eigen::Vector3d centre = 0.25 * (at(s) + at(b) + at(c) + at(d));
         const double radius = std::sqrt(std::max({(at(s) - centre).squaredNorm(), (at(b) - centre).squaredNorm(),
                                                   (at(c) - centre).squaredNorm(), (at(d) - centre).squaredNorm()})) +
-                              thickness_;
+                              listed;
         cell_sphere_[s] << centre, radius * radius;
       }
   }
-  const double reach = thickness_ + std::sqrt(longest);
-  const double reach2 = reach * reach, thickness2 = thickness_ * thickness_;
+  const double reach = listed + std::sqrt(longest);
+  const double reach2 = reach * reach, listed2 = listed * listed;
   const Cells cells = sortIntoCells(xs, count, reach, cell_of_, cell_start_, sorted_);
   for (int p = 0; p < count; ++p)
   {
+    group_start_[p] = static_cast<int>(candidates_.size());
     const Eigen::Vector3d xp = at(p);
     const int rp = row_[p], cp = col_[p];
     forNeighbours(cells, xs + 3 * p, [&](int q) {
@@ -319,8 +322,8 @@ void SelfCollision::detect(const Eigen::VectorXd& x)
       if (q == p || d2 >= reach2)
         return;
       const int rq = row_[q], cq = col_[q];
-      if (q > p && d2 < thickness2 && separatedIndices(rp, cp, rq, cq))
-        pairs_.push_back(Pair{p, {q, -1, -1}});
+      if (q > p && d2 < listed2 && separatedIndices(rp, cp, rq, cq))
+        candidates_.push_back(Pair{p, {q, -1, -1}, -1});
       if (!triangles || !anchor_[q])
         return;
       // Every corner of the cell (rq..rq+1, cq..cq+1) more than two springs from p.
@@ -331,32 +334,113 @@ void SelfCollision::detect(const Eigen::VectorXd& x)
       if ((cell_sphere_[q].head<3>() - xp).squaredNorm() >= cell_sphere_[q][3])
         return;
       const int b = slotAt(rq, cq + 1), c = slotAt(rq + 1, cq), d = slotAt(rq + 1, cq + 1);
+      int half = 0;
       for (const auto& corners : {std::array<int, 3>{q, b, d}, std::array<int, 3>{q, d, c}})
       {
         double w[3];
         const Eigen::Vector3d y = closestOnTriangle(xp, at(corners[0]), at(corners[1]), at(corners[2]), w);
-        if ((xp - y).squaredNorm() < thickness2)
-          pairs_.push_back(Pair{p, {corners[0], corners[1], corners[2]}});
+        if ((xp - y).squaredNorm() < listed2)
+          candidates_.push_back(Pair{p, {corners[0], corners[1], corners[2]}, half});
+        ++half;
       }
     });
   }
+  group_start_[count] = static_cast<int>(candidates_.size());
 }
 
-void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double /*dt*/,
+bool SelfCollision::edgeHeldByNeighbour(int k, int opposite) const
+{
+  const Pair& pair = candidates_[k];
+  const int r = row_[pair.c[0]], c = col_[pair.c[0]];
+  // The triangle across the edge opposite corner `opposite` (self_collision.h names the halves).
+  static constexpr int kAcross[2][3][3] = {
+      {{0, 1, 1}, {0, 0, 1}, {-1, 0, 1}},   // half 0: right edge, diagonal, top edge -> (row, col, half)
+      {{1, 0, 0}, {0, -1, 0}, {0, 0, 0}},   // half 1: bottom edge, left edge, diagonal
+  };
+  const int* across = kAcross[pair.half][opposite];
+  const int row = r + across[0], col = c + across[1], half = across[2];
+  const GridParams& g = grid_.params();
+  if (row < 0 || col < 0 || row >= g.rows || col >= g.cols)
+    return false;
+  const int anchor = slot_of_[row * g.cols + col];
+  if (anchor < 0 || 2 * anchor + half > 2 * pair.c[0] + pair.half)
+    return false;  // none there, or it leaves the point to this one
+  const int a = pair.c[(opposite + 1) % 3], b = pair.c[(opposite + 2) % 3];
+  for (int j = group_start_[pair.p]; j < group_start_[pair.p + 1]; ++j)
+  {
+    const Pair& other = candidates_[j];
+    if (other.half != half || other.c[0] != anchor || !(candidate_geometry_[j].gap < thickness_))
+      continue;
+    // Its closest point on the same edge: its weight on the corner off the edge is zero.
+    for (int i = 0; i < 3; ++i)
+      if (other.c[i] != a && other.c[i] != b)
+        return candidate_geometry_[j].w[i] == 0.0;
+  }
+  return false;
+}
+
+void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x)
+{
+  touches_.clear();
+  const double* xs = x.data();
+  const double* starts = x_start.data();
+  candidate_geometry_.resize(candidates_.size());
+  const int count = static_cast<int>(particle_of_.size());
+  for (int p = 0; p < count; ++p)
+  {
+    const int first = group_start_[p], last = group_start_[p + 1];
+    for (int k = first; k < last; ++k)
+      candidate_geometry_[k] = geometry(candidates_[k], xs, starts);
+    for (int k = first; k < last; ++k)
+    {
+      const Geometry& g = candidate_geometry_[k];
+      if (!(g.gap < thickness_))
+        continue;
+      const Pair& pair = candidates_[k];
+      if (pair.c[1] >= 0)
+      {
+        // A corner is held by the particle pair with it (listed: it is as close), an edge by the
+        // triangle across it when that one finds the same point.
+        const int zeros = (g.w[0] == 0.0) + (g.w[1] == 0.0) + (g.w[2] == 0.0);
+        if (zeros == 2)
+          continue;
+        if (zeros == 1 && edgeHeldByNeighbour(k, g.w[0] == 0.0 ? 0 : g.w[1] == 0.0 ? 1 : 2))
+          continue;
+      }
+      touches_.push_back(Touch{pair, g, {}, 0.0, Eigen::Vector3d::Zero()});
+    }
+  }
+}
+
+void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double dt,
                             const Contact* contact)
 {
   report_ = SelfCollisionReport{};
   report_.closest_before = report_.closest_after = thickness_;
-  detect(x);
-  if (pairs_.empty())
+  // Between two listings every particle has moved less than half the skin, so every distance between
+  // a particle and a particle or triangle has changed by less than the skin: a pair not listed is
+  // still farther than the thickness. (NaN positions list anew.)
+  const Eigen::Index dofs = x.size();
+  bool rebuild = built_at_.size() != dofs;
+  const double moved2 = 0.25 * kSkin * kSkin * thickness_ * thickness_;
+  for (Eigen::Index i = 0; i + 2 < dofs && !rebuild; i += 3)
+  {
+    const double dx = x[i] - built_at_[i], dy = x[i + 1] - built_at_[i + 1], dz = x[i + 2] - built_at_[i + 2];
+    rebuild = !(dx * dx + dy * dy + dz * dz <= moved2);
+  }
+  if (rebuild)
+    listCandidates(x);
+  report_.rebuilt = rebuild;
+  findTouches(x_start, x);
+  if (touches_.empty())
     return;
   // The particles of the pairs that lie on a collider, and the surface's normal there.
   surface_normal_.assign(particle_of_.size(), Eigen::Vector3d::Zero());
   if (contact)
   {
     std::vector<char> checked(particle_of_.size(), 0);
-    for (const Pair& pair : pairs_)
-      for (int slot : {pair.p, pair.c[0], pair.c[1], pair.c[2]})
+    for (const Touch& touch : touches_)
+      for (int slot : {touch.pair.p, touch.pair.c[0], touch.pair.c[1], touch.pair.c[2]})
       {
         if (slot < 0 || checked[slot])
           continue;
@@ -374,77 +458,91 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
         }
       }
   }
-  report_.contacts = static_cast<int>(pairs_.size());
+  report_.contacts = static_cast<int>(touches_.size());
   double* const xs = x.data();
   double* const vs = v.data();
   const double* const starts = x_start.data();
   auto ref = [](double* values, int slot) { return Eigen::Map<Eigen::Vector3d>(values + 3 * slot); };
   auto cref = [](const double* values, int slot) { return Eigen::Map<const Eigen::Vector3d>(values + 3 * slot); };
-  const int count = static_cast<int>(pairs_.size());
-  // A particle's inverse mass in a pair pushing along `normal`, relative to a free particle's: 0 on a
-  // collider when the push is along the surface's normal (more than 60 degrees from the surface).
-  auto inverse = [&](int slot, const Eigen::Vector3d& normal) {
-    return std::abs(surface_normal_[slot].dot(normal)) > 0.5 ? 0.0 : 1.0;
+  auto relative = [&](const double* values, const Touch& t) {
+    Eigen::Vector3d r = cref(values, t.pair.p);
+    for (int k = 0; k < 3 && t.pair.c[k] >= 0; ++k)
+      r -= t.g.w[k] * cref(values, t.pair.c[k]);
+    return r;
   };
+  // A particle's inverse mass in a pair pushing along its normal, relative to a free particle's: 0 on
+  // a collider when the push is along the surface's normal (more than 60 degrees from the surface).
+  for (Touch& t : touches_)
+  {
+    const int slots[4] = {t.pair.p, t.pair.c[0], t.pair.c[1], t.pair.c[2]};
+    const double weights[4] = {1.0, t.g.w[0], t.g.w[1], t.g.w[2]};
+    for (int k = 0; k < 4; ++k)
+    {
+      t.m[k] = slots[k] >= 0 && std::abs(surface_normal_[slots[k]].dot(t.g.normal)) <= 0.5 ? 1.0 : 0.0;
+      t.sum += slots[k] >= 0 ? weights[k] * weights[k] * t.m[k] : 0.0;
+    }
+    t.start = relative(starts, t);
+    report_.closest_before = std::min(report_.closest_before, t.g.gap);
+  }
   // Moves p by delta / (1 + sum w^2) and the corners against it by their weights (each times its
   // inverse mass): the pair's relative displacement changes by delta and, between free particles, its
   // momentum not at all.
-  auto apply = [&](double* values, const Pair& pair, const double w[3], const Eigen::Vector3d& normal,
-                   const Eigen::Vector3d& delta) {
-    double m[4] = {inverse(pair.p, normal), 0.0, 0.0, 0.0};
-    double sum = m[0];
-    for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
-    {
-      m[k + 1] = inverse(pair.c[k], normal);
-      sum += w[k] * w[k] * m[k + 1];
-    }
-    if (sum <= 0.0)
-      return;  // every particle of the pair held by a collider
-    const Eigen::Vector3d share = delta / sum;
-    ref(values, pair.p) += m[0] * share;
-    for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
-      ref(values, pair.c[k]) -= m[k + 1] * w[k] * share;
+  auto apply = [&](double* values, const Touch& t, const Eigen::Vector3d& delta) {
+    const Eigen::Vector3d share = delta / t.sum;
+    ref(values, t.pair.p) += t.m[0] * share;
+    for (int k = 0; k < 3 && t.pair.c[k] >= 0; ++k)
+      ref(values, t.pair.c[k]) -= t.m[k + 1] * t.g.w[k] * share;
   };
-  auto relative = [&](const double* values, const Pair& pair, const double w[3]) {
-    Eigen::Vector3d r = cref(values, pair.p);
-    for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
-      r -= w[k] * cref(values, pair.c[k]);
-    return r;
-  };
+  const int count = static_cast<int>(touches_.size());
   touched_.assign(count, 0);
+  // The sweeps end when one moves nothing by more than this (m, and m over the step for velocities).
+  const double settled = 1e-6 * thickness_;
   for (int sweep = 0; sweep < kSweeps; ++sweep)
+  {
+    double largest = 0.0;
     for (int k = 0; k < count; ++k)
     {
-      const Pair& pair = pairs_[k];
-      const Geometry g = geometry(pair, xs, starts);
-      if (sweep == 0)
-        report_.closest_before = std::min(report_.closest_before, g.gap);
-      if (g.gap >= thickness_)
+      const Touch& t = touches_[k];
+      if (t.sum <= 0.0)
+        continue;  // every particle of the pair held by a collider
+      // The gap along the pair's normal at the step's end: it moves by micrometres over the sweeps.
+      const Eigen::Vector3d r = relative(xs, t);
+      const double gap = r.dot(t.g.normal);
+      if (gap >= thickness_)
         continue;
       touched_[k] = 1;
       // Positions: push apart to the thickness, Coulomb on the pair's relative slip over the step with
       // the push as the normal bound (as the colliders).
-      const double push = thickness_ - g.gap;
-      const Eigen::Vector3d slip = relative(xs, pair, g.w) - relative(starts, pair, g.w);
-      apply(xs, pair, g.w, g.normal, push * g.normal + coulomb(slip - slip.dot(g.normal) * g.normal, friction_ * push));
+      const double push = thickness_ - gap;
+      largest = std::max(largest, push);
+      const Eigen::Vector3d slip = r - t.start;
+      apply(xs, t, push * t.g.normal + coulomb(slip - slip.dot(t.g.normal) * t.g.normal, friction_ * push));
     }
+    if (largest <= settled)
+      break;
+  }
   for (int sweep = 0; sweep < kSweeps; ++sweep)
+  {
+    double largest = 0.0;
     for (int k = 0; k < count; ++k)
     {
       if (!touched_[k])
         continue;
-      const Pair& pair = pairs_[k];
-      const Geometry g = geometry(pair, xs, starts);
+      const Touch& t = touches_[k];
       // Velocities: remove the approach, Coulomb on the relative tangential velocity.
-      const Eigen::Vector3d velocity = relative(vs, pair, g.w);
-      const double approach = -velocity.dot(g.normal);
+      const Eigen::Vector3d velocity = relative(vs, t);
+      const double approach = -velocity.dot(t.g.normal);
       if (approach <= 0.0)
         continue;
-      const Eigen::Vector3d tangential = velocity + approach * g.normal;
-      apply(vs, pair, g.w, g.normal, approach * g.normal + coulomb(tangential, friction_ * approach));
+      largest = std::max(largest, approach);
+      const Eigen::Vector3d tangential = velocity + approach * t.g.normal;
+      apply(vs, t, approach * t.g.normal + coulomb(tangential, friction_ * approach));
     }
-  for (int k = 0; k < count; ++k)
-    report_.closest_after = std::min(report_.closest_after, geometry(pairs_[k], xs, starts).gap);
+    if (largest * dt <= settled)
+      break;
+  }
+  for (const Touch& t : touches_)
+    report_.closest_after = std::min(report_.closest_after, relative(xs, t).dot(t.g.normal));
 }
 
 }  // namespace modal_mass_spring
