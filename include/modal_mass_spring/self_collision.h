@@ -13,11 +13,13 @@
 // its corners); the triangles close the cells, and the spheres still keep particles apart at the
 // grid's edges, where every triangle at a particle may touch a neighbour of the other.
 //
-// Broad phase: a list of candidate pairs within the thickness plus a skin, kept over the steps and
-// rebuilt only when some particle has moved more than half the skin since it was built (no pair
-// outside it can then have come within the thickness); it is built over a uniform grid of cells as
-// wide as the reach (the listing distance plus the longest edge of any triangle, so that a triangle
-// within it has its first corner in a neighbouring cell) by a counting sort. Narrow phase, every
+// Broad phase: a list of candidate pairs within the thickness plus twice a skin, kept over the steps;
+// the pairs of a particle that has moved more than half the skin since its pairs were last listed
+// are listed anew (all of them when many have), so that no pair outside the list can have come
+// within the thickness (docs/design.md, "Self-collision", gives the bound). A listing searches a
+// uniform grid of cells as wide as the reach (the listing distance plus the longest edge of any
+// triangle, so that a triangle within it has its first corner in a neighbouring cell), sorted by a
+// counting sort. Narrow phase, every
 // step: the candidates within the thickness at the step's end, one per closest point (a triangle
 // whose closest point is a corner or an edge it shares is left to the pair that holds that point),
 // corrected by Gauss-Seidel sweeps of equal-and-opposite pushes along each pair's normal at the
@@ -32,6 +34,7 @@
 
 #include <Eigen/Core>
 
+#include <array>
 #include <vector>
 
 namespace modal_mass_spring
@@ -66,11 +69,11 @@ double closestSeparatedDistance(const Grid& grid, const Eigen::VectorXd& positio
 struct SelfCollisionReport
 {
   int contacts = 0;  // pairs (particle-particle and particle-triangle) closer than the thickness, one per closest point
-  // The smallest gap among them before the correction and after it, along each pair's normal at the
-  // step's end (m; the thickness when none).
+  // The smallest gap among them before the correction and after it (as the last sweep left it), along
+  // each pair's normal at the step's end (m; the thickness when none).
   double closest_before = 0.0;
   double closest_after = 0.0;
-  bool rebuilt = false;  // the candidate pairs were listed anew this step
+  int relisted = 0;  // particles whose candidate pairs were listed anew this step (all at a full listing)
 };
 
 class SelfCollision
@@ -102,7 +105,7 @@ public:
   // At most this many Gauss-Seidel sweeps of the position and of the velocity correction.
   static constexpr int kSweeps = 4;
   // The skin of the candidate list, as a fraction of the thickness.
-  static constexpr double kSkin = 0.5;
+  static constexpr double kSkin = 0.25;
 
 private:
   // One pair: particle p (a free-particle slot) against corners c[0..2] (slots, -1 for none: a
@@ -134,13 +137,16 @@ private:
     double sum;
     Eigen::Vector3d start;
   };
-  // Lists the candidate pairs closer than the thickness plus the skin at positions x.
-  void listCandidates(const Eigen::VectorXd& x);
+  // Lists the candidate pairs closer than the thickness plus twice the skin at positions x: every
+  // pair when `moved` is empty, else those of the particles in it and of the triangles at them.
+  void listCandidates(const Eigen::VectorXd& x, const std::vector<int>& moved);
   // The candidates closer than the thickness at the step's end x, one per closest point.
   void findTouches(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x);
-  // Whether the triangle pair `k` of candidates_ leaves its closest point (on the edge opposite its
-  // corner `opposite`) to the triangle sharing that edge, when that one holds the same point.
-  bool edgeHeldByNeighbour(int k, int opposite) const;
+  // Whether the triangle pair `k` of `group` (one particle's candidates, with this step's geometry)
+  // leaves its closest point (on the edge opposite its corner `opposite`) to the triangle sharing
+  // that edge, when that one holds the same point.
+  bool edgeHeldByNeighbour(const std::vector<Pair>& group, const std::vector<Geometry>& geometry, int k,
+                           int opposite) const;
 
   const Grid& grid_;
   double thickness_;
@@ -150,12 +156,15 @@ private:
   std::vector<int> slot_of_;      // grid particle -> slot, -1 when fixed or held
   std::vector<int> row_, col_;    // per slot
   std::vector<char> anchor_;      // per slot: its particle is the first corner of a cell with every corner free
+  std::vector<std::array<int, 6>> fan_;  // per slot: the slots its triangles' edges join it to (-1: none, not free)
   // The broad phase's cells, kept between steps (no allocation a step once grown).
   std::vector<int> cell_of_, cell_start_, sorted_;
-  std::vector<Pair> candidates_;
-  std::vector<int> group_start_;  // candidates_ of slot p: [group_start_[p], group_start_[p + 1])
-  Eigen::VectorXd built_at_;      // the free positions the candidates were listed at (empty: none yet)
-  std::vector<Geometry> candidate_geometry_;  // this step's, per candidate
+  // Per slot p: its candidate pairs (p against a triangle, or against a particle of a later slot).
+  std::vector<std::vector<Pair>> candidates_;
+  Eigen::VectorXd built_at_;  // per slot, where its pairs were last listed (empty: none yet)
+  std::vector<Geometry> group_geometry_;  // this step's, per candidate of one slot
+  std::vector<int> moved_;                // slots moved more than half the skin
+  std::vector<char> is_moved_, is_anchor_listed_;
   std::vector<Touch> touches_;
   std::vector<char> touched_;
   SelfCollisionReport report_;

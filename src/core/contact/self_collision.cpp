@@ -236,6 +236,16 @@ SelfCollision::SelfCollision(const Grid& grid, double thickness, double friction
         slot_of_[grid.particleIndex(r + 1, c)] >= 0 && slot_of_[grid.particleIndex(r + 1, c + 1)] >= 0)
       anchor_[s] = 1;
   }
+  // The free ends of the triangles' edges at each particle: the sides and the diagonal (r, c)-(r+1, c+1).
+  fan_.assign(particle_of_.size(), {-1, -1, -1, -1, -1, -1});
+  static constexpr int kEdges[6][2] = {{0, 1}, {0, -1}, {1, 0}, {-1, 0}, {1, 1}, {-1, -1}};
+  for (size_t s = 0; s < particle_of_.size(); ++s)
+    for (int e = 0; e < 6; ++e)
+    {
+      const int r = row_[s] + kEdges[e][0], c = col_[s] + kEdges[e][1];
+      if (r >= 0 && c >= 0 && r < rows && c < cols)
+        fan_[s][e] = slot_of_[grid.particleIndex(r, c)];
+    }
 }
 
 SelfCollision::Geometry SelfCollision::geometry(const Pair& pair, const double* x, const double* x_start) const
@@ -277,18 +287,31 @@ SelfCollision::Geometry SelfCollision::geometry(const Pair& pair, const double* 
   return g;
 }
 
-void SelfCollision::listCandidates(const Eigen::VectorXd& x)
+void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<int>& moved)
 {
-  candidates_.clear();
   const int count = static_cast<int>(particle_of_.size());
-  group_start_.assign(count + 1, 0);
-  built_at_ = x;
+  const bool all = moved.empty();
+  candidates_.resize(count);
+  is_moved_.assign(count, all ? 1 : 0);
+  for (int p : moved)
+    is_moved_[p] = 1;
   const int cols = grid_.params().cols;
   const double* xs = x.data();
   auto at = [xs](int slot) { return Eigen::Map<const Eigen::Vector3d>(xs + 3 * slot); };
   auto slotAt = [&](int row, int col) { return slot_of_[row * cols + col]; };
   const bool triangles = primitive_ == SelfPrimitive::Triangles;
-  const double listed = (1.0 + kSkin) * thickness_;
+  // The pairs with a moved particle go; they are listed anew below.
+  for (std::vector<Pair>& group : candidates_)
+    if (all)
+      group.clear();
+    else
+      group.erase(std::remove_if(group.begin(), group.end(),
+                                 [&](const Pair& pair) {
+                                   return is_moved_[pair.p] || is_moved_[pair.c[0]] ||
+                                          (pair.c[1] >= 0 && (is_moved_[pair.c[1]] || is_moved_[pair.c[2]]));
+                                 }),
+                  group.end());
+  const double listed = (1.0 + 2.0 * kSkin) * thickness_;
   // A triangle within `listed` of a particle has its first corner within `listed` plus its longest
   // edge. Around each cell, a sphere through its farthest corner from the corners' mean: a particle
   // farther than `listed` from it is that far from both triangles (the cheap test before the exact one).
@@ -312,50 +335,83 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x)
   const double reach = listed + std::sqrt(longest);
   const double reach2 = reach * reach, listed2 = listed * listed;
   const Cells cells = sortIntoCells(xs, count, reach, cell_of_, cell_start_, sorted_);
+  // Particle p against the cell anchored at q (both its triangles), when every corner of the cell is
+  // more than two springs from p and a triangle is within `listed`.
+  auto listTriangles = [&](int p, int q) {
+    const Eigen::Vector3d xp = at(p);
+    const int rp = row_[p], cp = col_[p], rq = row_[q], cq = col_[q];
+    const int dr = rp < rq ? rq - rp : std::max(0, rp - rq - 1);
+    const int dc = cp < cq ? cq - cp : std::max(0, cp - cq - 1);
+    if (std::max(dr, dc) <= 2)
+      return;
+    if ((cell_sphere_[q].head<3>() - xp).squaredNorm() >= cell_sphere_[q][3])
+      return;
+    const int b = slotAt(rq, cq + 1), c = slotAt(rq + 1, cq), d = slotAt(rq + 1, cq + 1);
+    int half = 0;
+    for (const auto& corners : {std::array<int, 3>{q, b, d}, std::array<int, 3>{q, d, c}})
+    {
+      double w[3];
+      const Eigen::Vector3d y = closestOnTriangle(xp, at(corners[0]), at(corners[1]), at(corners[2]), w);
+      if ((xp - y).squaredNorm() < listed2)
+        candidates_[p].push_back(Pair{p, {corners[0], corners[1], corners[2]}, half});
+      ++half;
+    }
+  };
+  // The moved particles against everything (a particle pair in both particles' lists).
   for (int p = 0; p < count; ++p)
   {
-    group_start_[p] = static_cast<int>(candidates_.size());
+    if (!is_moved_[p])
+      continue;
     const Eigen::Vector3d xp = at(p);
-    const int rp = row_[p], cp = col_[p];
     forNeighbours(cells, xs + 3 * p, [&](int q) {
       const double d2 = (at(q) - xp).squaredNorm();
       if (q == p || d2 >= reach2)
         return;
-      const int rq = row_[q], cq = col_[q];
-      if (q > p && d2 < listed2 && separatedIndices(rp, cp, rq, cq))
-        candidates_.push_back(Pair{p, {q, -1, -1}, -1});
-      if (!triangles || !anchor_[q])
-        return;
-      // Every corner of the cell (rq..rq+1, cq..cq+1) more than two springs from p.
-      const int dr = rp < rq ? rq - rp : std::max(0, rp - rq - 1);
-      const int dc = cp < cq ? cq - cp : std::max(0, cp - cq - 1);
-      if (std::max(dr, dc) <= 2)
-        return;
-      if ((cell_sphere_[q].head<3>() - xp).squaredNorm() >= cell_sphere_[q][3])
-        return;
-      const int b = slotAt(rq, cq + 1), c = slotAt(rq + 1, cq), d = slotAt(rq + 1, cq + 1);
-      int half = 0;
-      for (const auto& corners : {std::array<int, 3>{q, b, d}, std::array<int, 3>{q, d, c}})
+      if (d2 < listed2 && (q > p || !is_moved_[q]) && separatedIndices(row_[p], col_[p], row_[q], col_[q]))
       {
-        double w[3];
-        const Eigen::Vector3d y = closestOnTriangle(xp, at(corners[0]), at(corners[1]), at(corners[2]), w);
-        if ((xp - y).squaredNorm() < listed2)
-          candidates_.push_back(Pair{p, {corners[0], corners[1], corners[2]}, half});
-        ++half;
+        candidates_[p].push_back(Pair{p, {q, -1, -1}, -1});
+        candidates_[q].push_back(Pair{q, {p, -1, -1}, -1});
       }
+      if (triangles && anchor_[q])
+        listTriangles(p, q);
     });
   }
-  group_start_[count] = static_cast<int>(candidates_.size());
+  built_at_.resize(x.size());
+  if (all)
+  {
+    built_at_ = x;
+    return;
+  }
+  for (int p : moved)
+    built_at_.segment<3>(3 * p) = at(p);
+  if (!triangles)
+    return;
+  // The cells with a moved corner against the particles that have not moved.
+  is_anchor_listed_.assign(count, 0);
+  for (int m : moved)
+    for (int r = std::max(0, row_[m] - 1); r <= row_[m]; ++r)
+      for (int c = std::max(0, col_[m] - 1); c <= col_[m]; ++c)
+      {
+        const int q = slotAt(r, c);
+        if (q < 0 || !anchor_[q] || is_anchor_listed_[q])
+          continue;
+        is_anchor_listed_[q] = 1;
+        forNeighbours(cells, xs + 3 * q, [&](int p) {
+          if (!is_moved_[p] && (at(q) - at(p)).squaredNorm() < reach2)
+            listTriangles(p, q);
+        });
+      }
 }
 
-bool SelfCollision::edgeHeldByNeighbour(int k, int opposite) const
+bool SelfCollision::edgeHeldByNeighbour(const std::vector<Pair>& group, const std::vector<Geometry>& geometry, int k,
+                                        int opposite) const
 {
-  const Pair& pair = candidates_[k];
+  const Pair& pair = group[k];
   const int r = row_[pair.c[0]], c = col_[pair.c[0]];
   // The triangle across the edge opposite corner `opposite` (self_collision.h names the halves).
   static constexpr int kAcross[2][3][3] = {
-      {{0, 1, 1}, {0, 0, 1}, {-1, 0, 1}},   // half 0: right edge, diagonal, top edge -> (row, col, half)
-      {{1, 0, 0}, {0, -1, 0}, {0, 0, 0}},   // half 1: bottom edge, left edge, diagonal
+      {{0, 1, 1}, {0, 0, 1}, {-1, 0, 1}},  // half 0: right edge, diagonal, top edge -> (row, col, half)
+      {{1, 0, 0}, {0, -1, 0}, {0, 0, 0}},  // half 1: bottom edge, left edge, diagonal
   };
   const int* across = kAcross[pair.half][opposite];
   const int row = r + across[0], col = c + across[1], half = across[2];
@@ -366,15 +422,15 @@ bool SelfCollision::edgeHeldByNeighbour(int k, int opposite) const
   if (anchor < 0 || 2 * anchor + half > 2 * pair.c[0] + pair.half)
     return false;  // none there, or it leaves the point to this one
   const int a = pair.c[(opposite + 1) % 3], b = pair.c[(opposite + 2) % 3];
-  for (int j = group_start_[pair.p]; j < group_start_[pair.p + 1]; ++j)
+  for (size_t j = 0; j < group.size(); ++j)
   {
-    const Pair& other = candidates_[j];
-    if (other.half != half || other.c[0] != anchor || !(candidate_geometry_[j].gap < thickness_))
+    const Pair& other = group[j];
+    if (other.half != half || other.c[0] != anchor || !(geometry[j].gap < thickness_))
       continue;
     // Its closest point on the same edge: its weight on the corner off the edge is zero.
     for (int i = 0; i < 3; ++i)
       if (other.c[i] != a && other.c[i] != b)
-        return candidate_geometry_[j].w[i] == 0.0;
+        return geometry[j].w[i] == 0.0;
   }
   return false;
 }
@@ -384,30 +440,63 @@ void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::Vec
   touches_.clear();
   const double* xs = x.data();
   const double* starts = x_start.data();
-  candidate_geometry_.resize(candidates_.size());
-  const int count = static_cast<int>(particle_of_.size());
+  auto at = [xs](int slot) { return Eigen::Map<const Eigen::Vector3d>(xs + 3 * slot); };
+  const double thickness2 = thickness_ * thickness_;
+  const int count = static_cast<int>(candidates_.size());
   for (int p = 0; p < count; ++p)
   {
-    const int first = group_start_[p], last = group_start_[p + 1];
-    for (int k = first; k < last; ++k)
-      candidate_geometry_[k] = geometry(candidates_[k], xs, starts);
-    for (int k = first; k < last; ++k)
+    const std::vector<Pair>& group = candidates_[p];
+    const int size = static_cast<int>(group.size());
+    group_geometry_.resize(size);
+    // The particles within the thickness of p whose every triangle has its closest point to p at
+    // them (p is in their corner's Voronoi region: Ericson 5.1.5's first test): the particle pair
+    // holds that point, so their triangles are not looked at.
+    int covered[8], covering = 0;
+    const Eigen::Vector3d xp = at(p);
+    for (int k = 0; k < size; ++k)
     {
-      const Geometry& g = candidate_geometry_[k];
+      const Pair& pair = group[k];
+      group_geometry_[k].gap = std::numeric_limits<double>::infinity();
+      if (pair.c[1] >= 0)
+        continue;
+      const int q = pair.c[0];
+      const Eigen::Vector3d d = xp - at(q);
+      if (!(d.squaredNorm() < thickness2))
+        continue;
+      bool corner = true;
+      for (int e = 0; e < 6 && corner; ++e)
+        corner = fan_[q][e] < 0 || d.dot(at(fan_[q][e]) - at(q)) <= 0.0;
+      if (corner && covering < 8)
+        covered[covering++] = q;
+      if (p < q)
+      {
+        const Geometry g = geometry(pair, xs, starts);
+        if (g.gap < thickness_)
+          touches_.push_back(Touch{pair, g, {}, 0.0, Eigen::Vector3d::Zero()});
+      }
+    }
+    for (int k = 0; k < size; ++k)
+    {
+      const Pair& pair = group[k];
+      if (pair.c[1] < 0 || std::any_of(covered, covered + covering, [&](int q) {
+            return pair.c[0] == q || pair.c[1] == q || pair.c[2] == q;
+          }))
+        continue;
+      group_geometry_[k] = geometry(pair, xs, starts);
+    }
+    for (int k = 0; k < size; ++k)
+    {
+      const Geometry& g = group_geometry_[k];
       if (!(g.gap < thickness_))
         continue;
-      const Pair& pair = candidates_[k];
-      if (pair.c[1] >= 0)
-      {
-        // A corner is held by the particle pair with it (listed: it is as close), an edge by the
-        // triangle across it when that one finds the same point.
-        const int zeros = (g.w[0] == 0.0) + (g.w[1] == 0.0) + (g.w[2] == 0.0);
-        if (zeros == 2)
-          continue;
-        if (zeros == 1 && edgeHeldByNeighbour(k, g.w[0] == 0.0 ? 0 : g.w[1] == 0.0 ? 1 : 2))
-          continue;
-      }
-      touches_.push_back(Touch{pair, g, {}, 0.0, Eigen::Vector3d::Zero()});
+      // A corner is held by the particle pair with it (listed: it is as close), an edge by the
+      // triangle across it when that one finds the same point.
+      const int zeros = (g.w[0] == 0.0) + (g.w[1] == 0.0) + (g.w[2] == 0.0);
+      if (zeros == 2)
+        continue;
+      if (zeros == 1 && edgeHeldByNeighbour(group, group_geometry_, k, g.w[0] == 0.0 ? 0 : g.w[1] == 0.0 ? 1 : 2))
+        continue;
+      touches_.push_back(Touch{group[k], g, {}, 0.0, Eigen::Vector3d::Zero()});
     }
   }
 }
@@ -417,20 +506,28 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
 {
   report_ = SelfCollisionReport{};
   report_.closest_before = report_.closest_after = thickness_;
-  // Between two listings every particle has moved less than half the skin, so every distance between
-  // a particle and a particle or triangle has changed by less than the skin: a pair not listed is
-  // still farther than the thickness. (NaN positions list anew.)
-  const Eigen::Index dofs = x.size();
-  bool rebuild = built_at_.size() != dofs;
+  // A particle's pairs are listed anew once it has moved half the skin since they were (the bound:
+  // docs/design.md, "Self-collision"); all of them when more than an eighth of the particles have
+  // (the listing searches every particle's cells anyway), or at the first step. NaN lists anew.
+  const int particles = static_cast<int>(particle_of_.size());
   const double moved2 = 0.25 * kSkin * kSkin * thickness_ * thickness_;
-  for (Eigen::Index i = 0; i + 2 < dofs && !rebuild; i += 3)
+  moved_.clear();
+  bool all = built_at_.size() != x.size();
+  for (int p = 0; p < particles && !all; ++p)
   {
+    const int i = 3 * p;
     const double dx = x[i] - built_at_[i], dy = x[i + 1] - built_at_[i + 1], dz = x[i + 2] - built_at_[i + 2];
-    rebuild = !(dx * dx + dy * dy + dz * dz <= moved2);
+    if (!(dx * dx + dy * dy + dz * dz <= moved2))
+    {
+      moved_.push_back(p);
+      all = 8 * static_cast<int>(moved_.size()) > particles;
+    }
   }
-  if (rebuild)
-    listCandidates(x);
-  report_.rebuilt = rebuild;
+  if (all)
+    moved_.clear();
+  report_.relisted = all ? particles : static_cast<int>(moved_.size());
+  if (report_.relisted > 0)
+    listCandidates(x, moved_);
   findTouches(x_start, x);
   if (touches_.empty())
     return;
@@ -500,16 +597,18 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
   for (int sweep = 0; sweep < kSweeps; ++sweep)
   {
     double largest = 0.0;
+    report_.closest_after = thickness_;
     for (int k = 0; k < count; ++k)
     {
       const Touch& t = touches_[k];
-      if (t.sum <= 0.0)
-        continue;  // every particle of the pair held by a collider
       // The gap along the pair's normal at the step's end: it moves by micrometres over the sweeps.
       const Eigen::Vector3d r = relative(xs, t);
       const double gap = r.dot(t.g.normal);
-      if (gap >= thickness_)
+      if (gap >= thickness_ || t.sum <= 0.0)  // apart, or every particle of the pair held by a collider
+      {
+        report_.closest_after = std::min(report_.closest_after, gap);
         continue;
+      }
       touched_[k] = 1;
       // Positions: push apart to the thickness, Coulomb on the pair's relative slip over the step with
       // the push as the normal bound (as the colliders).
@@ -541,8 +640,6 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
     if (largest * dt <= settled)
       break;
   }
-  for (const Touch& t : touches_)
-    report_.closest_after = std::min(report_.closest_after, relative(xs, t).dot(t.g.normal));
 }
 
 }  // namespace modal_mass_spring
