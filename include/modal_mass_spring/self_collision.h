@@ -111,11 +111,15 @@ private:
   // One pair: particle p (a free-particle slot) against corners c[0..2] (slots, -1 for none: a
   // particle-particle pair has only c[0]). A triangle is half `half` (0: c[0], its right and its
   // lower-right neighbour; 1: c[0], its lower-right and its lower neighbour) of the cell c[0] anchors.
+  // Its gap less the thickness when last looked at and the sum of its particles' travel then (a
+  // pair is not looked at again while they have travelled less than that margin since).
   struct Pair
   {
     int p;
     int c[3];
     int half;
+    double margin = -1.0;
+    double travel = 0.0;
   };
   // The closest point to p on the pair's other side, its barycentric weights, the unit normal from
   // there to p (oriented by the start positions inside a triangle) and the gap along it.
@@ -164,6 +168,8 @@ private:
   Eigen::VectorXd built_at_;  // per slot, where its pairs were last listed (empty: none yet)
   std::vector<Geometry> group_geometry_;  // this step's, per candidate of one slot
   std::vector<int> moved_;                // slots moved more than half the skin
+  Eigen::VectorXd last_x_;                // the free positions at the last step's end, before its correction
+  std::vector<double> travel_;            // per slot: the length of its path over those positions since the start
   std::vector<char> is_moved_, is_anchor_listed_;
   std::vector<Touch> touches_;
   std::vector<char> touched_;

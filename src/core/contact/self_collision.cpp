@@ -353,7 +353,7 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
       double w[3];
       const Eigen::Vector3d y = closestOnTriangle(xp, at(corners[0]), at(corners[1]), at(corners[2]), w);
       if ((xp - y).squaredNorm() < listed2)
-        candidates_[p].push_back(Pair{p, {corners[0], corners[1], corners[2]}, half});
+        candidates_[p].push_back(Pair{p, {corners[0], corners[1], corners[2]}, half, -1.0, 0.0});
       ++half;
     }
   };
@@ -369,8 +369,8 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
         return;
       if (d2 < listed2 && (q > p || !is_moved_[q]) && separatedIndices(row_[p], col_[p], row_[q], col_[q]))
       {
-        candidates_[p].push_back(Pair{p, {q, -1, -1}, -1});
-        candidates_[q].push_back(Pair{q, {p, -1, -1}, -1});
+        candidates_[p].push_back(Pair{p, {q, -1, -1}, -1, -1.0, 0.0});
+        candidates_[q].push_back(Pair{q, {p, -1, -1}, -1, -1.0, 0.0});
       }
       if (triangles && anchor_[q])
         listTriangles(p, q);
@@ -443,9 +443,21 @@ void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::Vec
   auto at = [xs](int slot) { return Eigen::Map<const Eigen::Vector3d>(xs + 3 * slot); };
   const double thickness2 = thickness_ * thickness_;
   const int count = static_cast<int>(candidates_.size());
+  // A pair's gap changes by at most the sum of its particles' travel since it was last looked at (a
+  // point's distance to a triangle by at most its own and the farthest corner's displacements): one
+  // whose particles have travelled less than its margin since is still apart.
+  auto apart = [&](Pair& pair) {
+    double travel = travel_[pair.p] + travel_[pair.c[0]];
+    if (pair.c[1] >= 0)
+      travel += travel_[pair.c[1]] + travel_[pair.c[2]];
+    if (travel - pair.travel < pair.margin)
+      return true;
+    pair.travel = travel;
+    return false;
+  };
   for (int p = 0; p < count; ++p)
   {
-    const std::vector<Pair>& group = candidates_[p];
+    std::vector<Pair>& group = candidates_[p];
     const int size = static_cast<int>(group.size());
     group_geometry_.resize(size);
     // The particles within the thickness of p whose every triangle has its closest point to p at
@@ -455,12 +467,13 @@ void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::Vec
     const Eigen::Vector3d xp = at(p);
     for (int k = 0; k < size; ++k)
     {
-      const Pair& pair = group[k];
+      Pair& pair = group[k];
       group_geometry_[k].gap = std::numeric_limits<double>::infinity();
-      if (pair.c[1] >= 0)
+      if (pair.c[1] >= 0 || apart(pair))
         continue;
       const int q = pair.c[0];
       const Eigen::Vector3d d = xp - at(q);
+      pair.margin = d.norm() - thickness_;
       if (!(d.squaredNorm() < thickness2))
         continue;
       bool corner = true;
@@ -477,12 +490,15 @@ void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::Vec
     }
     for (int k = 0; k < size; ++k)
     {
-      const Pair& pair = group[k];
+      Pair& pair = group[k];
       if (pair.c[1] < 0 || std::any_of(covered, covered + covering, [&](int q) {
             return pair.c[0] == q || pair.c[1] == q || pair.c[2] == q;
           }))
         continue;
+      if (apart(pair))
+        continue;
       group_geometry_[k] = geometry(pair, xs, starts);
+      pair.margin = group_geometry_[k].gap - thickness_;
     }
     for (int k = 0; k < size; ++k)
     {
@@ -525,6 +541,17 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
   }
   if (all)
     moved_.clear();
+  // Each particle's path length over the steps' end positions (the candidates' margins count it).
+  if (last_x_.size() != x.size())
+  {
+    last_x_ = x;
+    travel_.assign(particles, 0.0);
+  }
+  for (int p = 0; p < particles; ++p)
+  {
+    travel_[p] += (x.segment<3>(3 * p) - last_x_.segment<3>(3 * p)).norm();
+    last_x_.segment<3>(3 * p) = x.segment<3>(3 * p);
+  }
   report_.relisted = all ? particles : static_cast<int>(moved_.size());
   if (report_.relisted > 0)
     listCandidates(x, moved_);
