@@ -19,14 +19,14 @@
 // within the thickness (docs/design.md, "Self-collision", gives the bound). A listing searches a
 // uniform grid of cells as wide as the reach (the listing distance plus the longest edge of any
 // triangle, so that a triangle within it has its first corner in a neighbouring cell), sorted by a
-// counting sort. Narrow phase, every
-// step: the candidates within the thickness at the step's end, one per closest point (a triangle
-// whose closest point is a corner or an edge it shares is left to the pair that holds that point),
-// corrected by Gauss-Seidel sweeps of equal-and-opposite pushes along each pair's normal at the
-// step's end, split by the inverse masses (every free particle weighs the same), the contact point
-// of a triangle spread to its corners by barycentric weights; the sweeps stop when one moves nothing
-// by more than a millionth of the thickness. Fixed and held particles, and the triangles at them,
-// take no part.
+// counting sort. Narrow phase, every step: the candidates within the thickness at the step's end,
+// one per closest point (a triangle whose closest point is a corner or an edge it shares is left to
+// the pair that holds that point), skipping those whose particles have travelled less than their
+// gap's margin over the thickness since they were last looked at. Correction: Gauss-Seidel sweeps
+// of equal-and-opposite pushes along each pair's normal at the step's end, split by the inverse
+// masses (every free particle weighs the same), the contact point of a triangle spread to its
+// corners by barycentric weights; the sweeps stop after one that moved nothing by more than a
+// thousandth of the thickness. Fixed and held particles, and the triangles at them, take no part.
 #pragma once
 
 #include "modal_mass_spring/contact.h"

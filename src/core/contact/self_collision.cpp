@@ -619,8 +619,9 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
   };
   const int count = static_cast<int>(touches_.size());
   touched_.assign(count, 0);
-  // The sweeps end when one moves nothing by more than this (m, and m over the step for velocities).
-  const double settled = 1e-6 * thickness_;
+  // The sweeps end after one that moved nothing by more than this (m, and m over the step for
+  // velocities): what it leaves is smaller still, and the next step pushes out what is left.
+  const double settled = 1e-3 * thickness_;
   for (int sweep = 0; sweep < kSweeps; ++sweep)
   {
     double largest = 0.0;
