@@ -335,9 +335,10 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
   const double reach = listed + std::sqrt(longest);
   const double reach2 = reach * reach, listed2 = listed * listed;
   const Cells cells = sortIntoCells(xs, count, reach, cell_of_, cell_start_, sorted_);
-  // Particle p against the cell anchored at q (both its triangles), when every corner of the cell is
-  // more than two springs from p and a triangle is within `listed`.
-  auto listTriangles = [&](int p, int q) {
+  // Particle p against the cell anchored at q (both its triangles, or only those with a moved corner
+  // when `moved_only`), when every corner of the cell is more than two springs from p and a triangle
+  // is within `listed`.
+  auto listTriangles = [&](int p, int q, bool moved_only) {
     const Eigen::Vector3d xp = at(p);
     const int rp = row_[p], cp = col_[p], rq = row_[q], cq = col_[q];
     const int dr = rp < rq ? rq - rp : std::max(0, rp - rq - 1);
@@ -351,9 +352,12 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
     for (const auto& corners : {std::array<int, 3>{q, b, d}, std::array<int, 3>{q, d, c}})
     {
       double w[3];
-      const Eigen::Vector3d y = closestOnTriangle(xp, at(corners[0]), at(corners[1]), at(corners[2]), w);
-      if ((xp - y).squaredNorm() < listed2)
-        candidates_[p].push_back(Pair{p, {corners[0], corners[1], corners[2]}, half, -1.0, 0.0});
+      if (!moved_only || is_moved_[corners[0]] || is_moved_[corners[1]] || is_moved_[corners[2]])
+      {
+        const Eigen::Vector3d y = closestOnTriangle(xp, at(corners[0]), at(corners[1]), at(corners[2]), w);
+        if ((xp - y).squaredNorm() < listed2)
+          candidates_[p].push_back(Pair{p, {corners[0], corners[1], corners[2]}, half, -1.0, 0.0});
+      }
       ++half;
     }
   };
@@ -373,7 +377,7 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
         candidates_[q].push_back(Pair{q, {p, -1, -1}, -1, -1.0, 0.0});
       }
       if (triangles && anchor_[q])
-        listTriangles(p, q);
+        listTriangles(p, q, false);
     });
   }
   built_at_.resize(x.size());
@@ -386,7 +390,7 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
     built_at_.segment<3>(3 * p) = at(p);
   if (!triangles)
     return;
-  // The cells with a moved corner against the particles that have not moved.
+  // The triangles with a moved corner against the particles that have not moved.
   is_anchor_listed_.assign(count, 0);
   for (int m : moved)
     for (int r = std::max(0, row_[m] - 1); r <= row_[m]; ++r)
@@ -398,7 +402,7 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
         is_anchor_listed_[q] = 1;
         forNeighbours(cells, xs + 3 * q, [&](int p) {
           if (!is_moved_[p] && (at(q) - at(p)).squaredNorm() < reach2)
-            listTriangles(p, q);
+            listTriangles(p, q, true);  // the other half kept its pairs
         });
       }
 }
@@ -547,10 +551,20 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
     last_x_ = x;
     travel_.assign(particles, 0.0);
   }
+  bool finite = true;
   for (int p = 0; p < particles; ++p)
   {
     travel_[p] += (x.segment<3>(3 * p) - last_x_.segment<3>(3 * p)).norm();
     last_x_.segment<3>(3 * p) = x.segment<3>(3 * p);
+    finite = finite && std::isfinite(travel_[p]);
+  }
+  if (!finite)
+  {
+    // After positions that were not finite (a step that diverged, its state then put back): every
+    // margin is forgotten with a listing anew.
+    travel_.assign(particles, 0.0);
+    all = true;
+    moved_.clear();
   }
   report_.relisted = all ? particles : static_cast<int>(moved_.size());
   if (report_.relisted > 0)
