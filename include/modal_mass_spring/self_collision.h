@@ -13,12 +13,20 @@
 // its corners); the triangles close the cells, and the spheres still keep particles apart at the
 // grid's edges, where every triangle at a particle may touch a neighbour of the other.
 //
-// Broad phase: a uniform grid of cells as wide as the reach (the thickness plus the longest edge of
-// any triangle, so that a triangle within the thickness has its first corner in a neighbouring cell),
-// rebuilt every step by a counting sort. Narrow phase: the pairs found within the thickness at the
-// step's end, corrected by a few Gauss-Seidel sweeps of equal-and-opposite pushes split by the inverse
-// masses (every free particle weighs the same), the contact point of a triangle spread to its corners
-// by barycentric weights. Fixed and held particles, and the triangles at them, take no part.
+// Broad phase: a list of candidate pairs within the thickness plus twice a skin, kept over the steps;
+// the pairs of a particle that has moved more than half the skin since its pairs were last listed
+// are listed anew (all of them when many have), so that no pair outside the list can have come
+// within the thickness (docs/design.md, "Self-collision", gives the bound). A listing searches a
+// uniform grid of cells as wide as the reach (the listing distance plus the longest edge of any
+// triangle, so that a triangle within it has its first corner in a neighbouring cell), sorted by a
+// counting sort. Narrow phase, every step: the candidates within the thickness at the step's end,
+// one per closest point (a triangle whose closest point is a corner or an edge it shares is left to
+// the pair that holds that point), skipping those whose particles have travelled less than their
+// gap's margin over the thickness since they were last looked at. Correction: Gauss-Seidel sweeps
+// of equal-and-opposite pushes along each pair's normal at the step's end, split by the inverse
+// masses (every free particle weighs the same), the contact point of a triangle spread to its
+// corners by barycentric weights; the sweeps stop after one that moved nothing by more than a
+// thousandth of the thickness. Fixed and held particles, and the triangles at them, take no part.
 #pragma once
 
 #include "modal_mass_spring/contact.h"
@@ -26,6 +34,7 @@
 
 #include <Eigen/Core>
 
+#include <array>
 #include <vector>
 
 namespace modal_mass_spring
@@ -59,10 +68,12 @@ double closestSeparatedDistance(const Grid& grid, const Eigen::VectorXd& positio
 // What the last correction did.
 struct SelfCollisionReport
 {
-  int contacts = 0;  // pairs (particle-particle and particle-triangle) closer than the thickness
-  // The smallest gap among them before the correction and after it (m; the thickness when none).
+  int contacts = 0;  // pairs (particle-particle and particle-triangle) closer than the thickness, one per closest point
+  // The smallest gap among them before the correction and after it (as the last sweep left it), along
+  // each pair's normal at the step's end (m; the thickness when none).
   double closest_before = 0.0;
   double closest_after = 0.0;
+  int relisted = 0;  // particles whose candidate pairs were listed anew this step (all at a full listing)
 };
 
 class SelfCollision
@@ -73,7 +84,11 @@ public:
 
   double thickness() const { return thickness_; }
   double friction() const { return friction_; }
-  void setThickness(double thickness) { thickness_ = thickness; }
+  void setThickness(double thickness)
+  {
+    thickness_ = thickness;
+    built_at_.resize(0);  // the candidates were listed for the old thickness
+  }
   void setFriction(double friction) { friction_ = friction; }
 
   // Corrects the free dofs' absolute end positions x and velocities v, given their start positions
@@ -87,16 +102,24 @@ public:
                const Contact* contact = nullptr);
   const SelfCollisionReport& report() const { return report_; }
 
-  // Gauss-Seidel sweeps of the position and of the velocity correction.
+  // At most this many Gauss-Seidel sweeps of the position and of the velocity correction.
   static constexpr int kSweeps = 4;
+  // The skin of the candidate list, as a fraction of the thickness.
+  static constexpr double kSkin = 0.25;
 
 private:
   // One pair: particle p (a free-particle slot) against corners c[0..2] (slots, -1 for none: a
-  // particle-particle pair has only c[0]).
+  // particle-particle pair has only c[0]). A triangle is half `half` (0: c[0], its right and its
+  // lower-right neighbour; 1: c[0], its lower-right and its lower neighbour) of the cell c[0] anchors.
+  // Its gap less the thickness when last looked at and the sum of its particles' travel then (a
+  // pair is not looked at again while they have travelled less than that margin since).
   struct Pair
   {
     int p;
     int c[3];
+    int half;
+    double margin = -1.0;
+    double travel = 0.0;
   };
   // The closest point to p on the pair's other side, its barycentric weights, the unit normal from
   // there to p (oriented by the start positions inside a triangle) and the gap along it.
@@ -107,8 +130,27 @@ private:
     double gap;
   };
   Geometry geometry(const Pair& pair, const double* x, const double* x_start) const;
-  // Finds the pairs closer than the thickness at positions x.
-  void detect(const Eigen::VectorXd& x);
+  // A pair closer than the thickness, with what its sweeps need: its geometry at the step's end, the
+  // inverse masses of its particles along the normal (relative to a free particle's) and their
+  // weighted sum, and its relative position at the step's start.
+  struct Touch
+  {
+    Pair pair;
+    Geometry g;
+    double m[4];
+    double sum;
+    Eigen::Vector3d start;
+  };
+  // Lists the candidate pairs closer than the thickness plus twice the skin at positions x: every
+  // pair when `moved` is empty, else those of the particles in it and of the triangles at them.
+  void listCandidates(const Eigen::VectorXd& x, const std::vector<int>& moved);
+  // The candidates closer than the thickness at the step's end x, one per closest point.
+  void findTouches(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x);
+  // Whether the triangle pair `k` of `group` (one particle's candidates, with this step's geometry)
+  // leaves its closest point (on the edge opposite its corner `opposite`) to the triangle sharing
+  // that edge, when that one holds the same point.
+  bool edgeHeldByNeighbour(const std::vector<Pair>& group, const std::vector<Geometry>& geometry, int k,
+                           int opposite) const;
 
   const Grid& grid_;
   double thickness_;
@@ -118,9 +160,18 @@ private:
   std::vector<int> slot_of_;      // grid particle -> slot, -1 when fixed or held
   std::vector<int> row_, col_;    // per slot
   std::vector<char> anchor_;      // per slot: its particle is the first corner of a cell with every corner free
+  std::vector<std::array<int, 6>> fan_;  // per slot: the slots its triangles' edges join it to (-1: none, not free)
   // The broad phase's cells, kept between steps (no allocation a step once grown).
   std::vector<int> cell_of_, cell_start_, sorted_;
-  std::vector<Pair> pairs_;
+  // Per slot p: its candidate pairs (p against a triangle, or against a particle of a later slot).
+  std::vector<std::vector<Pair>> candidates_;
+  Eigen::VectorXd built_at_;  // per slot, where its pairs were last listed (empty: none yet)
+  std::vector<Geometry> group_geometry_;  // this step's, per candidate of one slot
+  std::vector<int> moved_;                // slots moved more than half the skin
+  Eigen::VectorXd last_x_;                // the free positions at the last step's end, before its correction
+  std::vector<double> travel_;            // per slot: the length of its path over those positions since the start
+  std::vector<char> is_moved_, is_anchor_listed_;
+  std::vector<Touch> touches_;
   std::vector<char> touched_;
   SelfCollisionReport report_;
   // Per slot: the outward normal of the collider surface it lies on (zero when on none).

@@ -236,6 +236,16 @@ SelfCollision::SelfCollision(const Grid& grid, double thickness, double friction
         slot_of_[grid.particleIndex(r + 1, c)] >= 0 && slot_of_[grid.particleIndex(r + 1, c + 1)] >= 0)
       anchor_[s] = 1;
   }
+  // The free ends of the triangles' edges at each particle: the sides and the diagonal (r, c)-(r+1, c+1).
+  fan_.assign(particle_of_.size(), {-1, -1, -1, -1, -1, -1});
+  static constexpr int kEdges[6][2] = {{0, 1}, {0, -1}, {1, 0}, {-1, 0}, {1, 1}, {-1, -1}};
+  for (size_t s = 0; s < particle_of_.size(); ++s)
+    for (int e = 0; e < 6; ++e)
+    {
+      const int r = row_[s] + kEdges[e][0], c = col_[s] + kEdges[e][1];
+      if (r >= 0 && c >= 0 && r < rows && c < cols)
+        fan_[s][e] = slot_of_[grid.particleIndex(r, c)];
+    }
 }
 
 SelfCollision::Geometry SelfCollision::geometry(const Pair& pair, const double* x, const double* x_start) const
@@ -277,19 +287,34 @@ SelfCollision::Geometry SelfCollision::geometry(const Pair& pair, const double* 
   return g;
 }
 
-void SelfCollision::detect(const Eigen::VectorXd& x)
+void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<int>& moved)
 {
-  pairs_.clear();
   const int count = static_cast<int>(particle_of_.size());
+  const bool all = moved.empty();
+  candidates_.resize(count);
+  is_moved_.assign(count, all ? 1 : 0);
+  for (int p : moved)
+    is_moved_[p] = 1;
   const int cols = grid_.params().cols;
   const double* xs = x.data();
   auto at = [xs](int slot) { return Eigen::Map<const Eigen::Vector3d>(xs + 3 * slot); };
   auto slotAt = [&](int row, int col) { return slot_of_[row * cols + col]; };
   const bool triangles = primitive_ == SelfPrimitive::Triangles;
-  // A triangle within the thickness of a particle has its first corner within the thickness plus its
-  // longest edge.
-  // Around each cell, a sphere through its farthest corner from the corners' mean: a particle farther
-  // than the thickness from it is that far from both triangles (the cheap test before the exact one).
+  // The pairs with a moved particle go; they are listed anew below.
+  for (std::vector<Pair>& group : candidates_)
+    if (all)
+      group.clear();
+    else
+      group.erase(std::remove_if(group.begin(), group.end(),
+                                 [&](const Pair& pair) {
+                                   return is_moved_[pair.p] || is_moved_[pair.c[0]] ||
+                                          (pair.c[1] >= 0 && (is_moved_[pair.c[1]] || is_moved_[pair.c[2]]));
+                                 }),
+                  group.end());
+  const double listed = (1.0 + 2.0 * kSkin) * thickness_;
+  // A triangle within `listed` of a particle has its first corner within `listed` plus its longest
+  // edge. Around each cell, a sphere through its farthest corner from the corners' mean: a particle
+  // farther than `listed` from it is that far from both triangles (the cheap test before the exact one).
   double longest = 0.0;
   if (triangles)
   {
@@ -303,60 +328,257 @@ void SelfCollision::detect(const Eigen::VectorXd& x)
         const Eigen::Vector3d centre = 0.25 * (at(s) + at(b) + at(c) + at(d));
         const double radius = std::sqrt(std::max({(at(s) - centre).squaredNorm(), (at(b) - centre).squaredNorm(),
                                                   (at(c) - centre).squaredNorm(), (at(d) - centre).squaredNorm()})) +
-                              thickness_;
+                              listed;
         cell_sphere_[s] << centre, radius * radius;
       }
   }
-  const double reach = thickness_ + std::sqrt(longest);
-  const double reach2 = reach * reach, thickness2 = thickness_ * thickness_;
+  const double reach = listed + std::sqrt(longest);
+  const double reach2 = reach * reach, listed2 = listed * listed;
   const Cells cells = sortIntoCells(xs, count, reach, cell_of_, cell_start_, sorted_);
+  // Particle p against the cell anchored at q (both its triangles, or only those with a moved corner
+  // when `moved_only`), when every corner of the cell is more than two springs from p and a triangle
+  // is within `listed`.
+  auto listTriangles = [&](int p, int q, bool moved_only) {
+    const Eigen::Vector3d xp = at(p);
+    const int rp = row_[p], cp = col_[p], rq = row_[q], cq = col_[q];
+    const int dr = rp < rq ? rq - rp : std::max(0, rp - rq - 1);
+    const int dc = cp < cq ? cq - cp : std::max(0, cp - cq - 1);
+    if (std::max(dr, dc) <= 2)
+      return;
+    if ((cell_sphere_[q].head<3>() - xp).squaredNorm() >= cell_sphere_[q][3])
+      return;
+    const int b = slotAt(rq, cq + 1), c = slotAt(rq + 1, cq), d = slotAt(rq + 1, cq + 1);
+    int half = 0;
+    for (const auto& corners : {std::array<int, 3>{q, b, d}, std::array<int, 3>{q, d, c}})
+    {
+      double w[3];
+      if (!moved_only || is_moved_[corners[0]] || is_moved_[corners[1]] || is_moved_[corners[2]])
+      {
+        const Eigen::Vector3d y = closestOnTriangle(xp, at(corners[0]), at(corners[1]), at(corners[2]), w);
+        if ((xp - y).squaredNorm() < listed2)
+          candidates_[p].push_back(Pair{p, {corners[0], corners[1], corners[2]}, half, -1.0, 0.0});
+      }
+      ++half;
+    }
+  };
+  // The moved particles against everything (a particle pair in both particles' lists).
   for (int p = 0; p < count; ++p)
   {
+    if (!is_moved_[p])
+      continue;
     const Eigen::Vector3d xp = at(p);
-    const int rp = row_[p], cp = col_[p];
     forNeighbours(cells, xs + 3 * p, [&](int q) {
       const double d2 = (at(q) - xp).squaredNorm();
       if (q == p || d2 >= reach2)
         return;
-      const int rq = row_[q], cq = col_[q];
-      if (q > p && d2 < thickness2 && separatedIndices(rp, cp, rq, cq))
-        pairs_.push_back(Pair{p, {q, -1, -1}});
-      if (!triangles || !anchor_[q])
-        return;
-      // Every corner of the cell (rq..rq+1, cq..cq+1) more than two springs from p.
-      const int dr = rp < rq ? rq - rp : std::max(0, rp - rq - 1);
-      const int dc = cp < cq ? cq - cp : std::max(0, cp - cq - 1);
-      if (std::max(dr, dc) <= 2)
-        return;
-      if ((cell_sphere_[q].head<3>() - xp).squaredNorm() >= cell_sphere_[q][3])
-        return;
-      const int b = slotAt(rq, cq + 1), c = slotAt(rq + 1, cq), d = slotAt(rq + 1, cq + 1);
-      for (const auto& corners : {std::array<int, 3>{q, b, d}, std::array<int, 3>{q, d, c}})
+      if (d2 < listed2 && (q > p || !is_moved_[q]) && separatedIndices(row_[p], col_[p], row_[q], col_[q]))
       {
-        double w[3];
-        const Eigen::Vector3d y = closestOnTriangle(xp, at(corners[0]), at(corners[1]), at(corners[2]), w);
-        if ((xp - y).squaredNorm() < thickness2)
-          pairs_.push_back(Pair{p, {corners[0], corners[1], corners[2]}});
+        candidates_[p].push_back(Pair{p, {q, -1, -1}, -1, -1.0, 0.0});
+        candidates_[q].push_back(Pair{q, {p, -1, -1}, -1, -1.0, 0.0});
       }
+      if (triangles && anchor_[q])
+        listTriangles(p, q, false);
     });
+  }
+  built_at_.resize(x.size());
+  if (all)
+  {
+    built_at_ = x;
+    return;
+  }
+  for (int p : moved)
+    built_at_.segment<3>(3 * p) = at(p);
+  if (!triangles)
+    return;
+  // The triangles with a moved corner against the particles that have not moved.
+  is_anchor_listed_.assign(count, 0);
+  for (int m : moved)
+    for (int r = std::max(0, row_[m] - 1); r <= row_[m]; ++r)
+      for (int c = std::max(0, col_[m] - 1); c <= col_[m]; ++c)
+      {
+        const int q = slotAt(r, c);
+        if (q < 0 || !anchor_[q] || is_anchor_listed_[q])
+          continue;
+        is_anchor_listed_[q] = 1;
+        forNeighbours(cells, xs + 3 * q, [&](int p) {
+          if (!is_moved_[p] && (at(q) - at(p)).squaredNorm() < reach2)
+            listTriangles(p, q, true);  // the other half kept its pairs
+        });
+      }
+}
+
+bool SelfCollision::edgeHeldByNeighbour(const std::vector<Pair>& group, const std::vector<Geometry>& geometry, int k,
+                                        int opposite) const
+{
+  const Pair& pair = group[k];
+  const int r = row_[pair.c[0]], c = col_[pair.c[0]];
+  // The triangle across the edge opposite corner `opposite` (self_collision.h names the halves).
+  static constexpr int kAcross[2][3][3] = {
+      {{0, 1, 1}, {0, 0, 1}, {-1, 0, 1}},  // half 0: right edge, diagonal, top edge -> (row, col, half)
+      {{1, 0, 0}, {0, -1, 0}, {0, 0, 0}},  // half 1: bottom edge, left edge, diagonal
+  };
+  const int* across = kAcross[pair.half][opposite];
+  const int row = r + across[0], col = c + across[1], half = across[2];
+  const GridParams& g = grid_.params();
+  if (row < 0 || col < 0 || row >= g.rows || col >= g.cols)
+    return false;
+  const int anchor = slot_of_[row * g.cols + col];
+  if (anchor < 0 || 2 * anchor + half > 2 * pair.c[0] + pair.half)
+    return false;  // none there, or it leaves the point to this one
+  const int a = pair.c[(opposite + 1) % 3], b = pair.c[(opposite + 2) % 3];
+  for (size_t j = 0; j < group.size(); ++j)
+  {
+    const Pair& other = group[j];
+    if (other.half != half || other.c[0] != anchor || !(geometry[j].gap < thickness_))
+      continue;
+    // Its closest point on the same edge: its weight on the corner off the edge is zero.
+    for (int i = 0; i < 3; ++i)
+      if (other.c[i] != a && other.c[i] != b)
+        return geometry[j].w[i] == 0.0;
+  }
+  return false;
+}
+
+void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x)
+{
+  touches_.clear();
+  const double* xs = x.data();
+  const double* starts = x_start.data();
+  auto at = [xs](int slot) { return Eigen::Map<const Eigen::Vector3d>(xs + 3 * slot); };
+  const double thickness2 = thickness_ * thickness_;
+  const int count = static_cast<int>(candidates_.size());
+  // A pair's gap changes by at most the sum of its particles' travel since it was last looked at (a
+  // point's distance to a triangle by at most its own and the farthest corner's displacements): one
+  // whose particles have travelled less than its margin since is still apart.
+  auto apart = [&](Pair& pair) {
+    double travel = travel_[pair.p] + travel_[pair.c[0]];
+    if (pair.c[1] >= 0)
+      travel += travel_[pair.c[1]] + travel_[pair.c[2]];
+    if (travel - pair.travel < pair.margin)
+      return true;
+    pair.travel = travel;
+    return false;
+  };
+  for (int p = 0; p < count; ++p)
+  {
+    std::vector<Pair>& group = candidates_[p];
+    const int size = static_cast<int>(group.size());
+    group_geometry_.resize(size);
+    // The particles within the thickness of p whose every triangle has its closest point to p at
+    // them (p is in their corner's Voronoi region: Ericson 5.1.5's first test): the particle pair
+    // holds that point, so their triangles are not looked at.
+    int covered[8], covering = 0;
+    const Eigen::Vector3d xp = at(p);
+    for (int k = 0; k < size; ++k)
+    {
+      Pair& pair = group[k];
+      group_geometry_[k].gap = std::numeric_limits<double>::infinity();
+      if (pair.c[1] >= 0 || apart(pair))
+        continue;
+      const int q = pair.c[0];
+      const Eigen::Vector3d d = xp - at(q);
+      pair.margin = d.norm() - thickness_;
+      if (!(d.squaredNorm() < thickness2))
+        continue;
+      bool corner = true;
+      for (int e = 0; e < 6 && corner; ++e)
+        corner = fan_[q][e] < 0 || d.dot(at(fan_[q][e]) - at(q)) <= 0.0;
+      if (corner && covering < 8)
+        covered[covering++] = q;
+      if (p < q)
+      {
+        const Geometry g = geometry(pair, xs, starts);
+        if (g.gap < thickness_)
+          touches_.push_back(Touch{pair, g, {}, 0.0, Eigen::Vector3d::Zero()});
+      }
+    }
+    for (int k = 0; k < size; ++k)
+    {
+      Pair& pair = group[k];
+      if (pair.c[1] < 0 || std::any_of(covered, covered + covering, [&](int q) {
+            return pair.c[0] == q || pair.c[1] == q || pair.c[2] == q;
+          }))
+        continue;
+      if (apart(pair))
+        continue;
+      group_geometry_[k] = geometry(pair, xs, starts);
+      pair.margin = group_geometry_[k].gap - thickness_;
+    }
+    for (int k = 0; k < size; ++k)
+    {
+      const Geometry& g = group_geometry_[k];
+      if (!(g.gap < thickness_))
+        continue;
+      // A corner is held by the particle pair with it (listed: it is as close), an edge by the
+      // triangle across it when that one finds the same point.
+      const int zeros = (g.w[0] == 0.0) + (g.w[1] == 0.0) + (g.w[2] == 0.0);
+      if (zeros == 2)
+        continue;
+      if (zeros == 1 && edgeHeldByNeighbour(group, group_geometry_, k, g.w[0] == 0.0 ? 0 : g.w[1] == 0.0 ? 1 : 2))
+        continue;
+      touches_.push_back(Touch{group[k], g, {}, 0.0, Eigen::Vector3d::Zero()});
+    }
   }
 }
 
-void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double /*dt*/,
+void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double dt,
                             const Contact* contact)
 {
   report_ = SelfCollisionReport{};
   report_.closest_before = report_.closest_after = thickness_;
-  detect(x);
-  if (pairs_.empty())
+  // A particle's pairs are listed anew once it has moved half the skin since they were (the bound:
+  // docs/design.md, "Self-collision"); all of them when more than an eighth of the particles have
+  // (the listing searches every particle's cells anyway), or at the first step. NaN lists anew.
+  const int particles = static_cast<int>(particle_of_.size());
+  const double moved2 = 0.25 * kSkin * kSkin * thickness_ * thickness_;
+  moved_.clear();
+  bool all = built_at_.size() != x.size();
+  for (int p = 0; p < particles && !all; ++p)
+  {
+    const int i = 3 * p;
+    const double dx = x[i] - built_at_[i], dy = x[i + 1] - built_at_[i + 1], dz = x[i + 2] - built_at_[i + 2];
+    if (!(dx * dx + dy * dy + dz * dz <= moved2))
+    {
+      moved_.push_back(p);
+      all = 8 * static_cast<int>(moved_.size()) > particles;
+    }
+  }
+  if (all)
+    moved_.clear();
+  // Each particle's path length over the steps' end positions (the candidates' margins count it).
+  if (last_x_.size() != x.size())
+  {
+    last_x_ = x;
+    travel_.assign(particles, 0.0);
+  }
+  bool finite = true;
+  for (int p = 0; p < particles; ++p)
+  {
+    travel_[p] += (x.segment<3>(3 * p) - last_x_.segment<3>(3 * p)).norm();
+    last_x_.segment<3>(3 * p) = x.segment<3>(3 * p);
+    finite = finite && std::isfinite(travel_[p]);
+  }
+  if (!finite)
+  {
+    // After positions that were not finite (a step that diverged, its state then put back): every
+    // margin is forgotten with a listing anew.
+    travel_.assign(particles, 0.0);
+    all = true;
+    moved_.clear();
+  }
+  report_.relisted = all ? particles : static_cast<int>(moved_.size());
+  if (report_.relisted > 0)
+    listCandidates(x, moved_);
+  findTouches(x_start, x);
+  if (touches_.empty())
     return;
   // The particles of the pairs that lie on a collider, and the surface's normal there.
   surface_normal_.assign(particle_of_.size(), Eigen::Vector3d::Zero());
   if (contact)
   {
     std::vector<char> checked(particle_of_.size(), 0);
-    for (const Pair& pair : pairs_)
-      for (int slot : {pair.p, pair.c[0], pair.c[1], pair.c[2]})
+    for (const Touch& touch : touches_)
+      for (int slot : {touch.pair.p, touch.pair.c[0], touch.pair.c[1], touch.pair.c[2]})
       {
         if (slot < 0 || checked[slot])
           continue;
@@ -374,77 +596,92 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
         }
       }
   }
-  report_.contacts = static_cast<int>(pairs_.size());
+  report_.contacts = static_cast<int>(touches_.size());
   double* const xs = x.data();
   double* const vs = v.data();
   const double* const starts = x_start.data();
   auto ref = [](double* values, int slot) { return Eigen::Map<Eigen::Vector3d>(values + 3 * slot); };
   auto cref = [](const double* values, int slot) { return Eigen::Map<const Eigen::Vector3d>(values + 3 * slot); };
-  const int count = static_cast<int>(pairs_.size());
-  // A particle's inverse mass in a pair pushing along `normal`, relative to a free particle's: 0 on a
-  // collider when the push is along the surface's normal (more than 60 degrees from the surface).
-  auto inverse = [&](int slot, const Eigen::Vector3d& normal) {
-    return std::abs(surface_normal_[slot].dot(normal)) > 0.5 ? 0.0 : 1.0;
+  auto relative = [&](const double* values, const Touch& t) {
+    Eigen::Vector3d r = cref(values, t.pair.p);
+    for (int k = 0; k < 3 && t.pair.c[k] >= 0; ++k)
+      r -= t.g.w[k] * cref(values, t.pair.c[k]);
+    return r;
   };
+  // A particle's inverse mass in a pair pushing along its normal, relative to a free particle's: 0 on
+  // a collider when the push is along the surface's normal (more than 60 degrees from the surface).
+  for (Touch& t : touches_)
+  {
+    const int slots[4] = {t.pair.p, t.pair.c[0], t.pair.c[1], t.pair.c[2]};
+    const double weights[4] = {1.0, t.g.w[0], t.g.w[1], t.g.w[2]};
+    for (int k = 0; k < 4; ++k)
+    {
+      t.m[k] = slots[k] >= 0 && std::abs(surface_normal_[slots[k]].dot(t.g.normal)) <= 0.5 ? 1.0 : 0.0;
+      t.sum += slots[k] >= 0 ? weights[k] * weights[k] * t.m[k] : 0.0;
+    }
+    t.start = relative(starts, t);
+    report_.closest_before = std::min(report_.closest_before, t.g.gap);
+  }
   // Moves p by delta / (1 + sum w^2) and the corners against it by their weights (each times its
   // inverse mass): the pair's relative displacement changes by delta and, between free particles, its
   // momentum not at all.
-  auto apply = [&](double* values, const Pair& pair, const double w[3], const Eigen::Vector3d& normal,
-                   const Eigen::Vector3d& delta) {
-    double m[4] = {inverse(pair.p, normal), 0.0, 0.0, 0.0};
-    double sum = m[0];
-    for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
-    {
-      m[k + 1] = inverse(pair.c[k], normal);
-      sum += w[k] * w[k] * m[k + 1];
-    }
-    if (sum <= 0.0)
-      return;  // every particle of the pair held by a collider
-    const Eigen::Vector3d share = delta / sum;
-    ref(values, pair.p) += m[0] * share;
-    for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
-      ref(values, pair.c[k]) -= m[k + 1] * w[k] * share;
+  auto apply = [&](double* values, const Touch& t, const Eigen::Vector3d& delta) {
+    const Eigen::Vector3d share = delta / t.sum;
+    ref(values, t.pair.p) += t.m[0] * share;
+    for (int k = 0; k < 3 && t.pair.c[k] >= 0; ++k)
+      ref(values, t.pair.c[k]) -= t.m[k + 1] * t.g.w[k] * share;
   };
-  auto relative = [&](const double* values, const Pair& pair, const double w[3]) {
-    Eigen::Vector3d r = cref(values, pair.p);
-    for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
-      r -= w[k] * cref(values, pair.c[k]);
-    return r;
-  };
+  const int count = static_cast<int>(touches_.size());
   touched_.assign(count, 0);
+  // The sweeps end after one that moved nothing by more than this (m, and m over the step for
+  // velocities): what it leaves is smaller still, and the next step pushes out what is left.
+  const double settled = 1e-3 * thickness_;
   for (int sweep = 0; sweep < kSweeps; ++sweep)
+  {
+    double largest = 0.0;
+    report_.closest_after = thickness_;
     for (int k = 0; k < count; ++k)
     {
-      const Pair& pair = pairs_[k];
-      const Geometry g = geometry(pair, xs, starts);
-      if (sweep == 0)
-        report_.closest_before = std::min(report_.closest_before, g.gap);
-      if (g.gap >= thickness_)
+      const Touch& t = touches_[k];
+      // The gap along the pair's normal at the step's end: it moves by micrometres over the sweeps.
+      const Eigen::Vector3d r = relative(xs, t);
+      const double gap = r.dot(t.g.normal);
+      if (gap >= thickness_ || t.sum <= 0.0)  // apart, or every particle of the pair held by a collider
+      {
+        report_.closest_after = std::min(report_.closest_after, gap);
         continue;
+      }
       touched_[k] = 1;
       // Positions: push apart to the thickness, Coulomb on the pair's relative slip over the step with
       // the push as the normal bound (as the colliders).
-      const double push = thickness_ - g.gap;
-      const Eigen::Vector3d slip = relative(xs, pair, g.w) - relative(starts, pair, g.w);
-      apply(xs, pair, g.w, g.normal, push * g.normal + coulomb(slip - slip.dot(g.normal) * g.normal, friction_ * push));
+      const double push = thickness_ - gap;
+      largest = std::max(largest, push);
+      const Eigen::Vector3d slip = r - t.start;
+      apply(xs, t, push * t.g.normal + coulomb(slip - slip.dot(t.g.normal) * t.g.normal, friction_ * push));
     }
+    if (largest <= settled)
+      break;
+  }
   for (int sweep = 0; sweep < kSweeps; ++sweep)
+  {
+    double largest = 0.0;
     for (int k = 0; k < count; ++k)
     {
       if (!touched_[k])
         continue;
-      const Pair& pair = pairs_[k];
-      const Geometry g = geometry(pair, xs, starts);
+      const Touch& t = touches_[k];
       // Velocities: remove the approach, Coulomb on the relative tangential velocity.
-      const Eigen::Vector3d velocity = relative(vs, pair, g.w);
-      const double approach = -velocity.dot(g.normal);
+      const Eigen::Vector3d velocity = relative(vs, t);
+      const double approach = -velocity.dot(t.g.normal);
       if (approach <= 0.0)
         continue;
-      const Eigen::Vector3d tangential = velocity + approach * g.normal;
-      apply(vs, pair, g.w, g.normal, approach * g.normal + coulomb(tangential, friction_ * approach));
+      largest = std::max(largest, approach);
+      const Eigen::Vector3d tangential = velocity + approach * t.g.normal;
+      apply(vs, t, approach * t.g.normal + coulomb(tangential, friction_ * approach));
     }
-  for (int k = 0; k < count; ++k)
-    report_.closest_after = std::min(report_.closest_after, geometry(pairs_[k], xs, starts).gap);
+    if (largest * dt <= settled)
+      break;
+  }
 }
 
 }  // namespace modal_mass_spring
