@@ -4,6 +4,7 @@
 //   basis_timing --write DIR [--size 100] [--dimension 2]   K (free dofs) and the diagonal of M, Matrix Market
 //   basis_timing --read DIR --modes 30                       one computeModalBasis on them; prints its times
 //                                                            and writes the eigenvalues to DIR/ours.txt
+#include "modal_mass_spring/cpu_time.h"
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/modal_basis.h"
 #include "modal_mass_spring/spring_forces.h"
@@ -22,13 +23,6 @@ using namespace modal_mass_spring;
 
 namespace
 {
-
-double threadCpuSeconds()
-{
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 int usage()
 {

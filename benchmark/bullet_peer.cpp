@@ -40,6 +40,7 @@
 // (--modes 0: no modal rows; --modal-explicit-step 0: no explicit modal rows.)
 // Built against Bullet's double-precision build (bullet_peer) and, where installed, its single-precision
 // one (bullet_peer_float, what pkg-config's `bullet` links): its Krylov tolerance is btScalar's epsilon.
+#include "modal_mass_spring/cpu_time.h"
 #include "modal_mass_spring/simulation.h"
 #include "swinging_cloth.h"
 
@@ -398,13 +399,6 @@ struct BulletCloth
   MassDampingForce* mass_damping = nullptr;
 };
 
-double cpuSeconds()
-{
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return t.tv_sec + 1e-9 * t.tv_nsec;
-}
-
 double wallSeconds()
 {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
@@ -535,9 +529,9 @@ void run(int size, const Options& o)
   cache.warn = [](const std::string& warning) { std::fprintf(stderr, "bullet_peer: cache: %s\n", warning.c_str()); };
   for (PackageRow& row : rows)
   {
-    const double c0 = cpuSeconds(), w0 = wallSeconds();
+    const double c0 = processCpuSeconds(), w0 = wallSeconds();
     row.sim = std::make_unique<Simulation>(g, row.params, StageFn{}, cache);
-    row.startup_cpu = cpuSeconds() - c0;
+    row.startup_cpu = processCpuSeconds() - c0;
     row.startup_wall = wallSeconds() - w0;
   }
   const Grid& grid = rows.front().sim->grid();
@@ -578,9 +572,9 @@ void run(int size, const Options& o)
       const int ratio = row.steps_per_peer_step;
       for (int k = 0; k < count * ratio && !row.failed; ++k)
       {
-        const double c0 = cpuSeconds(), w0 = wallSeconds();
+        const double c0 = processCpuSeconds(), w0 = wallSeconds();
         const StepResult result = row.sim->step(1);
-        row.time.cpu.push_back(cpuSeconds() - c0);
+        row.time.cpu.push_back(processCpuSeconds() - c0);
         row.time.wall.push_back(wallSeconds() - w0);
         row.newton += row.sim->lastNewtonIterations();
         row.substeps += row.sim->lastImplicitSubsteps();
@@ -596,9 +590,9 @@ void run(int size, const Options& o)
     }
     for (int k = 0; k < count; ++k)
     {
-      const double c0 = cpuSeconds(), w0 = wallSeconds();
+      const double c0 = processCpuSeconds(), w0 = wallSeconds();
       bullet.step();
-      bullet_time.cpu.push_back(cpuSeconds() - c0);
+      bullet_time.cpu.push_back(processCpuSeconds() - c0);
       bullet_time.wall.push_back(wallSeconds() - w0);
       if ((done + k + 1) % sample_every == 0)
         bullet_samples.push_back(swing(bullet.points(), top_y, top_z));

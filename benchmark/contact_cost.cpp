@@ -7,6 +7,7 @@
 // Usage: contact_cost drop|rest N seconds [--explicit DT] [methods...] (rest: the sheet starts on the
 // table top; --explicit: the explicit scheme at time step DT instead of implicit 5 ms steps, and for
 // `full` alone linearized at rest, which skips the equilibrium solves a large grid waits minutes for).
+#include "modal_mass_spring/cpu_time.h"
 #include "modal_mass_spring/simulation.h"
 
 #include <cstdio>
@@ -19,15 +20,6 @@ using namespace modal_mass_spring;
 
 namespace
 {
-
-// The process's CPU time (s): a loaded machine inflates wall time, not this (Simulation's
-// lastContactSeconds is CPU time too).
-double cpuSeconds()
-{
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 GridParams sheet(int n)
 {
@@ -86,9 +78,9 @@ Run run(int n, Method method, bool with_table, double seconds)
   double busy = 0.0;
   for (int k = 0; k < steps; ++k)
   {
-    const double start = cpuSeconds();
+    const double start = processCpuSeconds();
     const StepResult result = sim.step();
-    busy += cpuSeconds() - start;
+    busy += processCpuSeconds() - start;
     r.contact_ms_per_step += 1e3 * sim.lastContactSeconds() / steps;
     if (result.diverged)
     {

@@ -1,5 +1,6 @@
 // Google Benchmark of the core: basis construction (with and without modal derivatives), one step of each method, the
 // extra cost of moving handles, position reconstruction and one evaluation of all spring forces.
+#include "modal_mass_spring/cpu_time.h"
 #include "modal_mass_spring/force_model.h"
 #include "modal_mass_spring/modal_derivatives.h"
 #include "modal_mass_spring/simulation.h"
@@ -24,14 +25,6 @@ using namespace modal_mass_spring;
 
 namespace
 {
-
-// The process's CPU time (s).
-double processCpuSeconds()
-{
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
 
 GridParams square(int size, int dimension)
 {

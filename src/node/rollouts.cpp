@@ -1,7 +1,7 @@
 // Rollouts of candidate handle motions on worker simulations.
 #include "rollouts.h"
 
-#include "thread_cpu.h"
+#include "modal_mass_spring/cpu_time.h"
 
 #include "modal_mass_spring/parameter_error.h"
 

@@ -1,7 +1,7 @@
 // The node adds nothing numerical: it steps the core Simulation on a timer and shows its state (what
 // it publishes is assembled in status.cpp; its services are in services.cpp).
 #include "simulation_node.h"
-#include "thread_cpu.h"
+#include "modal_mass_spring/cpu_time.h"
 
 #include "modal_mass_spring/Status.h"
 #include "startup_report.h"

@@ -45,13 +45,6 @@ void report(const ProgressFn& progress, const std::string& label, double fractio
 
 }  // namespace
 
-double threadCpuSeconds()
-{
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
-
 double cpuPerSimulatedSecond(double step_cpu_seconds, double time_step)
 {
   if (!(step_cpu_seconds > 0.0 && time_step > 0.0) || !std::isfinite(step_cpu_seconds) || !std::isfinite(time_step))

@@ -3,6 +3,7 @@
 
 #include "handle_scenarios.h"
 
+#include "modal_mass_spring/cpu_time.h"
 #include "modal_mass_spring/simulation.h"
 
 #include <Eigen/Core>
@@ -34,9 +35,6 @@ struct ExperimentSetup
 // The setup among `setups` that differs from `setup` only in running the explicit integrator: every
 // other varied setting equal, `integrator` explicit. Nullptr when there is none.
 const ExperimentSetup* explicitTwin(const ExperimentSetup& setup, const std::vector<ExperimentSetup>& setups);
-
-// This thread's CPU time (s): what a step costs whatever else shares the machine's cores.
-double threadCpuSeconds();
 
 // CPU seconds per simulated second of a step of `time_step` s that took `step_cpu_seconds` of CPU: the
 // figure that compares steps of different sizes; its inverse is the real-time factor the CPU allows

@@ -1,5 +1,6 @@
 // A simulation: the linearization point and basis, and the current method stepped with its divergence
 // checks (its parameters are checked in validation.cpp).
+#include "modal_mass_spring/cpu_time.h"
 #include "modal_mass_spring/simulation.h"
 
 #include "modal_mass_spring/spring_forces.h"
@@ -595,19 +596,6 @@ std::string Simulation::divergence(bool integrator_ok, const State& next)
   }
   return "";
 }
-
-namespace
-{
-
-// The process's CPU time (s).
-double processCpuSeconds()
-{
-  timespec t{};
-  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &t);
-  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
-}
-
-}  // namespace
 
 StepResult Simulation::step(int steps)
 {
