@@ -21,15 +21,6 @@ std_msgs::ColorRGBA rgba(float r, float g, float b, float a = 1.0f)
   return c;
 }
 
-geometry_msgs::Point point(const Eigen::Vector3d& p)
-{
-  geometry_msgs::Point msg;
-  msg.x = p.x();
-  msg.y = p.y();
-  msg.z = p.z();
-  return msg;
-}
-
 // From `rest` towards red when stretched, towards blue when compressed, full at |strain| = scale.
 std_msgs::ColorRGBA strainColour(const std_msgs::ColorRGBA& rest, double strain, double scale)
 {
@@ -66,6 +57,15 @@ visualization_msgs::Marker deleted(const MarkerOptions& options, const std::stri
 }
 
 }  // namespace
+
+geometry_msgs::Point point(const Eigen::Vector3d& p)
+{
+  geometry_msgs::Point msg;
+  msg.x = p.x();
+  msg.y = p.y();
+  msg.z = p.z();
+  return msg;
+}
 
 Eigen::VectorXd particleStrains(const Grid& grid, const Eigen::Matrix3Xd& points)
 {

@@ -15,6 +15,9 @@
 namespace modal_mass_spring
 {
 
+// A point as a message.
+geometry_msgs::Point point(const Eigen::Vector3d& p);
+
 // How one grid is drawn: which namespaces are sent and how they look.
 struct MarkerOptions
 {

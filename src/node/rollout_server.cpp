@@ -1,5 +1,6 @@
 // ~get_state, ~set_state and ~rollout: the state saved and restored, and candidate handle motions
 // simulated from it on worker simulations while the live one steps on.
+#include "grid_messages.h"
 #include "rollouts.h"
 #include "simulation_node.h"
 #include "state_messages.h"
@@ -85,11 +86,7 @@ RolloutOutcome outcomeMessage(const CandidateOutcome& outcome)
     s.time = sample.time;
     s.positions.resize(static_cast<size_t>(sample.positions.cols()));
     for (Eigen::Index p = 0; p < sample.positions.cols(); ++p)
-    {
-      s.positions[p].x = sample.positions(0, p);
-      s.positions[p].y = sample.positions(1, p);
-      s.positions[p].z = sample.positions(2, p);
-    }
+      s.positions[p] = point(sample.positions.col(p));
     for (const Eigen::Vector3d& f : sample.handle_forces)
     {
       geometry_msgs::Wrench w;

@@ -1,6 +1,8 @@
 // SimulationState <-> SavedState.
 #include "state_messages.h"
 
+#include "grid_messages.h"
+
 #include "modal_mass_spring/parameter_error.h"
 
 #include <string>
@@ -94,11 +96,7 @@ SavedState stateMessage(const SimulationState& state, const HandleFrames& frames
     m.handle_frame_poses.push_back(poseMessage(frames.current(h)));
   }
   for (Eigen::Index p = 0; p < points.cols(); ++p)
-  {
-    geometry_msgs::Point point;
-    point.x = points(0, p) + offset.x(), point.y = points(1, p) + offset.y(), point.z = points(2, p) + offset.z();
-    m.positions.push_back(point);
-  }
+    m.positions.push_back(point(points.col(p) + offset));
   return m;
 }
 
