@@ -34,6 +34,8 @@ enum class ImplicitSolver
   Newton,          // Newton with the exact tangent: few iterations, each a new tangent and factorisation
   ConstantMatrix,  // the springs' constant Laplacian in place of the tangent, factorised once: more
                    // iterations, each a force evaluation and two triangular solves
+  LaggedTangent,   // the tangent of a recent state, factorised again every tangent_refresh_steps
+                   // steps: a few iterations, each a force evaluation and two triangular solves
 };
 
 // Where a run (and a reset) starts.
@@ -72,7 +74,7 @@ Linearization parseLinearization(const std::string& name);
 std::string toString(IntegratorKind integrator);
 IntegratorKind parseIntegrator(const std::string& name);
 std::string toString(InitialState initial_state);
-// "newton", "constant_matrix"
+// "newton", "constant_matrix", "lagged_tangent"
 std::string toString(ImplicitSolver solver);
 ImplicitSolver parseImplicitSolver(const std::string& name);
 InitialState parseInitialState(const std::string& name);

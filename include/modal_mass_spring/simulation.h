@@ -45,6 +45,7 @@ struct SimulationParams
   InitialState initial_state = InitialState::Initial;
   int newton_max_iterations = 50;  // per implicit solve (Newton's or the constant matrix's iterations)
   ImplicitSolver implicit_solver = ImplicitSolver::Newton;
+  int tangent_refresh_steps = 20;  // lagged_tangent: steps between two factorisations of the tangent
   // Newton iterations of the static equilibrium before it is refused (linearization or
   // initial_state 'equilibrium'): a 100 x 100 cloth hanging from its flat vertical sheet takes 3 to
   // 20; config/cloth.yaml, released at 30 degrees and buckling as it hangs, 60 to 400 (its path hangs
@@ -90,6 +91,9 @@ struct SimulationParams
   // (contact is corrected in world coordinates; moving_frame is refused).
   std::vector<Collider> colliders;
   double contact_thickness = 0.0;
+  // The modal methods correct the contacts of the particles on every contact_sample_stride-th row
+  // and column (and the edges) only: a step's contact cost no longer grows with the grid. 1: all.
+  int contact_sample_stride = 1;
   // Self-collision (self_collision.h): the free particles kept self_collision_thickness (m, in
   // (0, spacing]) apart from the cloth more than two springs away, with Coulomb friction self_friction
   // between the layers. 3D grids and `full` only: the modal methods are refused (docs/design.md says why).

@@ -129,7 +129,7 @@ void ImplicitNewmark::gyroscopicChanged()
 {
   damping_ = gyroscopic_ ? SparseMatrix(system_.damping + *gyroscopic_) : system_.damping;
   h_ = 0.0;  // the inertia term holds C + G: built again at the next step
-  constant_h_ = 0.0;
+  factor_h_ = 0.0;
   inertia_mapped_ = false;
 }
 
@@ -202,8 +202,8 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
   };
 
   const bool symmetric = !gyroscopic_ && model.isSymmetric();
-  if (constant_matrix_ && symmetric && !model.isLinear() && factorConstant(model))
-    return solveConstant(model, s, next, incremental);
+  if (solver_ != ImplicitSolver::Newton && symmetric && !model.isLinear() && prepareFactor(model, next.q, false))
+    return solveWithFactor(model, s, next, incremental);
   linear_solver_.setBlockSize(model.blockSize());
   for (last_iterations_ = 1; last_iterations_ <= max_iterations_; ++last_iterations_)
   {
@@ -263,16 +263,37 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
   return false;
 }
 
-bool ImplicitNewmark::factorConstant(ForceModel& model)
+void ImplicitNewmark::setSolver(ImplicitSolver solver, int refresh_steps)
 {
-  if (constant_h_ == h_)
+  solver_ = solver;
+  refresh_steps_ = refresh_steps;
+  factor_h_ = 0.0;
+}
+
+bool ImplicitNewmark::prepareFactor(ForceModel& model, const Eigen::VectorXd& q, bool refresh)
+{
+  const bool lagged = solver_ == ImplicitSolver::LaggedTangent;
+  refresh = refresh || factor_h_ != h_ || (lagged && solves_since_factor_ >= refresh_steps_);
+  if (!refresh)
     return true;
+  solves_since_factor_ = 0;
+  if (lagged)
+  {
+    model.tangentStiffness(q, tangent_);
+    if (factorize(model, tangent_))
+      return true;
+  }
   if (constant_stiffness_.rows() != model.size() && !model.constantStiffness(constant_stiffness_))
     return false;
-  const SparseMatrix matrix = inertia_ + (1.0 + alpha_) * constant_stiffness_;
-  constant_dense_ = model.blockSize() == 1;  // modal coordinates: small and dense
+  return factorize(model, constant_stiffness_);
+}
+
+bool ImplicitNewmark::factorize(const ForceModel& model, const SparseMatrix& stiffness)
+{
+  const SparseMatrix matrix = inertia_ + (1.0 + alpha_) * stiffness;
+  factor_dense_ = model.blockSize() == 1;  // modal coordinates: small and dense
   bool ok;
-  if (constant_dense_)
+  if (factor_dense_)
   {
     dense_factor_.compute(Eigen::MatrixXd(matrix));
     ok = dense_factor_.info() == Eigen::Success;
@@ -282,44 +303,65 @@ bool ImplicitNewmark::factorConstant(ForceModel& model)
     sparse_factor_.compute(matrix);
     ok = sparse_factor_.info() == Eigen::Success;
   }
-  constant_h_ = ok ? h_ : 0.0;
+  factor_h_ = ok ? h_ : 0.0;
   return ok;
 }
 
-Eigen::VectorXd ImplicitNewmark::solveConstantMatrix(const Eigen::VectorXd& rhs) const
+Eigen::VectorXd ImplicitNewmark::applyFactor(const Eigen::VectorXd& rhs) const
 {
-  return constant_dense_ ? Eigen::VectorXd(dense_factor_.solve(rhs)) : Eigen::VectorXd(sparse_factor_.solve(rhs));
+  return factor_dense_ ? Eigen::VectorXd(dense_factor_.solve(rhs)) : Eigen::VectorXd(sparse_factor_.solve(rhs));
 }
 
-bool ImplicitNewmark::solveConstant(ForceModel& model, const State& s, State& next,
-                                    const std::function<double(const Eigen::VectorXd&)>& incremental)
+bool ImplicitNewmark::solveWithFactor(ForceModel& model, const State& s, State& next,
+                                      const std::function<double(const Eigen::VectorXd&)>& incremental)
 {
   // The fixed-point map q -> g(q) = q + f(q), f = -J_c^-1 R(q). Anderson mixing takes the g of the
   // combination of the last iterates whose f is smallest (least squares over their differences).
+  ++solves_since_factor_;
   const Eigen::Index n = next.q.size();
   Eigen::MatrixXd delta_f(n, kAndersonDepth), delta_g(n, kAndersonDepth);
   int stored = 0, oldest = 0;
-  Eigen::VectorXd f, previous_f, previous_g, accepted_step;
-  double accepted_potential = std::numeric_limits<double>::infinity();
+  Eigen::VectorXd f, previous_f, previous_g, base_q, base_f;
+  double base_potential = 0.0, base_slope = 0.0;
+  bool plain = true;  // next.q is base_q + base_f, not a mixed iterate
+  auto forgetHistory = [&] {
+    stored = 0;
+    oldest = 0;
+    previous_f.resize(0);
+  };
   for (last_iterations_ = 1; last_iterations_ <= kConstantMatrixIterations * max_iterations_; ++last_iterations_)
   {
     double residual_norm = residual(model, s, next);
     double potential = incremental(next.q);
-    if (potential > accepted_potential && accepted_step.size() > 0)
+    if (base_q.size() > 0 && potential > base_potential + 1e-12 * std::abs(base_potential))
     {
-      // The mixed iterate went uphill: back to the plain step from the last accepted one, which
-      // descends (J_c >= J), and the history starts again.
-      next.q = accepted_step;
-      residual_norm = residual(model, s, next);
-      potential = incremental(next.q);
-      stored = 0;
-      oldest = 0;
-      previous_f.resize(0);
+      // Uphill from the last accepted iterate: a mixed iterate, or a plain step of a lagged tangent,
+      // which does not bound the springs' stiffness. Back along the plain direction, which descends
+      // for any positive definite matrix, until G has decreased enough (Armijo).
+      double t = plain ? 0.5 : 1.0;
+      for (;; t *= 0.5)
+      {
+        if (t < 1e-6)
+          return false;
+        next.q = base_q + t * base_f;
+        residual_norm = residual(model, s, next);
+        potential = incremental(next.q);
+        if (potential <= base_potential + 1e-4 * t * base_slope + 1e-12 * std::abs(base_potential))
+          break;
+      }
+      forgetHistory();
     }
     const double target = tolerance_ * (force_.norm() + inertial_norm_) + roundoff(model, next);
     if (residual_norm <= target)
       return true;
-    f = -solveConstantMatrix(residual_);
+    if (solver_ == ImplicitSolver::LaggedTangent && last_iterations_ % kRefreshIterations == 0)
+    {
+      // Slow to converge: the lagged tangent is too far from this state's.
+      if (!prepareFactor(model, next.q, true))
+        return false;
+      forgetHistory();
+    }
+    f = -applyFactor(residual_);
     if (!f.allFinite())
       return false;
     if (f.norm() <= 1e-10 * (next.q - s.q).norm())
@@ -329,8 +371,10 @@ bool ImplicitNewmark::solveConstant(ForceModel& model, const State& s, State& ne
       return true;
     }
     const Eigen::VectorXd g = next.q + f;
-    accepted_potential = potential;
-    accepted_step = g;
+    base_q = next.q;
+    base_f = f;
+    base_potential = potential;
+    base_slope = residual_.dot(f);
     if (previous_f.size() > 0)
     {
       delta_f.col(oldest) = f - previous_f;
@@ -340,7 +384,8 @@ bool ImplicitNewmark::solveConstant(ForceModel& model, const State& s, State& ne
     }
     previous_f = f;
     previous_g = g;
-    if (stored == 0)
+    plain = stored == 0;
+    if (plain)
     {
       next.q = g;
       continue;
@@ -348,7 +393,10 @@ bool ImplicitNewmark::solveConstant(ForceModel& model, const State& s, State& ne
     const Eigen::VectorXd gamma = delta_f.leftCols(stored).colPivHouseholderQr().solve(f);
     next.q = g - delta_g.leftCols(stored) * gamma;
     if (!next.q.allFinite())
+    {
       next.q = g;
+      plain = true;
+    }
   }
   return false;
 }

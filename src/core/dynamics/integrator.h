@@ -3,6 +3,7 @@
 #pragma once
 
 #include "modal_mass_spring/force_model.h"
+#include "modal_mass_spring/options.h"
 #include "modal_mass_spring/spring_forces.h"
 #include "modal_mass_spring/state.h"
 #include "solvers/tangent_solver.h"
@@ -96,10 +97,15 @@ enum class NewtonStart
 // (recursively, down to 1/16); a step that still does not converge is refused, never taken.
 // A gyroscopic G or a force whose tangent is not symmetric (a turning frame's) makes R no gradient:
 // Newton then solves with a sparse LU and its line search asks for a smaller |R|.
-// With a constant matrix (setConstantMatrix), each iteration solves with the model's constant
-// stiffness L >= K in place of the tangent, factorised once per step size: no tangent is built, and
-// every iteration descends G (projective dynamics' global step, Liu et al. 2013); Anderson mixing
-// of the last iterates (Walker and Ni 2011) is kept where it descends too (Peng et al. 2018).
+// Two solvers iterate with a matrix factorised less often than Newton's (setSolver). With the
+// constant matrix each iteration solves with the model's constant stiffness L >= K in place of the
+// tangent, factorised once per step size: no tangent is built (projective dynamics' global step,
+// Liu et al. 2013). With the lagged tangent it solves with K at a recent state, factorised again
+// every refresh_steps solves, at a new step size, and within a solve that is slow to converge (a
+// chord method); where that K + inertia is not positive definite, with L until the next refresh.
+// Either matrix is positive definite, so the plain step descends G; where an iterate goes uphill
+// it is backtracked (Armijo). Anderson mixing of the last iterates (Walker and Ni 2011) is kept where
+// it descends too (Peng et al. 2018).
 class ImplicitNewmark : public Integrator
 {
 public:
@@ -113,27 +119,32 @@ public:
   void setNewtonStart(NewtonStart start) { start_ = start; }
   // The largest relative linear residual |R + J delta| / |R| of an inexact Newton direction.
   void setMaxForcing(double forcing) { max_forcing_ = forcing; }
-  // Solves with the model's constant stiffness where it has one and R is a gradient (no gyroscopic
-  // or non-symmetric force), Newton's tangent otherwise.
-  void setConstantMatrix(bool on) { constant_matrix_ = on; }
-  bool constantMatrix() const { return constant_matrix_; }
+  // The constant matrix or the lagged tangent are used where R is a gradient (no gyroscopic or
+  // non-symmetric force) and the model is not linear; Newton's tangent otherwise.
+  void setSolver(ImplicitSolver solver, int refresh_steps = 20);
 
 private:
   // Anderson mixing's depth, chosen by measurement (docs/benchmarks.md); the constant matrix
-  // converges linearly, so it may take this many times Newton's iterations.
+  // converges linearly, so it may take this many times Newton's iterations. A lagged tangent is
+  // factorised again at the current iterate after kRefreshIterations iterations of one solve.
   static constexpr int kAndersonDepth = 10;
   static constexpr int kConstantMatrixIterations = 10;
+  static constexpr int kRefreshIterations = 20;
   static constexpr int kMaxHalvings = 4;
   void setStepSize(double h);
   bool advance(ForceModel& model, const State& s, State& next, double h, int depth);
   // One Newton solve of a step of size h_.
   bool solve(ForceModel& model, const State& s, State& next);
-  // The same step by iterations with the constant matrix; `incremental` is G.
-  bool solveConstant(ForceModel& model, const State& s, State& next,
-                     const std::function<double(const Eigen::VectorXd&)>& incremental);
-  // Factorises inertia + (1 + alpha) L for the step size h_, unless done; false where the model has no L.
-  bool factorConstant(ForceModel& model);
-  Eigen::VectorXd solveConstantMatrix(const Eigen::VectorXd& rhs) const;
+  // The same step by iterations with the constant matrix or the lagged tangent; `incremental` is G.
+  bool solveWithFactor(ForceModel& model, const State& s, State& next,
+                       const std::function<double(const Eigen::VectorXd&)>& incremental);
+  // Makes the iteration matrix of this solve ready, factorised anew where it is stale or `refresh`
+  // (the lagged tangent at q); false where the model has neither a positive definite tangent nor L.
+  bool prepareFactor(ForceModel& model, const Eigen::VectorXd& q, bool refresh);
+  // Factorises inertia + (1 + alpha) stiffness for the step size h_.
+  bool factorize(const ForceModel& model, const SparseMatrix& stiffness);
+  // The iteration matrix's inverse times rhs.
+  Eigen::VectorXd applyFactor(const Eigen::VectorXd& rhs) const;
   // The Newton direction -J^-1 R at next.q (empty when J cannot be factorised); with a symmetric J it
   // may leave a residual |R + J delta| up to `slack`.
   Eigen::VectorXd direction(ForceModel& model, const State& next, bool symmetric, double slack);
@@ -175,12 +186,15 @@ private:
   Eigen::VectorXd old_terms_;  // alpha (C v - F(q)): the HHT part of R from the start of the step
   Eigen::VectorXd predicted_;  // y = q + h v + h^2 (1/2 - beta) a: q' = y + beta h^2 a
   double inertial_norm_ = 0.0;  // |M a' + C v'| at the last residual
-  // The constant matrix: L from the model (at the first use), its sum with the inertia factorised
-  // dense (modal coordinates) or sparse, for the step size constant_h_ (0: none).
-  bool constant_matrix_ = false;
+  // The iteration matrix of the constant matrix or the lagged tangent: the inertia plus L (from the
+  // model at the first use) or a lagged K, factorised dense (modal coordinates) or sparse, for the
+  // step size factor_h_ (0: none), solves_since_factor_ solves ago.
+  ImplicitSolver solver_ = ImplicitSolver::Newton;
+  int refresh_steps_ = 20;
+  int solves_since_factor_ = 0;
   SparseMatrix constant_stiffness_;
-  double constant_h_ = 0.0;
-  bool constant_dense_ = false;
+  double factor_h_ = 0.0;
+  bool factor_dense_ = false;
   Eigen::LLT<Eigen::MatrixXd> dense_factor_;
   Eigen::SimplicialLLT<SparseMatrix> sparse_factor_;
 };

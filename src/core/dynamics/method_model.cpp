@@ -92,7 +92,7 @@ void MethodModel::configure(const IntegratorSettings& settings)
   {
     auto implicit = std::make_unique<ImplicitNewmark>(std::move(system), settings.time_step,
                                                       settings.newton_max_iterations, settings.hht_alpha);
-    implicit->setConstantMatrix(settings.solver == ImplicitSolver::ConstantMatrix);
+    implicit->setSolver(settings.solver, settings.tangent_refresh_steps);
     integrator_ = std::move(implicit);
   }
   else

@@ -23,7 +23,7 @@ int parseName(const std::string& parameter, const std::string& name, const std::
 const std::vector<std::string> kLinearizations{"rest", "equilibrium"};
 const std::vector<std::string> kIntegrators{"explicit", "implicit"};
 const std::vector<std::string> kInitialStates{"initial", "equilibrium"};
-const std::vector<std::string> kImplicitSolvers{"newton", "constant_matrix"};
+const std::vector<std::string> kImplicitSolvers{"newton", "constant_matrix", "lagged_tangent"};
 const std::vector<std::string> kBases{"linear_modes", "modal_derivatives", "skinning"};
 const std::vector<std::string> kHandleFormulations{"auto", "constraint_modes", "moving_frame"};
 

@@ -122,6 +122,7 @@ TEST(Implicit, NamesRoundTrip)
   EXPECT_EQ(toString(Linearization::Equilibrium), "equilibrium");
   EXPECT_EQ(parseInitialState("initial"), InitialState::Initial);
   EXPECT_EQ(parseImplicitSolver(toString(ImplicitSolver::ConstantMatrix)), ImplicitSolver::ConstantMatrix);
+  EXPECT_EQ(parseImplicitSolver("lagged_tangent"), ImplicitSolver::LaggedTangent);
   EXPECT_THROW(parseImplicitSolver("projective"), std::invalid_argument);
   try
   {
@@ -180,10 +181,11 @@ TEST(Implicit, LargeStepsConvergeWhereTheGridRestsAtTheLinearizationPoint)
     }
 }
 
-TEST(Implicit, ConstantMatrixReachesNewtonsSteps)
+TEST(Implicit, ConstantMatrixAndLaggedTangentReachNewtonsSteps)
 {
-  // Both solvers converge each step to the same tolerance: their runs agree to far below the motion.
-  // The constant matrix takes more iterations than Newton (no tangent), which shows it was used.
+  // The three solvers converge each step to the same tolerance: their runs agree to far below the
+  // motion. The constant matrix takes more iterations than Newton (no tangent), and the lagged
+  // tangent fewer than the constant matrix (a tangent, a few steps old), which shows each was used.
   for (Method method : {Method::Full, Method::Physical, Method::Cubature})
   {
     SimulationParams s = methodParams(method, 30, 5e-3, IntegratorKind::Implicit);
@@ -191,17 +193,25 @@ TEST(Implicit, ConstantMatrixReachesNewtonsSteps)
     Simulation newton(turnedSheet(), s);
     s.implicit_solver = ImplicitSolver::ConstantMatrix;
     Simulation constant(turnedSheet(), s);
-    int newton_iterations = 0, constant_iterations = 0;
+    s.implicit_solver = ImplicitSolver::LaggedTangent;
+    s.tangent_refresh_steps = 10;
+    Simulation lagged(turnedSheet(), s);
+    int newton_iterations = 0, constant_iterations = 0, lagged_iterations = 0;
     for (int k = 0; k < 100; ++k)
     {
       ASSERT_FALSE(newton.step().diverged) << toString(method);
       ASSERT_FALSE(constant.step().diverged) << toString(method);
+      ASSERT_FALSE(lagged.step().diverged) << toString(method);
       newton_iterations += newton.lastNewtonIterations();
       constant_iterations += constant.lastNewtonIterations();
+      lagged_iterations += lagged.lastNewtonIterations();
     }
     const double motion = largestParticleDistance(newton, newton.grid().initialPositions());
     EXPECT_GT(motion, 0.05) << toString(method);
     EXPECT_LT(largestParticleDistance(constant, newton.positions()), 1e-6 * motion) << toString(method);
+    EXPECT_LT(largestParticleDistance(lagged, newton.positions()), 1e-6 * motion) << toString(method);
     EXPECT_GT(constant_iterations, newton_iterations) << toString(method);
+    EXPECT_LT(lagged_iterations, constant_iterations) << toString(method);
+    EXPECT_NE(lagged_iterations, newton_iterations) << toString(method);
   }
 }

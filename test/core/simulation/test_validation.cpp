@@ -93,6 +93,7 @@ TEST(Validation, SimulationParametersAreRefusedByName)
   EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.hht_alpha = 0.1; }), "'hht_alpha' = 0.1"));
   EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.energy_tolerance = 0.0; }), "'energy_tolerance' = 0"));
   EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.newton_max_iterations = 0; }), "'newton_max_iterations' = 0"));
+  EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.tangent_refresh_steps = 0; }), "'tangent_refresh_steps' = 0"));
   EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.equilibrium_max_iterations = 0; }),
                        "'equilibrium_max_iterations' = 0"));
   EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.time_step = -1.0; }), "'time_step' = -1"));
