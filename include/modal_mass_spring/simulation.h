@@ -91,9 +91,6 @@ struct SimulationParams
   // (contact is corrected in world coordinates; moving_frame is refused).
   std::vector<Collider> colliders;
   double contact_thickness = 0.0;
-  // The modal methods correct the contacts of the particles on every contact_sample_stride-th row
-  // and column (and the edges) only: a step's contact cost no longer grows with the grid. 1: all.
-  int contact_sample_stride = 1;
   // Self-collision (self_collision.h): the free particles kept self_collision_thickness (m, in
   // (0, spacing]) apart from the cloth more than two springs away, with Coulomb friction self_friction
   // between the layers. 3D grids and `full` only: the modal methods are refused (docs/design.md says why).

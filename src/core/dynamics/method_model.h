@@ -158,9 +158,6 @@ public:
   // Corrects next() for contact with the colliders (Contact), before commit(): per particle for
   // `full`, through the basis for the modal methods. The acceleration is left as the forces gave it.
   virtual void correctContacts(Contact& contact) = 0;
-  // The free particles (free-dof index / dim) whose contacts the modal methods correct: all of them
-  // when empty. `full` corrects every particle whatever the sample.
-  virtual void setContactSample(const std::vector<int>& /*particles*/) {}
   // Corrects next() for self-collision, before commit(): `full` only (the Simulation refuses it for
   // the modal methods; they throw std::logic_error).
   virtual void correctSelfCollision(SelfCollision& self, const Contact* contact);
@@ -268,10 +265,8 @@ public:
   void setHandleMotion(const HandleMotion& motion) override;
   Eigen::VectorXd offset() const override { return offset_; }
   void restore(const State& state, const Eigen::VectorXd& offset) override;
-  // The touching particles' impulses through Phi (Contact::correctModal): O(n r) to find them, or
-  // O(sample r) with a contact sample.
+  // The touching particles' impulses through Phi (Contact::correctModal): O(n r) to find them.
   void correctContacts(Contact& contact) override;
-  void setContactSample(const std::vector<int>& particles) override;
 
 private:
   MassDamping massDamping(double alpha, double beta) const override;
@@ -319,18 +314,6 @@ private:
   // Phi^T (K_ii Psi + K_ib): the stiffness-proportional damping of the handles' velocity; empty when
   // Psi is static (zero).
   Eigen::MatrixXd interface_stiffness_;
-  // The contact sample's free dofs, their rows of Phi, masses, and its positions and velocities
-  // at a step's start and end (buffers).
-  struct ContactSample
-  {
-    std::vector<int> dofs;
-    Eigen::MatrixXd phi;
-    Eigen::VectorXd mass, x_start, x, v;
-  };
-  ContactSample sample_;
-  // The sample's positions x_ref + u at q (with the handles' Psi part, through its affine part where
-  // it has one), and its velocities when v is given.
-  void sampleState(const Eigen::VectorXd& q, Eigen::VectorXd& x, const Eigen::VectorXd* qv, Eigen::VectorXd* v);
   Eigen::VectorXd anchor_;
   // |offset + Phi X - anchor|_M^2 = c + 2 b.X + X.X with b = Phi^T M (offset - anchor).
   Eigen::VectorXd anchor_b_;

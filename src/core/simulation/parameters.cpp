@@ -67,7 +67,6 @@ SimulationParams loadSimulationParams(const ParameterSource& s)
   p.hht_alpha = s.getDouble("hht_alpha").value_or(p.hht_alpha);
   p.energy_tolerance = s.getDouble("energy_tolerance").value_or(p.energy_tolerance);
   p.contact_thickness = s.getDouble("contact_thickness").value_or(p.contact_thickness);
-  p.contact_sample_stride = s.getInt("contact_sample_stride").value_or(p.contact_sample_stride);
   p.self_collision = s.getBool("self_collision").value_or(p.self_collision);
   p.self_collision_thickness = s.getDouble("self_collision_thickness").value_or(p.self_collision_thickness);
   p.self_friction = s.getDouble("self_friction").value_or(p.self_friction);

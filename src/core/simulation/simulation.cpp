@@ -288,28 +288,6 @@ void Simulation::setCubature(Cubature cubature)
   cache_report_.cubature_stored = storeCubature(cache_report_.cubature_file, key, *cubature_, cache_);
 }
 
-namespace
-{
-
-// The free particles on every stride-th row and column, the last row and column included (the
-// cloth's edges and corners), as free-dof index / dim.
-std::vector<int> contactSample(const Grid& grid, int stride)
-{
-  const int rows = grid.params().rows, cols = grid.params().cols, dim = grid.dimension();
-  auto on = [stride](int i, int count) { return i % stride == 0 || i == count - 1; };
-  std::vector<int> particles;
-  for (int row = 0; row < rows; ++row)
-    for (int col = 0; col < cols; ++col)
-    {
-      const int free = grid.freeIndex(dim * grid.particleIndex(row, col));
-      if (on(row, rows) && on(col, cols) && free >= 0)
-        particles.push_back(free / dim);
-    }
-  return particles;
-}
-
-}  // namespace
-
 IntegratorSettings Simulation::integratorSettings() const
 {
   return IntegratorSettings{params_.integrator, params_.time_step, params_.newton_max_iterations,
@@ -369,8 +347,6 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
   if (moving_frame)
     model_->setFrameForces(frameForcesOf(frame_current_));
   model_->setExternalForce(grid_.gatherFree(external_force_));
-  if (contact_ && params_.contact_sample_stride > 1)
-    model_->setContactSample(contactSample(grid_, params_.contact_sample_stride));
   projection_error_ = model_->assign(u, v, remainder);
   model_->setAnchor(anchor_, anchor_handles_);
   diverged_ = false;

@@ -143,9 +143,6 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
                     "must be a finite number > 0 (the energy rise, relative to the grid's energy scale, that counts as divergence)");
   if (p.newton_max_iterations < 1)
     rejectParameter("newton_max_iterations", p.newton_max_iterations, "must be an integer >= 1");
-  if (p.contact_sample_stride < 1)
-    rejectParameter("contact_sample_stride", p.contact_sample_stride,
-                    "must be an integer >= 1 (1: every particle's contacts are corrected)");
   if (p.tangent_refresh_steps < 1)
     rejectParameter("tangent_refresh_steps", p.tangent_refresh_steps, "must be an integer >= 1");
   if (p.equilibrium_max_iterations < 1)
