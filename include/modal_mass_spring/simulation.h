@@ -23,6 +23,7 @@ namespace modal_mass_spring
 {
 
 // The method objects and what builds them are internal (src/core/dynamics/method_model.h).
+class ErrorIndicator;
 class MethodModel;
 struct IntegratorSettings;
 enum class Remainder;
@@ -288,6 +289,11 @@ public:
   // largest particle distance) the projected positions are from the requested ones.
   void setPhysicalState(const Eigen::VectorXd& displacement, const Eigen::VectorXd& velocity);
   double projectionError() const { return projection_error_; }
+  // How far the current state is estimated to be from what `full` would do from it (m, an RMS over
+  // the free particles): the displacement that balances the full model's force outside the
+  // method's span (reduction/error_indicator.h). 0 for `full`. O(springs + n r) and a sparse solve;
+  // the first call factorises the springs' Laplacian.
+  double errorIndicator();
   const LinearizationInfo& linearization() const { return linearization_; }
   // x_ref: the initial positions (rest) or the static equilibrium.
   const Eigen::VectorXd& linearizationPositions() const { return x_ref_; }
@@ -422,6 +428,7 @@ private:
   double energy_scale_ = 0.0;       // the base plus the start's spring and kinetic energy
   double start_energy_ = 0.0;  // the method's energy at the start of the run, carried over switches
   double projection_error_ = 0.0;
+  std::unique_ptr<ErrorIndicator> error_indicator_;  // built at the first errorIndicator()
   Eigen::VectorXd external_force_;  // on every dof; zero: none
   SparseMatrix handle_coupling_;        // K_ib at x_ref (interior x handle dofs)
   Eigen::MatrixXd constraint_modes_;    // Psi; empty until a modal method needs it

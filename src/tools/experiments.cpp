@@ -365,6 +365,8 @@ ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, const Accurac
   e.max_displacement = maxDisplacement(grid, run.sim->points());
   e.energy = run.sim->totalEnergy();
   e.center_y = run.sim->points().row(1).mean();
+  if (method != "full" && method != "reference" && method != "reference_half_step")
+    e.error_indicator = run.sim->errorIndicator();
   return e;
 }
 
@@ -433,10 +435,37 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
   return result;
 }
 
+double rankCorrelation(const std::vector<double>& a, const std::vector<double>& b)
+{
+  const size_t n = a.size();
+  if (n < 3 || b.size() != n)
+    return std::numeric_limits<double>::quiet_NaN();
+  auto ranks = [n](const std::vector<double>& v) {
+    std::vector<size_t> order(n);
+    for (size_t i = 0; i < n; ++i)
+      order[i] = i;
+    std::sort(order.begin(), order.end(), [&](size_t i, size_t j) { return v[i] < v[j]; });
+    Eigen::VectorXd r(n);
+    for (size_t i = 0; i < n;)
+    {
+      size_t j = i;
+      while (j + 1 < n && v[order[j + 1]] == v[order[i]])
+        ++j;
+      for (size_t k = i; k <= j; ++k)
+        r[order[k]] = 0.5 * static_cast<double>(i + j);
+      i = j + 1;
+    }
+    return Eigen::VectorXd(r.array() - r.mean());
+  };
+  const Eigen::VectorXd ra = ranks(a), rb = ranks(b);
+  const double norms = ra.norm() * rb.norm();
+  return norms > 0.0 ? ra.dot(rb) / norms : std::numeric_limits<double>::quiet_NaN();
+}
+
 std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& rows)
 {
   std::vector<AccuracySummary> out;
-  std::vector<std::vector<double>> times, cpu_times;
+  std::vector<std::vector<double>> times, cpu_times, indicators, distances;
   std::vector<int> counts;
   std::vector<double> time_steps;  // of each summary's samples: time / step
   for (const ErrorSample& e : rows)
@@ -451,6 +480,8 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
       out.back().method = e.method;
       times.emplace_back();
       cpu_times.emplace_back();
+      indicators.emplace_back();
+      distances.emplace_back();
       counts.push_back(0);
       time_steps.push_back(0.0);
       it = out.end() - 1;
@@ -473,6 +504,11 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
       times[k].push_back(e.step_seconds);
     if (e.step_cpu_seconds > 0.0)
       cpu_times[k].push_back(e.step_cpu_seconds);
+    if (!std::isnan(e.error_indicator))
+    {
+      indicators[k].push_back(e.error_indicator);
+      distances[k].push_back(e.rms_distance);
+    }
     ++counts[k];
   }
   for (size_t k = 0; k < out.size(); ++k)
@@ -492,6 +528,7 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
       s.final_rms = std::numeric_limits<double>::quiet_NaN();
     s.step_seconds_median = median(times[k]);
     s.step_cpu_seconds_median = median(cpu_times[k]);
+    s.indicator_rank_correlation = rankCorrelation(indicators[k], distances[k]);
     s.cpu_per_simulated_second = cpuPerSimulatedSecond(s.step_cpu_seconds_median, time_steps[k]);
     s.real_time_factor = realTimeFactor(s.step_cpu_seconds_median, time_steps[k]);
     double sum = 0.0;
@@ -754,11 +791,13 @@ void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows)
 
 void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows)
 {
-  precise(out) << "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds,center_y\n";
+  precise(out) << "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds,"
+                  "center_y,error_indicator\n";
   for (const ErrorSample& e : rows)
     out << e.variant << ',' << e.method << ',' << e.step << ',' << Field{e.time} << ',' << Field{e.max_distance}
         << ',' << Field{e.rms_distance} << ',' << Field{e.max_displacement} << ',' << Field{e.energy} << ','
-        << (e.diverged ? 1 : 0) << ',' << Field{e.step_seconds} << ',' << Field{e.center_y} << '\n';
+        << (e.diverged ? 1 : 0) << ',' << Field{e.step_seconds} << ',' << Field{e.center_y} << ','
+        << Field{e.error_indicator} << '\n';
 }
 
 void writeCubatureCsv(std::ostream& out, const std::vector<CubatureRow>& rows)
@@ -775,14 +814,15 @@ std::vector<AccuracySummary> notBuiltSummaries(const std::string& variant, const
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::vector<AccuracySummary> out;
   for (const auto& [method, reason] : result.not_built)
-    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, nan, nan, nan, false, reason});
+    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, nan, nan, nan, false, reason, nan});
   return out;
 }
 
 void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummary>& rows)
 {
   precise(out) << "variant,method,mean_rms,max_rms,mean_max,final_rms,step_seconds_median,step_seconds_mean,"
-                  "step_cpu_seconds_median,cpu_per_simulated_second,real_time_factor,diverged,not_built\n";
+                  "step_cpu_seconds_median,cpu_per_simulated_second,real_time_factor,diverged,not_built,"
+                  "indicator_rank_correlation\n";
   for (const AccuracySummary& s : rows)
   {
     // The reason is free text: quoted, its quotes doubled.
@@ -792,7 +832,8 @@ void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummar
     out << s.variant << ',' << s.method << ',' << Field{s.mean_rms} << ',' << Field{s.max_rms} << ','
         << Field{s.mean_max} << ',' << Field{s.final_rms} << ',' << Field{s.step_seconds_median} << ','
         << Field{s.step_seconds_mean} << ',' << Field{s.step_cpu_seconds_median} << ','
-        << Field{s.cpu_per_simulated_second} << ',' << Field{s.real_time_factor} << ',' << (s.diverged ? 1 : 0) << ",\"" << reason << "\"\n";
+        << Field{s.cpu_per_simulated_second} << ',' << Field{s.real_time_factor} << ',' << (s.diverged ? 1 : 0) << ",\"" << reason << "\","
+        << Field{s.indicator_rank_correlation} << '\n';
   }
 }
 

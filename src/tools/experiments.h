@@ -9,6 +9,7 @@
 #include <Eigen/Core>
 
 #include <functional>
+#include <limits>
 #include <ostream>
 #include <optional>
 #include <string>
@@ -111,6 +112,9 @@ struct ErrorSample
   double step_cpu_seconds = 0.0;  // and this thread's CPU time per step, which other processes do not inflate
   // The particles' mean y (m): a swing of a 3D sheet about its top edge (along x) moves it; 0 in 2D.
   double center_y = 0.0;
+  // The method's own estimate of its distance to `full` (Simulation::errorIndicator, m); NaN for
+  // `full` and the reference.
+  double error_indicator = std::numeric_limits<double>::quiet_NaN();
 };
 
 struct Snapshot
@@ -253,7 +257,13 @@ struct AccuracySummary
   double cpu_per_simulated_second = 0.0, real_time_factor = 0.0;
   bool diverged = false;
   std::string not_built;  // why the method could not be built (no samples, distances NaN); empty when it ran
+  // Spearman's rank correlation of the error indicator with the RMS distance over the samples after
+  // step 0 (NaN for `full`, or with fewer than three samples).
+  double indicator_rank_correlation = std::numeric_limits<double>::quiet_NaN();
 };
+// Spearman's rank correlation of a and b (equal sizes; ties take their mean rank); NaN below three
+// pairs or where either is constant.
+double rankCorrelation(const std::vector<double>& a, const std::vector<double>& b);
 // The summaries of the methods of `result` that did not build, for its variant.
 std::vector<AccuracySummary> notBuiltSummaries(const std::string& variant, const AccuracyResult& result);
 std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& rows);

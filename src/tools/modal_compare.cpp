@@ -1133,20 +1133,22 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
   const std::vector<AccuracySummary> summaries = summaries_of();
   std::vector<std::vector<std::string>> table{
       {"scenario", "method", "mean RMS m", "largest RMS m", "RMS at the end m", "step us (median)", "CPU us (median)",
-       "CPU s per simulated s", "real-time factor"}};
+       "CPU s per simulated s", "real-time factor", "indicator rank corr."}};
   for (const AccuracySummary& s : summaries)
     if (!s.not_built.empty())
-      table.push_back({s.variant, s.method, "did not build: " + s.not_built, "", "", "", "", "", ""});
+      table.push_back({s.variant, s.method, "did not build: " + s.not_built, "", "", "", "", "", "", ""});
     else if (s.method != "reference_half_step" && (s.method != reference || s.step_seconds_median > 0.0))
       // The reference's own row when it is timed (`full` at the methods' step): the step times to compare.
       table.push_back({s.variant, s.method, s.method == reference ? "(reference)" : fmt(s.mean_rms),
                        s.method == reference ? "" : fmt(s.max_rms),
                        s.method == reference ? "" : s.diverged ? "diverged" : fmt(s.final_rms),
                        fmt(1e6 * s.step_seconds_median), fmt(1e6 * s.step_cpu_seconds_median),
-                       fmt(s.cpu_per_simulated_second), fmt(s.real_time_factor)});
+                       fmt(s.cpu_per_simulated_second), fmt(s.real_time_factor),
+                       fmt(s.indicator_rank_correlation)});
   printTable("handles (" + o.tag + "): distance of the free particles to " + reference +
                  " over every sample after step 0; wall and this thread's CPU time per step while running, the "
-                 "CPU time per simulated second and the real-time factor it allows (time_step / CPU per step)",
+                 "CPU time per simulated second and the real-time factor it allows (time_step / CPU per step); "
+                 "the rank correlation of the method's error indicator with that distance",
              table);
   for (const std::string& m : messages)
     std::cout << "note: " << m << "\n";

@@ -501,3 +501,14 @@ TEST(Cost, AMethodThatDivergesAtOnceIsReportedWithItsStep)
   EXPECT_NE(csv.str().find(",diverged,diverged_step\n"), std::string::npos) << csv.str();
   EXPECT_NE(csv.str().find(",1,1\n"), std::string::npos) << csv.str();
 }
+
+TEST(Experiments, RankCorrelationIsSpearmansWithTiesAtTheirMeanRank)
+{
+  EXPECT_DOUBLE_EQ(rankCorrelation({1.0, 2.0, 3.0, 4.0}, {10.0, 20.0, 35.0, 40.0}), 1.0);
+  EXPECT_DOUBLE_EQ(rankCorrelation({1.0, 2.0, 3.0, 4.0}, {4.0, 3.0, 2.0, 1.0}), -1.0);
+  EXPECT_DOUBLE_EQ(rankCorrelation({1.0, 2.0, 3.0}, {1.0, 3.0, 2.0}), 0.5);
+  // Ranks 0.5, 0.5, 2, 3 against 0, 1, 2, 3: 4.5 / sqrt(4.5 * 5).
+  EXPECT_NEAR(rankCorrelation({1.0, 1.0, 2.0, 3.0}, {1.0, 2.0, 3.0, 4.0}), 4.5 / std::sqrt(22.5), 1e-12);
+  EXPECT_TRUE(std::isnan(rankCorrelation({1.0, 2.0}, {1.0, 2.0})));
+  EXPECT_TRUE(std::isnan(rankCorrelation({1.0, 1.0, 1.0}, {1.0, 2.0, 3.0})));
+}

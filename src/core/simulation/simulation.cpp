@@ -6,6 +6,7 @@
 #include "modal_mass_spring/spring_forces.h"
 #include "modal_mass_spring/validation.h"
 #include "dynamics/method_model.h"
+#include "reduction/error_indicator.h"
 #include "solvers/equilibrium.h"
 
 #include <chrono>
@@ -860,6 +861,22 @@ Eigen::VectorXd Simulation::positions() const
       x.segment(p, dim) = f.worldPosition(x.segment(p, dim));
   }
   return x;
+}
+
+double Simulation::errorIndicator()
+{
+  if (params_.method == Method::Full)
+    return 0.0;
+  if (!error_indicator_)
+    error_indicator_ = std::make_unique<ErrorIndicator>(grid_, mass_);
+  // In the body frame where one moves: the springs do not see the frame, and the basis lives there.
+  Eigen::VectorXd x = x_ref_;
+  if (handle_current_.displacement.size() > 0)
+    for (int k = 0; k < grid_.numHandleDofs(); ++k)
+      x[grid_.handleDofs()[k]] += handle_current_.displacement[k];
+  grid_.addFree(bodyDisplacement(), x);
+  const ModalBasis& basis = params_.method == Method::Linear ? basis_ : physical_basis_;
+  return error_indicator_->estimate(x, basis.phi, external_force_);
 }
 
 void Simulation::particleState(int particle, Eigen::VectorXd& position, Eigen::VectorXd& velocity) const

@@ -1,0 +1,37 @@
+#include "reduction/error_indicator.h"
+
+#include "modal_mass_spring/spring_forces.h"
+
+#include <cmath>
+#include <stdexcept>
+
+namespace modal_mass_spring
+{
+
+ErrorIndicator::ErrorIndicator(const Grid& grid, const Eigen::VectorXd& mass) : grid_(grid), mass_(mass)
+{
+  particle_mass_ = mass_.sum() / grid_.dimension();
+  SparseMatrix matrix = springLaplacian(grid_);
+  for (Eigen::Index k = 0; k < mass_.size(); ++k)
+    matrix.coeffRef(k, k) += mass_[k] / (kTau * kTau);
+  factor_.compute(matrix);
+  if (factor_.info() != Eigen::Success)
+    throw std::runtime_error("error indicator: the springs' Laplacian plus the mass could not be factorised");
+}
+
+double ErrorIndicator::estimate(const Eigen::VectorXd& x, const Eigen::MatrixXd& phi,
+                                const Eigen::VectorXd& external) const
+{
+  Eigen::VectorXd f_all;
+  springForces(grid_, x, f_all);
+  f_all += grid_.gravityForce();
+  if (external.size() == f_all.size())
+    f_all += external;
+  Eigen::VectorXd r = grid_.gatherFree(f_all);
+  const Eigen::VectorXd in_span = phi.transpose() * r;
+  r -= mass_.cwiseProduct(phi * in_span);
+  const Eigen::VectorXd du = factor_.solve(r);
+  return particle_mass_ > 0.0 ? std::sqrt(du.dot(mass_.cwiseProduct(du)) / particle_mass_) : 0.0;
+}
+
+}  // namespace modal_mass_spring

@@ -1,0 +1,84 @@
+// The reduced methods' error indicator (Simulation::errorIndicator): zero where nothing of the full
+// force lies outside the span, large where the span cannot hold the deformation.
+#include "test_support.h"
+
+#include "modal_mass_spring/simulation.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <iostream>
+#include <vector>
+
+using namespace modal_mass_spring;
+
+TEST(ErrorIndicator, ZeroWhereTheSpanHoldsEveryDisplacement)
+{
+  // The 5 x 5 sheet swinging down from 45 degrees: with every mode nothing of the full force is
+  // outside the span; with four modes much is.
+  const int free_dofs = 60;
+  SimulationParams s = methodParams(Method::Physical, free_dofs, 5e-3, IntegratorKind::Implicit);
+  Simulation every(turnedSheet(), s);
+  s.num_modes = 4;
+  Simulation few(turnedSheet(), s);
+  ASSERT_FALSE(every.step(40).diverged);
+  ASSERT_FALSE(few.step(40).diverged);
+  EXPECT_LT(every.errorIndicator(), 1e-10);
+  EXPECT_GT(few.errorIndicator(), 1e-6);
+  s.method = Method::Full;
+  EXPECT_EQ(Simulation(turnedSheet(), s).errorIndicator(), 0.0);
+}
+
+TEST(ErrorIndicator, ZeroAtTheHangingEquilibrium)
+{
+  // Forces balance there: whatever the span, nothing is left for it to miss.
+  SimulationParams s = methodParams(Method::Cubature, 6, 5e-3, IntegratorKind::Implicit);
+  s.linearization = Linearization::Equilibrium;
+  s.initial_state = InitialState::Equilibrium;
+  Simulation sim(clothSheet(10), s);
+  EXPECT_LT(sim.errorIndicator(), 1e-9);
+}
+
+TEST(ErrorIndicator, SeesTheTurnSixModesCannotHoldAndTheSkinningSpanCan)
+{
+  // A 10 x 10 cloth held by its top row, turned 60 degrees about the vertical through the row's
+  // middle and held: the springs of six linear modes are strained by the turn, which they cannot
+  // follow; the skinning span turns the cloth rigidly and leaves no force outside itself.
+  std::vector<int> top;
+  for (int col = 0; col < 10; ++col)
+    top.push_back(col);
+  const GridParams g = heldCloth({top}, 10);
+  SimulationParams s = methodParams(Method::Physical, 6, 5e-3, IntegratorKind::Implicit);
+  s.alpha = 0.5;
+  s.linearization = Linearization::Equilibrium;
+  s.initial_state = InitialState::Equilibrium;
+  Simulation modes(g, s);
+  s.basis = BasisKind::Skinning;
+  s.num_skinning_weights = 8;
+  Simulation skinning(g, s);
+  EXPECT_LT(modes.errorIndicator(), 1e-9);  // at rest in the equilibrium
+  const Eigen::VectorXd start = modes.handlePositions();
+  Eigen::Vector3d middle = Eigen::Vector3d::Zero();
+  for (Eigen::Index k = 0; k < start.size(); k += 3)
+    middle += start.segment<3>(k) / 10.0;
+  for (int k = 1; k <= 100; ++k)
+  {
+    const double angle = 0.5 * (1.0 - std::cos(M_PI * k / 100.0)) * M_PI / 3.0;
+    const Eigen::Matrix3d turn = Eigen::AngleAxisd(angle, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+    Eigen::VectorXd target = start;
+    for (Eigen::Index i = 0; i < start.size(); i += 3)
+      target.segment<3>(i) = middle + turn * (start.segment<3>(i) - middle);
+    for (Simulation* sim : {&modes, &skinning})
+    {
+      sim->setHandleMotion(target);
+      ASSERT_FALSE(sim->step().diverged) << "step " << k;
+    }
+  }
+  for (Simulation* sim : {&modes, &skinning})
+    ASSERT_FALSE(sim->step(200).diverged);  // held 1 s: the swing damped out
+  std::cout << "indicator, six modes: " << modes.errorIndicator() << " m, skinning: " << skinning.errorIndicator()
+            << " m\n";
+  EXPECT_GT(modes.errorIndicator(), 1e-3);
+  EXPECT_LT(skinning.errorIndicator(), 1e-3 * modes.errorIndicator());
+}
