@@ -1,0 +1,61 @@
+#!/usr/bin/env python3
+"""The error indicator against the true distance to `full`, from modal_compare's error CSVs.
+
+    indicator_calibration.py handles_*_error.csv accuracy_*_error.csv
+
+For each method: Spearman's rank correlation of error_indicator with rms_distance over every sample
+after step 0 of every file (pooled), the same over the scenarios' means, the median ratio of the
+distance to the indicator, and each scenario's means.
+"""
+import csv
+import math
+import statistics
+import sys
+
+
+def ranks(values):
+    order = sorted(range(len(values)), key=lambda i: values[i])
+    result = [0.0] * len(values)
+    i = 0
+    while i < len(values):
+        j = i
+        while j + 1 < len(values) and values[order[j + 1]] == values[order[i]]:
+            j += 1
+        for k in range(i, j + 1):
+            result[order[k]] = (i + j) / 2.0
+        i = j + 1
+    return result
+
+
+def spearman(a, b):
+    ra, rb = ranks(a), ranks(b)
+    ma, mb = statistics.fmean(ra), statistics.fmean(rb)
+    num = sum((x - ma) * (y - mb) for x, y in zip(ra, rb))
+    den = math.sqrt(sum((x - ma) ** 2 for x in ra) * sum((y - mb) ** 2 for y in rb))
+    return num / den if den > 0 else float("nan")
+
+
+def main(paths):
+    samples = {}  # method -> scenario -> [(indicator, distance)]
+    for path in paths:
+        name = path.rsplit("/", 1)[-1].replace("_error.csv", "")
+        for row in csv.DictReader(open(path)):
+            if row["step"] == "0" or not row.get("error_indicator") or row["diverged"] == "1":
+                continue
+            scenario = name + "/" + row["variant"]
+            pair = (float(row["error_indicator"]), float(row["rms_distance"]))
+            samples.setdefault(row["method"], {}).setdefault(scenario, []).append(pair)
+    for method, scenarios in samples.items():
+        pairs = [p for s in scenarios.values() for p in s]
+        means = [(statistics.fmean(i for i, _ in s), statistics.fmean(d for _, d in s)) for s in scenarios.values()]
+        ratios = [d / i for i, d in pairs if i > 0]
+        print(f"{method}: {len(pairs)} samples in {len(scenarios)} scenarios; rank correlation pooled "
+              f"{spearman([i for i, _ in pairs], [d for _, d in pairs]):.3f}, over the scenarios' means "
+              f"{spearman([i for i, _ in means], [d for _, d in means]):.3f}; distance / indicator median "
+              f"{statistics.median(ratios):.3g}")
+        for scenario, (i, d) in zip(scenarios, means):
+            print(f"  {scenario:40s} indicator {i:.2e} m  RMS distance {d:.2e} m")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
