@@ -141,7 +141,6 @@ private:
   // with the motion carried over.
   void startLiveTuning();
   void reconfigure(SimulationConfig& config, uint32_t level);
-  SimulationConfig tuningOf(const NodeConfiguration& configuration) const;
   void rebuildLoop();
   void swapRebuilt();  // with mutex_ held, at a tick boundary
   bool rebuilding() const { return rebuilding_ || !rebuilt_.empty() || training_; }
