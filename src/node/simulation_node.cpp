@@ -1,6 +1,8 @@
 // The node adds nothing numerical: it steps the core Simulation on a timer and shows its state (what
 // it publishes is assembled in status.cpp; its services are in services.cpp).
 #include "simulation_node.h"
+
+#include "lockstep.h"
 #include "modal_mass_spring/cpu_time.h"
 
 #include "modal_mass_spring/Status.h"
@@ -293,22 +295,11 @@ void SimulationNode::buildTracks()
 
 void SimulationNode::synchronise()
 {
-  const Track* source = nullptr;
-  for (const Track& track : tracks_)
-    if (track.simulation->method() != Method::Full || (!lockstep() && &track == &tracks_.front()))
-    {
-      source = &track;
-      break;
-    }
-  if (!source)
-    return;
-  const Eigen::VectorXd u = source->simulation->displacement(), v = source->simulation->velocity();
+  std::vector<Simulation*> simulations;
   for (Track& track : tracks_)
-    if (&track != source && track.simulation->method() == Method::Full)
-    {
-      track.simulation->setPhysicalState(u, v);
-      track.divergence_message.clear();
-    }
+    simulations.push_back(track.simulation.get());
+  for (size_t k : synchroniseFull(simulations, !lockstep()))
+    tracks_[k].divergence_message.clear();
 }
 
 const SimulationNode::Track* SimulationNode::reference() const
