@@ -50,7 +50,7 @@ bool SimulationNode::setState(SetState::Request& request, SetState::Response& re
   primary().step_offset = 0;
   primary().divergence_message = simulation.diverged() ? request.state.divergence_message : "";
   synchronise();  // the shadow full from the restored state
-  owed_steps_ = 0.0;
+  pacing_.dropOwed();
   ++state_changes_;
   response.success = true;
   response.message = "restored method " + toString(simulation.method()) + " at step " +

@@ -213,7 +213,7 @@ bool SimulationNode::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Respo
   }
   handle_frames_->reset();
   synchronise();
-  owed_steps_ = 0.0;
+  pacing_.dropOwed();
   ++state_changes_;
   response.success = true;
   response.message = "reset to the initial state at rest (" +

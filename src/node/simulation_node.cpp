@@ -1,6 +1,8 @@
 // The node adds nothing numerical: it steps the core Simulation on a timer and shows its state (what
 // it publishes is assembled in status.cpp; its services are in services.cpp).
 #include "simulation_node.h"
+
+#include "lockstep.h"
 #include "modal_mass_spring/cpu_time.h"
 
 #include "modal_mass_spring/Status.h"
@@ -293,22 +295,11 @@ void SimulationNode::buildTracks()
 
 void SimulationNode::synchronise()
 {
-  const Track* source = nullptr;
-  for (const Track& track : tracks_)
-    if (track.simulation->method() != Method::Full || (!lockstep() && &track == &tracks_.front()))
-    {
-      source = &track;
-      break;
-    }
-  if (!source)
-    return;
-  const Eigen::VectorXd u = source->simulation->displacement(), v = source->simulation->velocity();
+  std::vector<Simulation*> simulations;
   for (Track& track : tracks_)
-    if (&track != source && track.simulation->method() == Method::Full)
-    {
-      track.simulation->setPhysicalState(u, v);
-      track.divergence_message.clear();
-    }
+    simulations.push_back(track.simulation.get());
+  for (size_t k : synchroniseFull(simulations, !lockstep()))
+    tracks_[k].divergence_message.clear();
 }
 
 const SimulationNode::Track* SimulationNode::reference() const
@@ -530,9 +521,7 @@ void SimulationNode::onTick()
     const NodeParams& params = config_.node;
     const double dt = config_.simulation.time_step;
     period = 1.0 / params.publish_rate;
-    const ros::WallTime now = ros::WallTime::now();
-    const double wall = last_tick_.isZero() ? period : (now - last_tick_).toSec();
-    last_tick_ = now;
+    const double now = ros::WallTime::now().toSec();
     tick_steps_ = 0;
     tick_step_seconds_ = 0.0;
     for (Track& track : tracks_)
@@ -541,75 +530,22 @@ void SimulationNode::onTick()
                                                   [](const Track& t) { return !t.simulation->diverged(); })
                                     : !primary().simulation->diverged();
     if (!paused_ && running)
-    {
-      // A fixed simulated time per tick, in whole steps; how late the tick is does not matter.
-      owed_steps_ += params.real_time_factor / (params.publish_rate * dt);
-      const int steps = static_cast<int>(std::floor(owed_steps_ + 1e-9));
-      owed_steps_ = std::max(0.0, owed_steps_ - steps);
-      const long changes = state_changes_;
-      const auto tick_start = Clock::now();
-      auto start = tick_start;
-      int stepped = 0;  // how far along the tick the handles have moved
-      for (int k = 0; k < steps; ++k)
-      {
-        if (services_waiting_.load() > 0)
-        {
-          // A service call goes in between two steps; a call that changes the state (pause, reset,
-          // set_method, step) ends this tick's stepping.
-          tick_step_seconds_ += secondsSince(start);
-          lock.unlock();
-          while (services_waiting_.load() > 0)
-            std::this_thread::yield();
-          lock.lock();
-          start = Clock::now();
-          if (state_changes_ != changes || paused_)
-            break;
-        }
-        // A comparison shows every method at the same moment: when the slowest cannot keep up, a
-        // tick steps for at most its period and drops the rest, so all slow down together.
-        if (lockstep() && secondsSince(tick_start) > period)
-        {
-          owed_steps_ = 0.0;
-          break;
-        }
-        setHandleMotion(steps * dt, static_cast<double>(k + 1) / steps);
-        setColliderPoses(static_cast<double>(k + 1) / steps);
-        stepped = k + 1;
-        if (!stepAll())
-          break;
-      }
-      tick_step_seconds_ += secondsSince(start);
-      if (steps > 0)
-      {
-        handle_frames_->finishTick(static_cast<double>(stepped) / steps);
-        collider_frames_->finishTick(static_cast<double>(stepped) / steps);
-      }
-    }
+      stepTick(lock, period);
     for (Track& track : tracks_)
     {
       tick_steps_ = std::max(tick_steps_, track.tick_steps);
       track.finishTick();
     }
     clock_seconds_ += tick_steps_ * dt;
-    achieved_factor_ = tick_steps_ * dt / std::max(wall, 1e-9);
+    achieved_factor_ = pacing_.achievedFactor(tick_steps_, dt, now, period);
     output = snapshot(stamp());
     drag_marker = dragMarkerTarget();
 
     if (params.status_log_period > 0.0 && (ros::WallTime::now() - last_status_log_).toSec() >= params.status_log_period)
     {
       last_status_log_ = ros::WallTime::now();
-      const Track& first = primary();
-      status_warns = state(first) == Status::DIVERGED;
-      char line[480];
-      std::snprintf(line, sizeof line,
-                    "%s: %s, step %ld, simulated %.3f s, energy %.6g J, %.3f ms of stepping per tick; %s%s%s",
-                    stateName(first).c_str(),
-                    lockstep() ? "methods in lockstep" : ("method " + toString(first.simulation->method())).c_str(),
-                    steps(first), simTime(first), first.last_energy,
-                    1e3 * tick_step_seconds_, lockstep() ? (first.name + ": ").c_str() : "",
-                    formatCpuPace(first.step_cpu_seconds, dt).c_str(),
-                    lockstep() ? ("; achieved real-time factor " + std::to_string(achieved_factor_)).c_str() : "");
-      status_line = line;
+      status_warns = state(primary()) == Status::DIVERGED;
+      status_line = statusLine();
     }
   }
   send(output);
@@ -627,6 +563,66 @@ void SimulationNode::onTick()
     ROS_WARN("%s", status_line.c_str());
   else if (!status_line.empty())
     ROS_INFO("%s", status_line.c_str());
+}
+
+void SimulationNode::stepTick(std::unique_lock<std::mutex>& lock, double period)
+{
+  const NodeParams& params = config_.node;
+  const double dt = config_.simulation.time_step;
+  const int steps = pacing_.stepsOwed(params.real_time_factor, params.publish_rate, dt);
+  const long changes = state_changes_;
+  const auto tick_start = Clock::now();
+  auto start = tick_start;
+  int stepped = 0;  // how far along the tick the handles have moved
+  for (int k = 0; k < steps; ++k)
+  {
+    if (services_waiting_.load() > 0)
+    {
+      // A service call goes in between two steps; a call that changes the state (pause, reset,
+      // set_method, step) ends this tick's stepping.
+      tick_step_seconds_ += secondsSince(start);
+      lock.unlock();
+      while (services_waiting_.load() > 0)
+        std::this_thread::yield();
+      lock.lock();
+      start = Clock::now();
+      if (state_changes_ != changes || paused_)
+        break;
+    }
+    // A comparison shows every method at the same moment: when the slowest cannot keep up, a
+    // tick steps for at most its period and drops the rest, so all slow down together.
+    if (lockstep() && secondsSince(tick_start) > period)
+    {
+      pacing_.dropOwed();
+      break;
+    }
+    setHandleMotion(steps * dt, static_cast<double>(k + 1) / steps);
+    setColliderPoses(static_cast<double>(k + 1) / steps);
+    stepped = k + 1;
+    if (!stepAll())
+      break;
+  }
+  tick_step_seconds_ += secondsSince(start);
+  if (steps > 0)
+  {
+    handle_frames_->finishTick(static_cast<double>(stepped) / steps);
+    collider_frames_->finishTick(static_cast<double>(stepped) / steps);
+  }
+}
+
+std::string SimulationNode::statusLine() const
+{
+  const Track& first = tracks_.front();
+  const double dt = config_.simulation.time_step;
+  char line[480];
+  std::snprintf(line, sizeof line,
+                "%s: %s, step %ld, simulated %.3f s, energy %.6g J, %.3f ms of stepping per tick; %s%s%s",
+                stateName(first).c_str(),
+                lockstep() ? "methods in lockstep" : ("method " + toString(first.simulation->method())).c_str(),
+                steps(first), simTime(first), first.last_energy, 1e3 * tick_step_seconds_,
+                lockstep() ? (first.name + ": ").c_str() : "", formatCpuPace(first.step_cpu_seconds, dt).c_str(),
+                lockstep() ? ("; achieved real-time factor " + std::to_string(achieved_factor_)).c_str() : "");
+  return line;
 }
 
 void SimulationNode::warnDropped(const std::string& text)

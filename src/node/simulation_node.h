@@ -17,6 +17,7 @@
 #include "modal_mass_spring/Step.h"
 #include "modal_mass_spring/simulation.h"
 #include "node_params.h"
+#include "tick_pacing.h"
 
 #include <actionlib/server/simple_action_server.h>
 #include <boost/thread/recursive_mutex.hpp>
@@ -121,6 +122,10 @@ private:
   // diverged, or every method of the comparison).
   bool stepAll();
   void onTick();
+  // The tick's stepping (with mutex_ held through `lock`, which a waiting service call opens between
+  // two steps), and the periodic status line.
+  void stepTick(std::unique_lock<std::mutex>& lock, double period);
+  std::string statusLine() const;  // with mutex_ held
   // What a tick publishes, and the state and diagnostics (status.cpp).
   Output snapshot(const ros::Time& stamp);  // with mutex_ held
   void send(const Output& output);
@@ -141,7 +146,6 @@ private:
   // with the motion carried over.
   void startLiveTuning();
   void reconfigure(SimulationConfig& config, uint32_t level);
-  SimulationConfig tuningOf(const NodeConfiguration& configuration) const;
   void rebuildLoop();
   void swapRebuilt();  // with mutex_ held, at a tick boundary
   bool rebuilding() const { return rebuilding_ || !rebuilt_.empty() || training_; }
@@ -220,12 +224,11 @@ private:
   std::atomic<int> services_waiting_{0};
   long state_changes_ = 0;  // by a service: pause, reset, set_method; ends the tick's stepping
   std::vector<Track> tracks_;  // the first is the one a single-method node shows
-  double owed_steps_ = 0.0;    // the fraction of a step carried to the next tick
+  TickPacing pacing_;          // the steps a tick owes, the fraction of one carried over
   bool paused_ = false;
   bool use_sim_time_ = false;
   double clock_seconds_ = 0.0;  // simulated seconds stepped since start-up: /clock, never reset
   double achieved_factor_ = 0.0;
-  ros::WallTime last_tick_;
 
   // This tick's steps and cost; the counters behind the diagnostics since their last update (timer
   // thread only).

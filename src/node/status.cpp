@@ -5,6 +5,7 @@
 
 #include "contact_messages.h"
 #include "grid_messages.h"
+#include "lockstep.h"
 
 #include <rosgraph_msgs/Clock.h>
 
@@ -92,9 +93,9 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     track.rms_distance = track.max_distance = 0.0;
     if (!ref || &track == ref)
       continue;
-    const Eigen::VectorXd distances = (track.last_points - ref->last_points).colwise().norm();
-    track.rms_distance = std::sqrt(distances.squaredNorm() / std::max<Eigen::Index>(1, distances.size()));
-    track.max_distance = distances.maxCoeff();
+    const ParticleDistances d = particleDistances(track.last_points, ref->last_points);
+    track.rms_distance = d.rms;
+    track.max_distance = d.max;
   }
 
   // tf2 rejects a second transform of a frame at the same stamp (e.g. a paused /clock): skip it.

@@ -5,6 +5,7 @@
 
 #include <yaml-cpp/yaml.h>
 
+#include <optional>
 #include <set>
 #include <string>
 #include <vector>
@@ -18,6 +19,24 @@ extern const std::set<std::string> kNodeParameters;
 // Keys only the tools read, in shapes of their own (modal_compare's handle_scenarios).
 extern const std::set<std::string> kToolParameters;
 
+// Scalars that came typed (the node's parameters, converted from the parameter server's XmlRpc values:
+// xmlrpc_parameter_source.h) carry their type as a tag and are read as that type only, as the
+// parameter server gives them; a string still stands for a number or a list where one is expected
+// (rosrun's command line and YAML 1.1 hand `3.0e6` and `[0, 0, -9.81]` over as strings). A YAML
+// file's scalars carry none of these tags and are read as whatever is asked.
+extern const std::string kStringTag, kIntTag, kFloatTag, kBoolTag, kListTag, kMapTag, kOtherTag;
+
+// One value as the getters read it, or nothing when it is not of that type.
+std::optional<int> scalarInt(const YAML::Node& node);
+std::optional<double> scalarNumber(const YAML::Node& node);  // integers too
+std::optional<bool> scalarBool(const YAML::Node& node);
+std::optional<std::string> scalarString(const YAML::Node& node);
+// A list, or a typed string that is the YAML text of one (its scalars then typed strings).
+std::optional<YAML::Node> listNode(const YAML::Node& node);
+// The value as a message shows it: "'abc'" (a YAML file's, as written), "'abc' (a string)",
+// "3 (an integer)", "a list of 2 values" (typed).
+std::string describeValue(const YAML::Node& node);
+
 // Keys the core does not ask for (the node's publish_rate, frame names, ...) are ignored, so one file
 // serves the node and the tools; keys() and queried() tell which those were. A key given twice is
 // refused (yaml-cpp would let the first one win silently).
@@ -29,6 +48,8 @@ public:
   static YamlParameterSource fromFile(const std::string& path);
   // `origin` names the text in messages.
   static YamlParameterSource fromString(const std::string& text, const std::string& origin = "<string>");
+  // Over a tree already built (a map; null counts as empty).
+  static YamlParameterSource fromNode(YAML::Node root, const std::string& origin);
 
   // An independent copy (yaml-cpp nodes share their data when copied).
   YamlParameterSource clone() const;
@@ -53,6 +74,7 @@ public:
   std::optional<std::string> getString(const std::string& key) const override;
   std::optional<std::vector<int>> getIntList(const std::string& key) const override;
   std::optional<std::vector<double>> getDoubleList(const std::string& key) const override;
+  std::optional<std::vector<std::string>> getStringList(const std::string& key) const;
   // The YAML of a key the tools read in a shape of their own (handle_scenarios); undefined when absent.
   YAML::Node getNode(const std::string& key) const { return lookup(key); }
 
@@ -68,8 +90,10 @@ private:
   YAML::Node lookup(const std::string& key) const;
   template <typename T>
   std::optional<T> scalar(const std::string& key, const std::string& expected) const;
+  // `example` shows a typed list's source how to give one.
   template <typename T>
-  std::optional<std::vector<T>> list(const std::string& key, const std::string& expected) const;
+  std::optional<std::vector<T>> list(const std::string& key, const std::string& expected,
+                                     const std::string& example) const;
 
   YAML::Node root_;
   std::string origin_;
