@@ -22,11 +22,14 @@
 // counting sort. Narrow phase, every step: the candidates within the thickness at the step's end,
 // one per closest point (a triangle whose closest point is a corner or an edge it shares is left to
 // the pair that holds that point), skipping those whose particles have travelled less than their
-// gap's margin over the thickness since they were last looked at. Correction: Gauss-Seidel sweeps
-// of equal-and-opposite pushes along each pair's normal at the step's end, split by the inverse
-// masses (every free particle weighs the same), the contact point of a triangle spread to its
-// corners by barycentric weights; the sweeps stop after one that moved nothing by more than a
-// thousandth of the thickness. Fixed and held particles, and the triangles at them, take no part.
+// gap's margin over the thickness since they were last looked at, and keeping the closest point and
+// normal of those within reach of the thickness while their particles travel less than a hundredth
+// of it (kReuse). Correction: Gauss-Seidel sweeps of equal-and-opposite pushes along each pair's
+// normal at the step's end, split by the inverse masses (every free particle weighs the same), the
+// contact point of a triangle spread to its corners by barycentric weights; the sweeps stop after
+// one that moved nothing by more than a thousandth of the thickness (after the first, only the
+// pairs a larger push moved are swept). Fixed and held particles, and the triangles at them, take
+// no part.
 #pragma once
 
 #include "modal_mass_spring/contact.h"

@@ -327,7 +327,8 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
   // A triangle within `listed` of a particle has its first corner within `listed` plus its longest
   // edge. Around each cell, a sphere through its farthest corner from the corners' mean: a particle
   // farther than `listed` from it is that far from both triangles (the cheap test before the exact
-  // one; found for the cells the listing meets, a negative radius marks one not found yet).
+  // one; at a listing of some particles, found for the cells it meets: a negative radius marks one
+  // not found yet).
   double longest = 0.0;
   if (triangles)
   {
@@ -353,6 +354,10 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
     }
     return sphere;
   };
+  if (triangles && all)
+    for (int s = 0; s < count; ++s)
+      if (anchor_[s])
+        cellSphere(s);
   const double reach = listed + std::sqrt(longest);
   const double reach2 = reach * reach, listed2 = listed * listed;
   const Cells cells = sortIntoCells(xs, count, reach, cell_of_, cell_start_, sorted_);
