@@ -77,10 +77,11 @@ SimulationParams explicitFull(bool self)
   sim.step();
 }
 
-// One explicit `full` step of the folded cloth on the table, after 100 steps (20 ms) that let the
-// upper half settle onto the lower one; arg 1: with self-collision. Reports the self-collision share
-// of the step (its CPU time, Simulation::lastSelfCollisionSeconds), and per step the pairs and the
-// particles whose candidate pairs were listed anew.
+// One explicit `full` step of the folded cloth on the table, after arg 2 steps (100: 20 ms; 1000:
+// 0.2 s) that let the upper half settle onto the lower one; arg 1: with self-collision. Reports the
+// self-collision share of the step (its CPU time, Simulation::lastSelfCollisionSeconds), and per step
+// the pairs, the particles whose candidate pairs were listed anew, the pairs that kept their closest
+// points and the correction's sweeps (positions and velocities).
 void BM_FoldedFullStep(benchmark::State& state)
 {
   GridParams g = cloth(static_cast<int>(state.range(0)));
@@ -88,20 +89,27 @@ void BM_FoldedFullStep(benchmark::State& state)
   Simulation sim(g, explicitFull(state.range(1) != 0));
   sim.setPhysicalState(sim.grid().gatherFree(folded(sim.grid(), kThickness) - sim.linearizationPositions()),
                        Eigen::VectorXd::Zero(sim.grid().numFreeDofs()));
-  for (int k = 0; k < 100; ++k)
+  for (int k = 0; k < state.range(2); ++k)
     sim.step();
-  double self_seconds = 0.0, relisted = 0.0;
+  double self_seconds = 0.0, relisted = 0.0, reused = 0.0, sweeps = 0.0;
   for (auto _ : state)
   {
     measuredStep(sim);
     self_seconds += sim.lastSelfCollisionSeconds();
-    relisted += sim.selfCollision() ? sim.selfCollision()->report().relisted : 0;
+    if (const SelfCollision* self = sim.selfCollision())
+    {
+      relisted += self->report().relisted;
+      reused += self->report().reused;
+      sweeps += self->report().position_sweeps + self->report().velocity_sweeps;
+    }
   }
   state.counters["self_ms"] = benchmark::Counter(1e3 * self_seconds / state.iterations());
   state.counters["contacts"] = sim.selfCollision() ? sim.selfCollision()->report().contacts : 0;
   state.counters["relisted"] = benchmark::Counter(relisted / state.iterations());
+  state.counters["reused"] = benchmark::Counter(reused / state.iterations());
+  state.counters["sweeps"] = benchmark::Counter(sweeps / state.iterations());
 }
-BENCHMARK(BM_FoldedFullStep)->ArgsProduct({{30, 100}, {0, 1}})->Unit(benchmark::kMicrosecond);
+BENCHMARK(BM_FoldedFullStep)->ArgsProduct({{30, 100}, {0, 1}, {100, 1000}})->Unit(benchmark::kMicrosecond);
 
 // The self-collision pass alone on the folded cloth, its upper half 0.1 mm into the thickness (the
 // state copied back each time).

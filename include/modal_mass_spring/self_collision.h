@@ -22,11 +22,14 @@
 // counting sort. Narrow phase, every step: the candidates within the thickness at the step's end,
 // one per closest point (a triangle whose closest point is a corner or an edge it shares is left to
 // the pair that holds that point), skipping those whose particles have travelled less than their
-// gap's margin over the thickness since they were last looked at. Correction: Gauss-Seidel sweeps
-// of equal-and-opposite pushes along each pair's normal at the step's end, split by the inverse
-// masses (every free particle weighs the same), the contact point of a triangle spread to its
-// corners by barycentric weights; the sweeps stop after one that moved nothing by more than a
-// thousandth of the thickness. Fixed and held particles, and the triangles at them, take no part.
+// gap's margin over the thickness since they were last looked at, and keeping the closest point and
+// normal of those within reach of the thickness while their particles travel less than a hundredth
+// of it (kReuse). Correction: Gauss-Seidel sweeps of equal-and-opposite pushes along each pair's
+// normal at the step's end, split by the inverse masses (every free particle weighs the same), the
+// contact point of a triangle spread to its corners by barycentric weights; the sweeps stop after
+// one that moved nothing by more than a thousandth of the thickness (after the first, only the
+// pairs a larger push moved are swept). Fixed and held particles, and the triangles at them, take
+// no part.
 #pragma once
 
 #include "modal_mass_spring/contact.h"
@@ -74,6 +77,8 @@ struct SelfCollisionReport
   double closest_before = 0.0;
   double closest_after = 0.0;
   int relisted = 0;  // particles whose candidate pairs were listed anew this step (all at a full listing)
+  int reused = 0;    // pairs whose closest point and normal were kept from an earlier step (see kReuse)
+  int position_sweeps = 0, velocity_sweeps = 0;  // the Gauss-Seidel sweeps of the correction
 };
 
 class SelfCollision
@@ -106,13 +111,28 @@ public:
   static constexpr int kSweeps = 4;
   // The skin of the candidate list, as a fraction of the thickness.
   static constexpr double kSkin = 0.25;
+  // A particle's candidates within the thickness plus this fraction of it keep their closest point
+  // and normal while the sum of their particles' travel since stays below it: their gaps are then
+  // measured with the kept weights and normal, within twice this fraction of the thickness of the
+  // closest point's (docs/design.md, "Self-collision").
+  static constexpr double kReuse = 0.01;
 
 private:
   // One pair: particle p (a free-particle slot) against corners c[0..2] (slots, -1 for none: a
   // particle-particle pair has only c[0]). A triangle is half `half` (0: c[0], its right and its
   // lower-right neighbour; 1: c[0], its lower-right and its lower neighbour) of the cell c[0] anchors.
   // Its gap less the thickness when last looked at and the sum of its particles' travel then (a
-  // pair is not looked at again while they have travelled less than that margin since).
+  // pair is not looked at again while they have travelled less than that margin since). A pair
+  // within the thickness plus the reuse fraction then is `kept`: a pair of its own (1, with its
+  // closest point's weights and normal in `kept_geometry`) or one whose point another pair holds (2,
+  // likewise; 3 for a triangle whose point is at a particle the particle pair holds, not looked at);
+  // its closest point is found again once its particles have travelled the reuse fraction since.
+  struct Geometry
+  {
+    double w[3] = {1.0, 0.0, 0.0};
+    Eigen::Vector3d normal = Eigen::Vector3d::UnitZ();
+    double gap = 0.0;
+  };
   struct Pair
   {
     int p;
@@ -120,15 +140,11 @@ private:
     int half;
     double margin = -1.0;
     double travel = 0.0;
+    int kept = 0;
+    Geometry kept_geometry;
   };
   // The closest point to p on the pair's other side, its barycentric weights, the unit normal from
   // there to p (oriented by the start positions inside a triangle) and the gap along it.
-  struct Geometry
-  {
-    double w[3];
-    Eigen::Vector3d normal;
-    double gap;
-  };
   Geometry geometry(const Pair& pair, const double* x, const double* x_start) const;
   // A pair closer than the thickness, with what its sweeps need: its geometry at the step's end, the
   // inverse masses of its particles along the normal (relative to a free particle's) and their
@@ -146,6 +162,17 @@ private:
   void listCandidates(const Eigen::VectorXd& x, const std::vector<int>& moved);
   // The candidates closer than the thickness at the step's end x, one per closest point.
   void findTouches(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x);
+  // Whether slot p's candidates are as they were last looked at within the tolerances (none listed or
+  // dropped since, the kept ones travelled less than the reuse fraction, the others less than their margin).
+  bool groupSettled(int p) const;
+  // The sum of the pair's particles' travel (travel_).
+  double travelOf(const Pair& pair) const
+  {
+    const double travel = travel_[pair.p] + travel_[pair.c[0]];
+    return pair.c[1] >= 0 ? travel + travel_[pair.c[1]] + travel_[pair.c[2]] : travel;
+  }
+  // Looks at slot p's candidates (those not still apart) and keeps those within reach of the thickness.
+  void lookAtGroup(int p, const double* x, const double* x_start);
   // Whether the triangle pair `k` of `group` (one particle's candidates, with this step's geometry)
   // leaves its closest point (on the edge opposite its corner `opposite`) to the triangle sharing
   // that edge, when that one holds the same point.
@@ -165,6 +192,7 @@ private:
   std::vector<int> cell_of_, cell_start_, sorted_;
   // Per slot p: its candidate pairs (p against a triangle, or against a particle of a later slot).
   std::vector<std::vector<Pair>> candidates_;
+  std::vector<char> group_changed_;  // per slot: pairs listed or dropped since its candidates were looked at
   Eigen::VectorXd built_at_;  // per slot, where its pairs were last listed (empty: none yet)
   std::vector<Geometry> group_geometry_;  // this step's, per candidate of one slot
   std::vector<int> moved_;                // slots moved more than half the skin
@@ -173,9 +201,15 @@ private:
   std::vector<char> is_moved_, is_anchor_listed_;
   std::vector<Touch> touches_;
   std::vector<char> touched_;
+  std::vector<int> stirred_;  // per slot: the last sweep that pushed it by more than the settled distance
   SelfCollisionReport report_;
-  // Per slot: the outward normal of the collider surface it lies on (zero when on none).
+  // Per slot: the outward normal of the collider surface it lies on (zero when on none), and its
+  // travel when that was found (NaN: not yet); the colliders then (whether given, poses, active).
   std::vector<Eigen::Vector3d> surface_normal_;
+  std::vector<double> surface_travel_;
+  bool surface_contact_ = false;
+  std::vector<Eigen::Isometry3d> surface_poses_;
+  std::vector<char> surface_active_;
   // Per anchor slot: the centre and the squared radius of a sphere around its cell (this step's).
   std::vector<Eigen::Vector4d> cell_sphere_;
 };

@@ -292,6 +292,7 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
   const int count = static_cast<int>(particle_of_.size());
   const bool all = moved.empty();
   candidates_.resize(count);
+  group_changed_.resize(count);
   is_moved_.assign(count, all ? 1 : 0);
   for (int p : moved)
     is_moved_[p] = 1;
@@ -300,38 +301,63 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
   auto at = [xs](int slot) { return Eigen::Map<const Eigen::Vector3d>(xs + 3 * slot); };
   auto slotAt = [&](int row, int col) { return slot_of_[row * cols + col]; };
   const bool triangles = primitive_ == SelfPrimitive::Triangles;
-  // The pairs with a moved particle go; they are listed anew below.
-  for (std::vector<Pair>& group : candidates_)
+  // The pairs with a moved particle go; they are listed anew below (moved to the end of their group,
+  // [gone_from, gone_end), until those listed again have taken what was found of them).
+  std::vector<int> gone_from(all ? 0 : count), gone_end(all ? 0 : count);
+  for (int p = 0; p < count; ++p)
+  {
+    std::vector<Pair>& group = candidates_[p];
+    group_changed_[p] = all;
     if (all)
+    {
       group.clear();
-    else
-      group.erase(std::remove_if(group.begin(), group.end(),
-                                 [&](const Pair& pair) {
-                                   return is_moved_[pair.p] || is_moved_[pair.c[0]] ||
-                                          (pair.c[1] >= 0 && (is_moved_[pair.c[1]] || is_moved_[pair.c[2]]));
-                                 }),
-                  group.end());
+      continue;
+    }
+    gone_end[p] = static_cast<int>(group.size());
+    gone_from[p] = static_cast<int>(std::partition(group.begin(), group.end(),
+                                                   [&](const Pair& pair) {
+                                                     return !(is_moved_[pair.p] || is_moved_[pair.c[0]] ||
+                                                              (pair.c[1] >= 0 && (is_moved_[pair.c[1]] ||
+                                                                                  is_moved_[pair.c[2]])));
+                                                   }) -
+                                    group.begin());
+    group_changed_[p] = gone_from[p] != gone_end[p];
+  }
   const double listed = (1.0 + 2.0 * kSkin) * thickness_;
   // A triangle within `listed` of a particle has its first corner within `listed` plus its longest
   // edge. Around each cell, a sphere through its farthest corner from the corners' mean: a particle
-  // farther than `listed` from it is that far from both triangles (the cheap test before the exact one).
+  // farther than `listed` from it is that far from both triangles (the cheap test before the exact
+  // one; at a listing of some particles, found for the cells it meets: a negative radius marks one
+  // not found yet).
   double longest = 0.0;
   if (triangles)
   {
-    cell_sphere_.resize(count);
+    cell_sphere_.assign(count, Eigen::Vector4d::Constant(-1.0));
     for (int s = 0; s < count; ++s)
       if (anchor_[s])
       {
         const int b = slotAt(row_[s], col_[s] + 1), c = slotAt(row_[s] + 1, col_[s]), d = slotAt(row_[s] + 1, col_[s] + 1);
         longest = std::max({longest, (at(b) - at(s)).squaredNorm(), (at(c) - at(s)).squaredNorm(),
                             (at(d) - at(s)).squaredNorm(), (at(d) - at(b)).squaredNorm(), (at(d) - at(c)).squaredNorm()});
-        const Eigen::Vector3d centre = 0.25 * (at(s) + at(b) + at(c) + at(d));
-        const double radius = std::sqrt(std::max({(at(s) - centre).squaredNorm(), (at(b) - centre).squaredNorm(),
-                                                  (at(c) - centre).squaredNorm(), (at(d) - centre).squaredNorm()})) +
-                              listed;
-        cell_sphere_[s] << centre, radius * radius;
       }
   }
+  auto cellSphere = [&](int s) -> const Eigen::Vector4d& {
+    Eigen::Vector4d& sphere = cell_sphere_[s];
+    if (sphere[3] < 0.0)
+    {
+      const int b = slotAt(row_[s], col_[s] + 1), c = slotAt(row_[s] + 1, col_[s]), d = slotAt(row_[s] + 1, col_[s] + 1);
+      const Eigen::Vector3d centre = 0.25 * (at(s) + at(b) + at(c) + at(d));
+      const double radius = std::sqrt(std::max({(at(s) - centre).squaredNorm(), (at(b) - centre).squaredNorm(),
+                                                (at(c) - centre).squaredNorm(), (at(d) - centre).squaredNorm()})) +
+                            listed;
+      sphere << centre, radius * radius;
+    }
+    return sphere;
+  };
+  if (triangles && all)
+    for (int s = 0; s < count; ++s)
+      if (anchor_[s])
+        cellSphere(s);
   const double reach = listed + std::sqrt(longest);
   const double reach2 = reach * reach, listed2 = listed * listed;
   const Cells cells = sortIntoCells(xs, count, reach, cell_of_, cell_start_, sorted_);
@@ -345,7 +371,8 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
     const int dc = cp < cq ? cq - cp : std::max(0, cp - cq - 1);
     if (std::max(dr, dc) <= 2)
       return;
-    if ((cell_sphere_[q].head<3>() - xp).squaredNorm() >= cell_sphere_[q][3])
+    const Eigen::Vector4d& sphere = cellSphere(q);
+    if ((sphere.head<3>() - xp).squaredNorm() >= sphere[3])
       return;
     const int b = slotAt(rq, cq + 1), c = slotAt(rq + 1, cq), d = slotAt(rq + 1, cq + 1);
     int half = 0;
@@ -356,7 +383,10 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
       {
         const Eigen::Vector3d y = closestOnTriangle(xp, at(corners[0]), at(corners[1]), at(corners[2]), w);
         if ((xp - y).squaredNorm() < listed2)
-          candidates_[p].push_back(Pair{p, {corners[0], corners[1], corners[2]}, half, -1.0, 0.0});
+        {
+          candidates_[p].push_back(Pair{p, {corners[0], corners[1], corners[2]}, half, -1.0, 0.0, 0, Geometry{}});
+          group_changed_[p] = 1;
+        }
       }
       ++half;
     }
@@ -373,8 +403,9 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
         return;
       if (d2 < listed2 && (q > p || !is_moved_[q]) && separatedIndices(row_[p], col_[p], row_[q], col_[q]))
       {
-        candidates_[p].push_back(Pair{p, {q, -1, -1}, -1, -1.0, 0.0});
-        candidates_[q].push_back(Pair{q, {p, -1, -1}, -1, -1.0, 0.0});
+        candidates_[p].push_back(Pair{p, {q, -1, -1}, -1, -1.0, 0.0, 0, Geometry{}});
+        candidates_[q].push_back(Pair{q, {p, -1, -1}, -1, -1.0, 0.0, 0, Geometry{}});
+        group_changed_[p] = group_changed_[q] = 1;
       }
       if (triangles && anchor_[q])
         listTriangles(p, q, false);
@@ -388,23 +419,45 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
   }
   for (int p : moved)
     built_at_.segment<3>(3 * p) = at(p);
-  if (!triangles)
-    return;
   // The triangles with a moved corner against the particles that have not moved.
-  is_anchor_listed_.assign(count, 0);
-  for (int m : moved)
-    for (int r = std::max(0, row_[m] - 1); r <= row_[m]; ++r)
-      for (int c = std::max(0, col_[m] - 1); c <= col_[m]; ++c)
-      {
-        const int q = slotAt(r, c);
-        if (q < 0 || !anchor_[q] || is_anchor_listed_[q])
-          continue;
-        is_anchor_listed_[q] = 1;
-        forNeighbours(cells, xs + 3 * q, [&](int p) {
-          if (!is_moved_[p] && (at(q) - at(p)).squaredNorm() < reach2)
-            listTriangles(p, q, true);  // the other half kept its pairs
-        });
-      }
+  if (triangles)
+  {
+    is_anchor_listed_.assign(count, 0);
+    for (int m : moved)
+      for (int r = std::max(0, row_[m] - 1); r <= row_[m]; ++r)
+        for (int c = std::max(0, col_[m] - 1); c <= col_[m]; ++c)
+        {
+          const int q = slotAt(r, c);
+          if (q < 0 || !anchor_[q] || is_anchor_listed_[q])
+            continue;
+          is_anchor_listed_[q] = 1;
+          forNeighbours(cells, xs + 3 * q, [&](int p) {
+            if (!is_moved_[p] && (at(q) - at(p)).squaredNorm() < reach2)
+              listTriangles(p, q, true);  // the other half kept its pairs
+          });
+        }
+  }
+  // A pair listed again takes what was found of it before (its margin, its kept closest point: they
+  // hold for the pair whatever the listing), so that a listing does not send it to the narrow phase.
+  for (int p = 0; p < count; ++p)
+  {
+    std::vector<Pair>& group = candidates_[p];
+    const int gone = gone_end[p] - gone_from[p];
+    if (gone == 0)
+      continue;
+    int found = 0;
+    for (size_t k = gone_end[p]; k < group.size(); ++k)
+      for (int j = gone_from[p]; j < gone_end[p]; ++j)
+        if (group[j].c[0] == group[k].c[0] && group[j].c[1] == group[k].c[1] && group[j].half == group[k].half)
+        {
+          group[k] = group[j];
+          ++found;
+          break;
+        }
+    // The same pairs as before: the group is as it was looked at.
+    group_changed_[p] = found != gone || static_cast<int>(group.size()) - gone_end[p] != gone;
+    group.erase(group.begin() + gone_from[p], group.begin() + gone_end[p]);
+  }
 }
 
 bool SelfCollision::edgeHeldByNeighbour(const std::vector<Pair>& group, const std::vector<Geometry>& geometry, int k,
@@ -429,7 +482,7 @@ bool SelfCollision::edgeHeldByNeighbour(const std::vector<Pair>& group, const st
   for (size_t j = 0; j < group.size(); ++j)
   {
     const Pair& other = group[j];
-    if (other.half != half || other.c[0] != anchor || !(geometry[j].gap < thickness_))
+    if (other.half != half || other.c[0] != anchor || !(geometry[j].gap < (1.0 + kReuse) * thickness_))
       continue;
     // Its closest point on the same edge: its weight on the corner off the edge is zero.
     for (int i = 0; i < 3; ++i)
@@ -439,84 +492,151 @@ bool SelfCollision::edgeHeldByNeighbour(const std::vector<Pair>& group, const st
   return false;
 }
 
+namespace
+{
+
+// A kept pair's gap at positions x: along its kept normal, with its kept weights.
+template <typename KeptPair>
+double keptGap(const KeptPair& pair, const double* x)
+{
+  Eigen::Vector3d r = Eigen::Map<const Eigen::Vector3d>(x + 3 * pair.p);
+  for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
+    r -= pair.kept_geometry.w[k] * Eigen::Map<const Eigen::Vector3d>(x + 3 * pair.c[k]);
+  return r.dot(pair.kept_geometry.normal);
+}
+
+}  // namespace
+
+bool SelfCollision::groupSettled(int p) const
+{
+  if (group_changed_[p])
+    return false;
+  const double reuse = kReuse * thickness_;
+  for (const Pair& pair : candidates_[p])
+    if (!(travelOf(pair) - pair.travel < (pair.kept ? reuse : pair.margin)))
+      return false;
+  return true;
+}
+
+void SelfCollision::lookAtGroup(int p, const double* xs, const double* starts)
+{
+  auto at = [xs](int slot) { return Eigen::Map<const Eigen::Vector3d>(xs + 3 * slot); };
+  // Pairs within this of the thickness are kept (their closest points found below as within it); a
+  // triangle pair kept keeps its closest point while its particles have travelled less than `reuse`.
+  const double reach = (1.0 + kReuse) * thickness_, reuse = kReuse * thickness_;
+  std::vector<Pair>& group = candidates_[p];
+  const int size = static_cast<int>(group.size());
+  group_geometry_.resize(size);
+  // A pair whose particles have travelled less than its margin since it was last looked at is still
+  // apart (a point's distance to a triangle changes by at most its own and the farthest corner's
+  // displacements); a kept pair is looked at whenever its group is.
+  auto apart = [&](Pair& pair) {
+    const double travel = travelOf(pair);
+    if (!pair.kept && travel - pair.travel < pair.margin)
+      return true;
+    pair.travel = travel;
+    pair.kept = 0;
+    return false;
+  };
+  // The particles within reach of p whose every triangle has its closest point to p at them (p is
+  // in their corner's Voronoi region: Ericson 5.1.5's first test): the particle pair holds that
+  // point, so their triangles are not looked at.
+  int covered[8], covering = 0;
+  const Eigen::Vector3d xp = at(p);
+  for (int k = 0; k < size; ++k)
+  {
+    Pair& pair = group[k];
+    group_geometry_[k].gap = std::numeric_limits<double>::infinity();
+    if (pair.c[1] >= 0 || apart(pair))
+      continue;
+    const int q = pair.c[0];
+    const Eigen::Vector3d d = xp - at(q);
+    pair.margin = d.norm() - thickness_;
+    if (!(d.squaredNorm() < reach * reach))
+      continue;
+    bool corner = true;
+    for (int e = 0; e < 6 && corner; ++e)
+      corner = fan_[q][e] < 0 || d.dot(at(fan_[q][e]) - at(q)) <= 0.0;
+    if (corner && covering < 8)
+      covered[covering++] = q;
+    // The pair is p's when p comes first (it is in q's list too).
+    pair.kept = p < q ? 1 : 2;
+    if (p < q)
+    {
+      pair.kept_geometry = geometry(pair, xs, starts);
+      if (pair.kept_geometry.gap < thickness_)
+        touches_.push_back(Touch{pair, pair.kept_geometry, {}, 0.0, Eigen::Vector3d::Zero()});
+    }
+  }
+  for (int k = 0; k < size; ++k)
+  {
+    Pair& pair = group[k];
+    if (pair.c[1] < 0)
+      continue;
+    if (std::any_of(covered, covered + covering,
+                    [&](int q) { return pair.c[0] == q || pair.c[1] == q || pair.c[2] == q; }))
+    {
+      pair.travel = travelOf(pair);
+      pair.kept = 3;
+      continue;
+    }
+    if ((pair.kept == 1 || pair.kept == 2) && travelOf(pair) - pair.travel < reuse)
+    {
+      group_geometry_[k] = pair.kept_geometry;
+      group_geometry_[k].gap = keptGap(pair, xs);
+      continue;
+    }
+    if (apart(pair))
+      continue;
+    group_geometry_[k] = geometry(pair, xs, starts);
+    pair.margin = group_geometry_[k].gap - thickness_;
+  }
+  for (int k = 0; k < size; ++k)
+  {
+    const Geometry& g = group_geometry_[k];
+    if (!(g.gap < reach))
+      continue;
+    // A corner is held by the particle pair with it (listed: it is as close), an edge by the
+    // triangle across it when that one finds the same point.
+    const int zeros = (g.w[0] == 0.0) + (g.w[1] == 0.0) + (g.w[2] == 0.0);
+    const bool held = zeros == 2 || (zeros == 1 && edgeHeldByNeighbour(group, group_geometry_, k,
+                                                                         g.w[0] == 0.0 ? 0 : g.w[1] == 0.0 ? 1 : 2));
+    const bool reused = group[k].kept != 0;  // a pair looked at anew was marked not kept
+    group[k].kept = held ? 2 : 1;
+    group[k].kept_geometry = g;
+    if (!held && g.gap < thickness_)
+    {
+      touches_.push_back(Touch{group[k], g, {}, 0.0, Eigen::Vector3d::Zero()});
+      report_.reused += reused;
+    }
+  }
+}
+
 void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x)
 {
   touches_.clear();
   const double* xs = x.data();
-  const double* starts = x_start.data();
-  auto at = [xs](int slot) { return Eigen::Map<const Eigen::Vector3d>(xs + 3 * slot); };
-  const double thickness2 = thickness_ * thickness_;
   const int count = static_cast<int>(candidates_.size());
-  // A pair's gap changes by at most the sum of its particles' travel since it was last looked at (a
-  // point's distance to a triangle by at most its own and the farthest corner's displacements): one
-  // whose particles have travelled less than its margin since is still apart.
-  auto apart = [&](Pair& pair) {
-    double travel = travel_[pair.p] + travel_[pair.c[0]];
-    if (pair.c[1] >= 0)
-      travel += travel_[pair.c[1]] + travel_[pair.c[2]];
-    if (travel - pair.travel < pair.margin)
-      return true;
-    pair.travel = travel;
-    return false;
-  };
   for (int p = 0; p < count; ++p)
   {
-    std::vector<Pair>& group = candidates_[p];
-    const int size = static_cast<int>(group.size());
-    group_geometry_.resize(size);
-    // The particles within the thickness of p whose every triangle has its closest point to p at
-    // them (p is in their corner's Voronoi region: Ericson 5.1.5's first test): the particle pair
-    // holds that point, so their triangles are not looked at.
-    int covered[8], covering = 0;
-    const Eigen::Vector3d xp = at(p);
-    for (int k = 0; k < size; ++k)
+    if (!groupSettled(p))
     {
-      Pair& pair = group[k];
-      group_geometry_[k].gap = std::numeric_limits<double>::infinity();
-      if (pair.c[1] >= 0 || apart(pair))
+      lookAtGroup(p, xs, x_start.data());
+      group_changed_[p] = 0;
+      continue;
+    }
+    // Every pair as it was: the kept ones' gaps along their kept normals, with their kept weights.
+    for (const Pair& pair : candidates_[p])
+    {
+      if (pair.kept != 1)
         continue;
-      const int q = pair.c[0];
-      const Eigen::Vector3d d = xp - at(q);
-      pair.margin = d.norm() - thickness_;
-      if (!(d.squaredNorm() < thickness2))
-        continue;
-      bool corner = true;
-      for (int e = 0; e < 6 && corner; ++e)
-        corner = fan_[q][e] < 0 || d.dot(at(fan_[q][e]) - at(q)) <= 0.0;
-      if (corner && covering < 8)
-        covered[covering++] = q;
-      if (p < q)
+      Geometry g = pair.kept_geometry;
+      g.gap = keptGap(pair, xs);
+      if (g.gap < thickness_)
       {
-        const Geometry g = geometry(pair, xs, starts);
-        if (g.gap < thickness_)
-          touches_.push_back(Touch{pair, g, {}, 0.0, Eigen::Vector3d::Zero()});
+        touches_.push_back(Touch{pair, g, {}, 0.0, Eigen::Vector3d::Zero()});
+        ++report_.reused;
       }
-    }
-    for (int k = 0; k < size; ++k)
-    {
-      Pair& pair = group[k];
-      if (pair.c[1] < 0 || std::any_of(covered, covered + covering, [&](int q) {
-            return pair.c[0] == q || pair.c[1] == q || pair.c[2] == q;
-          }))
-        continue;
-      if (apart(pair))
-        continue;
-      group_geometry_[k] = geometry(pair, xs, starts);
-      pair.margin = group_geometry_[k].gap - thickness_;
-    }
-    for (int k = 0; k < size; ++k)
-    {
-      const Geometry& g = group_geometry_[k];
-      if (!(g.gap < thickness_))
-        continue;
-      // A corner is held by the particle pair with it (listed: it is as close), an edge by the
-      // triangle across it when that one finds the same point.
-      const int zeros = (g.w[0] == 0.0) + (g.w[1] == 0.0) + (g.w[2] == 0.0);
-      if (zeros == 2)
-        continue;
-      if (zeros == 1 && edgeHeldByNeighbour(group, group_geometry_, k, g.w[0] == 0.0 ? 0 : g.w[1] == 0.0 ? 1 : 2))
-        continue;
-      touches_.push_back(Touch{group[k], g, {}, 0.0, Eigen::Vector3d::Zero()});
     }
   }
 }
@@ -563,6 +683,7 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
     // After positions that were not finite (a step that diverged, its state then put back): every
     // margin is forgotten with a listing anew.
     travel_.assign(particles, 0.0);
+    surface_travel_.clear();
     all = true;
     moved_.clear();
   }
@@ -572,30 +693,47 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
   findTouches(x_start, x);
   if (touches_.empty())
     return;
-  // The particles of the pairs that lie on a collider, and the surface's normal there.
-  surface_normal_.assign(particle_of_.size(), Eigen::Vector3d::Zero());
-  if (contact)
+  // The particles of the pairs that lie on a collider, and the surface's normal there: found anew
+  // for a particle that has travelled the reuse fraction since it was last, and for every particle
+  // once a collider has moved (or none is given).
+  const int colliders = contact ? static_cast<int>(contact->colliders().size()) : 0;
+  bool same_colliders = surface_travel_.size() == particle_of_.size() && surface_poses_.size() == static_cast<size_t>(colliders) &&
+                        (contact != nullptr) == surface_contact_;
+  for (int i = 0; i < colliders && same_colliders; ++i)
+    same_colliders = surface_active_[i] == contact->active(i) && surface_poses_[i].matrix() == contact->pose(i).matrix();
+  if (!same_colliders)
   {
-    std::vector<char> checked(particle_of_.size(), 0);
-    for (const Touch& touch : touches_)
-      for (int slot : {touch.pair.p, touch.pair.c[0], touch.pair.c[1], touch.pair.c[2]})
+    surface_normal_.assign(particle_of_.size(), Eigen::Vector3d::Zero());
+    surface_travel_.assign(particle_of_.size(), std::numeric_limits<double>::quiet_NaN());
+    surface_contact_ = contact != nullptr;
+    surface_poses_.clear();
+    surface_active_.clear();
+    for (int i = 0; i < colliders; ++i)
+    {
+      surface_poses_.push_back(contact->pose(i));
+      surface_active_.push_back(contact->active(i));
+    }
+  }
+  const double reuse = kReuse * thickness_;
+  for (const Touch& touch : touches_)
+    for (int slot : {touch.pair.p, touch.pair.c[0], touch.pair.c[1], touch.pair.c[2]})
+    {
+      if (slot < 0 || travel_[slot] - surface_travel_[slot] < reuse)
+        continue;
+      surface_travel_[slot] = travel_[slot];
+      surface_normal_[slot].setZero();
+      const Eigen::Vector3d at = x.segment<3>(3 * slot);
+      for (int i = 0; i < colliders; ++i)
       {
-        if (slot < 0 || checked[slot])
-          continue;
-        checked[slot] = 1;
-        const Eigen::Vector3d at = x.segment<3>(3 * slot);
-        for (int i = 0; i < static_cast<int>(contact->colliders().size()); ++i)
+        Eigen::Vector3d normal;
+        if (contact->active(i) &&
+            signedDistance(contact->colliders()[i], contact->pose(i), at, normal) <= 1.001 * contact->thickness())
         {
-          Eigen::Vector3d normal;
-          if (contact->active(i) &&
-              signedDistance(contact->colliders()[i], contact->pose(i), at, normal) <= 1.001 * contact->thickness())
-          {
-            surface_normal_[slot] = normal;
-            break;
-          }
+          surface_normal_[slot] = normal;
+          break;
         }
       }
-  }
+    }
   report_.contacts = static_cast<int>(touches_.size());
   double* const xs = x.data();
   double* const vs = v.data();
@@ -636,13 +774,31 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
   // The sweeps end after one that moved nothing by more than this (m, and m over the step for
   // velocities): what it leaves is smaller still, and the next step pushes out what is left.
   const double settled = 1e-3 * thickness_;
+  // After the first sweep, a pair is swept again only when a push of more than that moved one of its
+  // particles in the last sweep or this one: the rule that ends the sweeps, pair by pair.
+  const double stir = settled;
+  auto stirred = [&](const Touch& t, int sweep) {
+    for (int slot : {t.pair.p, t.pair.c[0], t.pair.c[1], t.pair.c[2]})
+      if (slot >= 0 && stirred_[slot] >= sweep - 1)
+        return true;
+    return false;
+  };
+  auto stirring = [&](const Touch& t, int sweep) {
+    for (int slot : {t.pair.p, t.pair.c[0], t.pair.c[1], t.pair.c[2]})
+      if (slot >= 0)
+        stirred_[slot] = sweep;
+  };
+  stirred_.assign(particle_of_.size(), -1);
   for (int sweep = 0; sweep < kSweeps; ++sweep)
   {
+    ++report_.position_sweeps;
     double largest = 0.0;
     report_.closest_after = thickness_;
     for (int k = 0; k < count; ++k)
     {
       const Touch& t = touches_[k];
+      if (sweep > 0 && !stirred(t, sweep))
+        continue;
       // The gap along the pair's normal at the step's end: it moves by micrometres over the sweeps.
       const Eigen::Vector3d r = relative(xs, t);
       const double gap = r.dot(t.g.normal);
@@ -658,18 +814,24 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
       largest = std::max(largest, push);
       const Eigen::Vector3d slip = r - t.start;
       apply(xs, t, push * t.g.normal + coulomb(slip - slip.dot(t.g.normal) * t.g.normal, friction_ * push));
+      if (push > stir)
+        stirring(t, sweep);
     }
     if (largest <= settled)
       break;
   }
+  stirred_.assign(particle_of_.size(), -1);
   for (int sweep = 0; sweep < kSweeps; ++sweep)
   {
+    ++report_.velocity_sweeps;
     double largest = 0.0;
     for (int k = 0; k < count; ++k)
     {
       if (!touched_[k])
         continue;
       const Touch& t = touches_[k];
+      if (sweep > 0 && !stirred(t, sweep))
+        continue;
       // Velocities: remove the approach, Coulomb on the relative tangential velocity.
       const Eigen::Vector3d velocity = relative(vs, t);
       const double approach = -velocity.dot(t.g.normal);
@@ -678,6 +840,8 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
       largest = std::max(largest, approach);
       const Eigen::Vector3d tangential = velocity + approach * t.g.normal;
       apply(vs, t, approach * t.g.normal + coulomb(tangential, friction_ * approach));
+      if (approach * dt > stir)
+        stirring(t, sweep);
     }
     if (largest * dt <= settled)
       break;
