@@ -3,6 +3,7 @@
 // positions, energies and forces. Everything here is ROS-free (Eigen only).
 #pragma once
 
+#include "modal_mass_spring/adaptive.h"
 #include "modal_mass_spring/contact.h"
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/handles.h"

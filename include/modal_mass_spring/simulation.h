@@ -294,6 +294,10 @@ public:
   // method's span (reduction/error_indicator.h). 0 for `full`. O(springs + n r) and a sparse solve;
   // the first call factorises the springs' Laplacian.
   double errorIndicator();
+  // How far the current state is from the span of method `reduced` (m, an RMS over the free
+  // particles): the part of the displacement (less the handles' constraint modes) that its
+  // M-orthogonal projection onto the basis leaves. The basis must be built (std::logic_error).
+  double spanDistance(Method reduced) const;
   const LinearizationInfo& linearization() const { return linearization_; }
   // x_ref: the initial positions (rest) or the static equilibrium.
   const Eigen::VectorXd& linearizationPositions() const { return x_ref_; }

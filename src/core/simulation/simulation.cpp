@@ -879,6 +879,20 @@ double Simulation::errorIndicator()
   return error_indicator_->estimate(x, basis.phi, external_force_);
 }
 
+double Simulation::spanDistance(Method reduced) const
+{
+  if (!basis_built_ || reduced == Method::Full)
+    throw std::logic_error("spanDistance: needs a modal method whose basis is built");
+  const bool skinning = params_.basis == BasisKind::Skinning && reduced != Method::Linear;
+  const ModalBasis& basis = reduced == Method::Linear ? basis_ : physical_basis_;
+  const Eigen::MatrixXd& psi = skinning ? skinning_constraint_modes_ : constraint_modes_;
+  Eigen::VectorXd u = bodyDisplacement();
+  if (formulation_ != HandleFormulation::MovingFrame && psi.size() > 0 && handle_current_.displacement.size() > 0)
+    u -= psi * handle_current_.displacement;
+  const Eigen::VectorXd rest = u - basis.phi * (basis.phi.transpose() * mass_.cwiseProduct(u));
+  return std::sqrt(rest.dot(mass_.cwiseProduct(rest)) * grid_.dimension() / mass_.sum());
+}
+
 void Simulation::particleState(int particle, Eigen::VectorXd& position, Eigen::VectorXd& velocity) const
 {
   const int dim = grid_.dimension();

@@ -1,0 +1,62 @@
+// A reduced method that falls back to `full` where its span cannot follow the motion (after Kim and
+// James 2009): every check_steps steps, a reduced step's error indicator (Simulation::errorIndicator)
+// times its calibration decides whether the motion is still within `tolerance` of `full`; if not,
+// the simulation switches to `full`, carrying the state over. Under `full`, it switches back once the
+// state has stayed within `tolerance` of the reduced span (Simulation::spanDistance) for `dwell`
+// seconds; the part outside the span is then kept frozen, as every switch does (Simulation::setMethod).
+#pragma once
+
+#include "modal_mass_spring/options.h"
+#include "modal_mass_spring/simulation.h"
+
+#include <string>
+
+namespace modal_mass_spring
+{
+
+struct AdaptiveSettings
+{
+  Method reduced = Method::Cubature;  // the reduced method it steps where it may
+  double tolerance = 0.015;           // m, the RMS distance to `full` it accepts
+  double dwell = 0.2;                 // s within tolerance of the span before it goes back
+  int check_steps = 10;               // steps between two checks
+  // The median ratio of the distance to `full` to the error indicator over the shipped scenarios
+  // (docs/results.md, "The reduced models' error indicator"): the indicator times this is the
+  // distance it stands for.
+  double indicator_scale = 30.0;
+};
+
+// Throws std::invalid_argument naming a setting out of its range: a tolerance not positive and
+// finite, a dwell negative or not finite, check_steps < 1, a reduced method that is `full` or
+// `linear` (whose forces do not see the span's error), an indicator_scale not positive.
+void validateAdaptiveSettings(const AdaptiveSettings& settings);
+
+class AdaptiveStepper
+{
+public:
+  // Puts `sim` in the reduced method (building its basis, or training its cubature, if needed).
+  AdaptiveStepper(Simulation& sim, const AdaptiveSettings& settings);
+  // One step of the active method, then the check when one is due (and the switch it calls for).
+  StepResult step();
+  bool reduced() const { return sim_.method() != Method::Full; }
+  // The share of the steps taken so far in the reduced method, the switches, the last check's
+  // estimate (m: the indicator times its scale while reduced, the distance to the span under full).
+  double reducedShare() const { return steps_ > 0 ? static_cast<double>(reduced_steps_) / steps_ : 1.0; }
+  int switches() const { return switches_; }
+  double lastEstimate() const { return last_estimate_; }
+  // Why the last switch happened (empty before the first).
+  const std::string& lastSwitch() const { return last_switch_; }
+
+private:
+  void check();
+
+  Simulation& sim_;
+  AdaptiveSettings settings_;
+  long steps_ = 0, reduced_steps_ = 0;
+  int switches_ = 0;
+  double last_estimate_ = 0.0;
+  double within_since_ = -1.0;  // under full: the time the state came within tolerance of the span (-1: not)
+  std::string last_switch_;
+};
+
+}  // namespace modal_mass_spring

@@ -1,0 +1,172 @@
+// The adaptive stepper: reduced where the span follows the motion, `full` where it does not.
+#include "test_support.h"
+
+#include "modal_mass_spring/adaptive.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <vector>
+
+using namespace modal_mass_spring;
+
+namespace
+{
+
+// A 10 x 10 cloth held by its top row at its hanging equilibrium, as modal_compare's held cloth.
+GridParams topRowHeld()
+{
+  std::vector<int> top;
+  for (int col = 0; col < 10; ++col)
+    top.push_back(col);
+  return heldCloth({top}, 10);
+}
+
+SimulationParams heldParams(Method method, BasisKind basis)
+{
+  SimulationParams s = methodParams(method, 6, 5e-3, IntegratorKind::Implicit);
+  s.alpha = 0.5;
+  s.linearization = Linearization::Equilibrium;
+  s.initial_state = InitialState::Equilibrium;
+  s.basis = basis;
+  s.num_skinning_weights = basis == BasisKind::Skinning ? 8 : 0;
+  return s;
+}
+
+// The top row's positions at step k of a motion `move(start, k)`.
+using Motion = std::function<Eigen::VectorXd(const Eigen::VectorXd& start, int k)>;
+
+// Turns the row 60 degrees about the vertical through its middle over 100 steps, then holds it.
+Eigen::VectorXd turn(const Eigen::VectorXd& start, int k)
+{
+  Eigen::Vector3d middle = Eigen::Vector3d::Zero();
+  for (Eigen::Index i = 0; i < start.size(); i += 3)
+    middle += start.segment<3>(i) / 10.0;
+  const double angle = 0.5 * (1.0 - std::cos(M_PI * std::min(k, 100) / 100.0)) * M_PI / 3.0;
+  const Eigen::Matrix3d r = Eigen::AngleAxisd(angle, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  Eigen::VectorXd x = start;
+  for (Eigen::Index i = 0; i < start.size(); i += 3)
+    x.segment<3>(i) = middle + r * (start.segment<3>(i) - middle);
+  return x;
+}
+
+// Moves the row 5 cm along x over 100 steps, then holds it.
+Eigen::VectorXd translate(const Eigen::VectorXd& start, int k)
+{
+  Eigen::VectorXd x = start;
+  const double s = 0.5 * (1.0 - std::cos(M_PI * std::min(k, 100) / 100.0));
+  for (Eigen::Index i = 0; i < start.size(); i += 3)
+    x[i] += 0.05 * s;
+  return x;
+}
+
+// Steps `sim` (through `adaptive` when given) `steps` steps of `motion`.
+void run(Simulation& sim, const Motion& motion, int steps, AdaptiveStepper* adaptive = nullptr)
+{
+  const Eigen::VectorXd start = sim.handlePositions();
+  for (int k = 1; k <= steps; ++k)
+  {
+    sim.setHandleMotion(motion(start, k));
+    const StepResult r = adaptive ? adaptive->step() : sim.step();
+    ASSERT_FALSE(r.diverged) << "step " << k << ": " << r.message;
+  }
+}
+
+}  // namespace
+
+TEST(Adaptive, BadSettingsAreRefusedByName)
+{
+  Simulation sim(topRowHeld(), heldParams(Method::Full, BasisKind::Skinning));
+  auto refusedSetting = [&](const std::function<void(AdaptiveSettings&)>& change) {
+    AdaptiveSettings s;
+    change(s);
+    return refusal([&] { AdaptiveStepper stepper(sim, s); });
+  };
+  EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.tolerance = 0.0; }), "'error_tolerance' = 0"));
+  EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.tolerance = NAN; }), "'error_tolerance'"));
+  EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.dwell = -1.0; }), "'adaptive_dwell' = -1"));
+  EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.check_steps = 0; }), "'adaptive_check_steps' = 0"));
+  EXPECT_TRUE(
+      contains(refusedSetting([](AdaptiveSettings& s) { s.reduced = Method::Linear; }), "must be one of physical, cubature"));
+  EXPECT_EQ(sim.method(), Method::Full);  // nothing changed
+}
+
+TEST(Adaptive, FallsBackToFullWhereTheSpanCannotTurnTheCloth)
+{
+  // Six linear modes cannot turn the cloth: `physical` alone ends far from `full`, the adaptive
+  // stepper switches to `full` early in the turn and ends close to it.
+  Simulation full(topRowHeld(), heldParams(Method::Full, BasisKind::LinearModes));
+  Simulation modes(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
+  Simulation adaptive_sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
+  AdaptiveSettings settings;
+  settings.reduced = Method::Physical;
+  settings.tolerance = 0.01;
+  AdaptiveStepper adaptive(adaptive_sim, settings);
+  run(full, turn, 200);
+  run(modes, turn, 200);
+  run(adaptive_sim, turn, 200, &adaptive);
+  const double modes_distance = largestParticleDistance(modes, full.positions());
+  const double adaptive_distance = largestParticleDistance(adaptive_sim, full.positions());
+  std::cout << "physical alone " << modes_distance << " m from full, adaptive " << adaptive_distance << " m ("
+            << adaptive.reducedShare() * 100 << "% of its steps reduced, " << adaptive.switches()
+            << " switches: " << adaptive.lastSwitch() << ")\n";
+  EXPECT_GE(adaptive.switches(), 1);
+  EXPECT_FALSE(adaptive.reduced());
+  EXPECT_TRUE(contains(adaptive.lastSwitch(), "to full at t = ")) << adaptive.lastSwitch();
+  EXPECT_GT(modes_distance, 0.05);
+  EXPECT_LT(adaptive_distance, 0.2 * modes_distance);
+}
+
+TEST(Adaptive, StaysReducedWhereTheSpanFollows)
+{
+  // The skinning span moves the cloth along with its row: every step reduced, the same run as
+  // `physical` alone to the bit.
+  Simulation physical(topRowHeld(), heldParams(Method::Physical, BasisKind::Skinning));
+  Simulation adaptive_sim(topRowHeld(), heldParams(Method::Physical, BasisKind::Skinning));
+  AdaptiveSettings settings;
+  settings.reduced = Method::Physical;
+  AdaptiveStepper adaptive(adaptive_sim, settings);
+  run(physical, translate, 200);
+  run(adaptive_sim, translate, 200, &adaptive);
+  std::cout << "last estimate " << adaptive.lastEstimate() << " m\n";
+  EXPECT_EQ(adaptive.switches(), 0) << adaptive.lastSwitch();
+  EXPECT_EQ(adaptive.reducedShare(), 1.0);
+  EXPECT_EQ(adaptive_sim.positions(), physical.positions());
+}
+
+TEST(Adaptive, GoesBackToTheSpanOnceTheStateIsWithinToleranceForTheDwell)
+{
+  // Sent to `full` by the turn six modes cannot follow, then held still with a tolerance twice the
+  // state's distance to their span: after the dwell it is reduced again, the state carried over (no
+  // particle jumps at the switch).
+  Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
+  AdaptiveSettings settings;
+  settings.reduced = Method::Physical;
+  settings.tolerance = 0.01;
+  AdaptiveStepper first(sim, settings);
+  run(sim, turn, 100, &first);
+  ASSERT_FALSE(first.reduced());
+  const double distance = sim.spanDistance(Method::Physical);
+  ASSERT_GT(distance, settings.tolerance);
+  settings.tolerance = 2.0 * distance;
+  settings.dwell = 0.1;
+  AdaptiveStepper second(sim, settings);
+  sim.setMethod(Method::Full);  // the stepper starts reduced: back to where the first one left it
+  const Eigen::VectorXd held = sim.handlePositions();
+  int switched_at = -1;
+  double jump = 0.0;
+  for (int k = 1; k <= 100 && switched_at < 0; ++k)
+  {
+    sim.setHandleMotion(held);
+    const Eigen::VectorXd before = sim.positions();
+    ASSERT_FALSE(second.step().diverged);
+    jump = (sim.positions() - before).cwiseAbs().maxCoeff();
+    if (second.reduced())
+      switched_at = k;
+  }
+  ASSERT_GT(switched_at, 0) << "never went back; last distance to the span " << second.lastEstimate() << " m";
+  EXPECT_GE(switched_at * 5e-3, settings.dwell - 1e-9);
+  EXPECT_TRUE(contains(second.lastSwitch(), "to physical at t = ")) << second.lastSwitch();
+  EXPECT_LT(jump, 0.01);  // the step's own motion: the switch moved nothing
+}
