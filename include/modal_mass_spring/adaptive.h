@@ -26,6 +26,10 @@ struct AdaptiveSettings
   double indicator_scale = 30.0;
 };
 
+// The settings a simulation's parameters give (adaptive_method, error_tolerance, adaptive_dwell,
+// adaptive_check_steps).
+AdaptiveSettings adaptiveSettings(const SimulationParams& params);
+
 // Throws std::invalid_argument naming a setting out of its range: a tolerance not positive and
 // finite, a dwell negative or not finite, check_steps < 1, a reduced method that is `full` or
 // `linear` (whose forces do not see the span's error), an indicator_scale not positive.

@@ -47,6 +47,12 @@ struct SimulationParams
   int newton_max_iterations = 50;  // per implicit solve (Newton's or the constant matrix's iterations)
   ImplicitSolver implicit_solver = ImplicitSolver::Newton;
   int tangent_refresh_steps = 20;  // lagged_tangent: steps between two factorisations of the tangent
+  // The adaptive stepper's (adaptive.h): the reduced method, the RMS distance to `full` it accepts
+  // (m), the time within it of the span before going back to it (s), the steps between checks.
+  Method adaptive_method = Method::Cubature;
+  double error_tolerance = 0.015;
+  double adaptive_dwell = 0.2;
+  int adaptive_check_steps = 10;
   // Newton iterations of the static equilibrium before it is refused (linearization or
   // initial_state 'equilibrium'): a 100 x 100 cloth hanging from its flat vertical sheet takes 3 to
   // 20; config/cloth.yaml, released at 30 degrees and buckling as it hangs, 60 to 400 (its path hangs

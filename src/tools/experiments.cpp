@@ -256,6 +256,7 @@ struct AccuracyRun
   bool diverged = false;
   double step_seconds = 0.0, step_cpu_seconds = 0.0;
   std::unique_ptr<HandleDriver> driver = nullptr;  // moves the handles of a handle scenario, one step at a time
+  std::unique_ptr<AdaptiveStepper> adaptive = nullptr;  // steps `sim` for method "adaptive"
 
   void advance(const std::string& variant, std::vector<std::string>& messages)
   {
@@ -264,11 +265,12 @@ struct AccuracyRun
     const auto start = Clock::now();
     const double cpu_start = threadCpuSeconds();
     StepResult r;
-    if (driver)
+    if (driver || adaptive)
       for (int k = 0; k < steps_per_sample && !r.diverged; ++k)
       {
-        driver->drive(*sim);
-        r = sim->step();
+        if (driver)
+          driver->drive(*sim);
+        r = adaptive ? adaptive->step() : sim->step();
       }
     else
       r = sim->step(steps_per_sample);
@@ -334,6 +336,24 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
     {
       not_built.emplace_back(toString(m), e.what());
     }
+  if (options.adaptive)
+    try
+    {
+      AccuracyRun run{"adaptive",
+                      std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, setup.sim.adaptive_method),
+                                                   StageFn{}, options.cache),
+                      options.sample, true};
+      run.adaptive = std::make_unique<AdaptiveStepper>(*run.sim, adaptiveSettings(setup.sim));
+      runs.push_back(std::move(run));
+    }
+    catch (const std::bad_alloc&)
+    {
+      throw;
+    }
+    catch (const std::exception& e)
+    {
+      not_built.emplace_back("adaptive", e.what());
+    }
   if (setup.handle_scenario)
   {
     for (AccuracyRun& run : runs)
@@ -365,7 +385,13 @@ ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, const Accurac
   e.max_displacement = maxDisplacement(grid, run.sim->points());
   e.energy = run.sim->totalEnergy();
   e.center_y = run.sim->points().row(1).mean();
-  if (method != "full" && method != "reference" && method != "reference_half_step")
+  if (run.adaptive)
+  {
+    e.reduced_share = run.adaptive->reducedShare();
+    e.switches = run.adaptive->switches();
+    e.error_indicator = run.adaptive->reduced() ? run.sim->errorIndicator() : std::numeric_limits<double>::quiet_NaN();
+  }
+  else if (method != "full" && method != "reference" && method != "reference_half_step")
     e.error_indicator = run.sim->errorIndicator();
   return e;
 }
@@ -504,6 +530,8 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
       times[k].push_back(e.step_seconds);
     if (e.step_cpu_seconds > 0.0)
       cpu_times[k].push_back(e.step_cpu_seconds);
+    s.reduced_share = e.reduced_share;
+    s.switches = e.switches;
     if (!std::isnan(e.error_indicator))
     {
       indicators[k].push_back(e.error_indicator);
@@ -814,7 +842,7 @@ std::vector<AccuracySummary> notBuiltSummaries(const std::string& variant, const
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::vector<AccuracySummary> out;
   for (const auto& [method, reason] : result.not_built)
-    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, nan, nan, nan, false, reason, nan});
+    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, nan, nan, nan, false, reason, nan, nan, -1});
   return out;
 }
 
@@ -822,7 +850,7 @@ void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummar
 {
   precise(out) << "variant,method,mean_rms,max_rms,mean_max,final_rms,step_seconds_median,step_seconds_mean,"
                   "step_cpu_seconds_median,cpu_per_simulated_second,real_time_factor,diverged,not_built,"
-                  "indicator_rank_correlation\n";
+                  "indicator_rank_correlation,reduced_share,switches\n";
   for (const AccuracySummary& s : rows)
   {
     // The reason is free text: quoted, its quotes doubled.
@@ -833,7 +861,8 @@ void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummar
         << Field{s.mean_max} << ',' << Field{s.final_rms} << ',' << Field{s.step_seconds_median} << ','
         << Field{s.step_seconds_mean} << ',' << Field{s.step_cpu_seconds_median} << ','
         << Field{s.cpu_per_simulated_second} << ',' << Field{s.real_time_factor} << ',' << (s.diverged ? 1 : 0) << ",\"" << reason << "\","
-        << Field{s.indicator_rank_correlation} << '\n';
+        << Field{s.indicator_rank_correlation} << ',' << Field{s.reduced_share} << ','
+        << (s.switches >= 0 ? std::to_string(s.switches) : std::string()) << '\n';
   }
 }
 

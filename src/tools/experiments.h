@@ -3,6 +3,7 @@
 
 #include "handle_scenarios.h"
 
+#include "modal_mass_spring/adaptive.h"
 #include "modal_mass_spring/cpu_time.h"
 #include "modal_mass_spring/simulation.h"
 
@@ -89,6 +90,7 @@ struct AccuracyOptions
   // it like the modal methods, and a second reference at half this step checks that the first one is
   // converged (`reference_check`).
   double reference_time_step = 0.0;
+  bool adaptive = false;  // also run method "adaptive" (AdaptiveStepper, the setup's adaptive settings)
   bool snapshots = true;  // keep the particle positions every `interval` steps
   // Where the bases and cubatures are cached between runs (directory empty: off). The cost
   // experiment never uses it: it measures the build.
@@ -115,6 +117,9 @@ struct ErrorSample
   // The method's own estimate of its distance to `full` (Simulation::errorIndicator, m); NaN for
   // `full` and the reference.
   double error_indicator = std::numeric_limits<double>::quiet_NaN();
+  // Method "adaptive": the share of its steps so far taken reduced and its switches (else NaN, -1).
+  double reduced_share = std::numeric_limits<double>::quiet_NaN();
+  int switches = -1;
 };
 
 struct Snapshot
@@ -260,6 +265,9 @@ struct AccuracySummary
   // Spearman's rank correlation of the error indicator with the RMS distance over the samples after
   // step 0 (NaN for `full`, or with fewer than three samples).
   double indicator_rank_correlation = std::numeric_limits<double>::quiet_NaN();
+  // Method "adaptive": its share of reduced steps and its switches over the run (else NaN, -1).
+  double reduced_share = std::numeric_limits<double>::quiet_NaN();
+  int switches = -1;
 };
 // Spearman's rank correlation of a and b (equal sizes; ties take their mean rank); NaN below three
 // pairs or where either is constant.

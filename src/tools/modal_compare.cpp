@@ -47,7 +47,9 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
                         paper's three: cost, accuracy and stability; handles runs only when named)
   --output DIR          folder for the CSV files (default: .)
   --tag NAME            file name tag, <experiment>_<tag>.csv (default: the config file's stem); no '/'
-  --methods LIST        comma-separated of full, linear, physical, cubature (default: all four;
+  --methods LIST        comma-separated of full, linear, physical, cubature, adaptive (default: the first four;
+                        adaptive, in accuracy and handles only: adaptive_method stepped while its error
+                        indicator allows, full where it does not (error_tolerance, adaptive_dwell);
                         accuracy always runs full as the reference and writes cubature's training
                         report, |T|, training and held-out error and time, to accuracy_<tag>_cubature.csv)
   --set KEY=VALUE       override one parameter of the config (VALUE is YAML); repeatable, once per key
@@ -196,6 +198,7 @@ struct Options
   std::string output = ".";
   std::string tag;
   std::vector<Method> methods{Method::Full, Method::Linear, Method::Physical, Method::Cubature};
+  bool adaptive = false;  // --methods named `adaptive`
   std::vector<std::pair<std::string, std::string>> sets;
   std::vector<std::pair<std::string, std::vector<std::string>>> varies;
   bool quiet = false;
@@ -233,8 +236,14 @@ void setExperiments(Options& o, const std::string& text)
 void setMethods(Options& o, const std::string& text)
 {
   o.methods.clear();
+  o.adaptive = false;
   for (const std::string& name : parseList("--methods", text))
   {
+    if (name == "adaptive")
+    {
+      o.adaptive = true;
+      continue;
+    }
     try
     {
       o.methods.push_back(parseMethod(name));
@@ -244,7 +253,7 @@ void setMethods(Options& o, const std::string& text)
       std::string names;
       for (const std::string& known : methodNames())
         names += (names.empty() ? "" : ", ") + known;
-      rejectParameter("--methods", "'" + name + "'", "unknown method: must be one of " + names);
+      rejectParameter("--methods", "'" + name + "'", "unknown method: must be one of " + names + ", adaptive");
     }
   }
 }
@@ -352,6 +361,7 @@ void finishOptions(Options& o)
     rejectParameter("--check-factor", o.check_factor, "needs the stability experiment");
   checkStabilityOptions(o.stability);
   o.accuracy.methods = o.methods;
+  o.accuracy.adaptive = o.adaptive;
   o.stability.methods = o.methods;
   o.cost.methods = o.methods;
   if (o.tag.empty())
@@ -536,7 +546,7 @@ int handleSteps(const Options& o, const ExperimentSetup& setup, bool move_only =
 
 bool runsCubature(const Options& o)
 {
-  return std::find(o.methods.begin(), o.methods.end(), Method::Cubature) != o.methods.end();
+  return o.adaptive || std::find(o.methods.begin(), o.methods.end(), Method::Cubature) != o.methods.end();
 }
 
 // The core's checks of one setup (validateParameters: ranges, sizes, the memory estimate), which
@@ -956,6 +966,15 @@ void printAccuracyHeader(const Options& o, const ExperimentSetup& setup, const A
               << " m, largest particle distance " << fmt(result.reference_check_max_distance) << " m\n";
 }
 
+// For method "adaptive": its share of reduced steps and its switches, one line per variant.
+void printAdaptive(const std::vector<AccuracySummary>& summaries)
+{
+  for (const AccuracySummary& s : summaries)
+    if (s.method == "adaptive" && s.not_built.empty())
+      std::cout << "adaptive (" << s.variant << "): " << fmt(100.0 * s.reduced_share) << "% of its steps reduced, "
+                << s.switches << " switches\n";
+}
+
 void printAccuracySummary(const Options& o, const std::string& reference, const std::vector<ErrorSample>& errors)
 {
   std::vector<std::vector<std::string>> summary{{"variant", "method", "mean RMS m", "largest RMS m", "mean largest m",
@@ -971,6 +990,7 @@ void printAccuracySummary(const Options& o, const std::string& reference, const 
                  "; wall and this thread's CPU time per step while running, the CPU time per simulated second "
                  "and the real-time factor it allows (time_step / CPU per step)",
              summary);
+  printAdaptive(summarizeAccuracy(errors));
 }
 
 void runAccuracyExperiment(const Options& o, const std::vector<ExperimentSetup>& setups, Progress& progress)
@@ -1150,6 +1170,7 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
                  "CPU time per simulated second and the real-time factor it allows (time_step / CPU per step); "
                  "the rank correlation of the method's error indicator with that distance",
              table);
+  printAdaptive(summaries);
   for (const std::string& m : messages)
     std::cout << "note: " << m << "\n";
 }

@@ -446,7 +446,7 @@ TEST(HandleScenarios, AMethodThatCannotBeBuiltIsReportedAndTheOthersRun)
   EXPECT_TRUE(std::isnan(rows[1].mean_rms));
   std::ostringstream csv;
   writeAccuracySummaryCsv(csv, rows);
-  EXPECT_NE(csv.str().find(",not_built,indicator_rank_correlation\n"), std::string::npos) << csv.str();
+  EXPECT_NE(csv.str().find(",not_built,indicator_rank_correlation,reduced_share,switches\n"), std::string::npos) << csv.str();
   EXPECT_NE(csv.str().find("grips,linear,,,,,,,,,,0,\"handles: "), std::string::npos) << csv.str();
 }
 
@@ -474,4 +474,43 @@ TEST(HandleScenarios, TheConvergedReferenceRunsWhateverTheMethodsBasis)
   EXPECT_EQ(result.errors.back().method, "physical");
   EXPECT_FALSE(result.errors.back().diverged);
   EXPECT_EQ(result.reference_check.size(), result.errors.size() / 2);
+}
+
+// Method "adaptive" runs beside the others: with a tolerance no step exceeds it is its reduced
+// method step for step; with one every step exceeds it goes to `full` at its first check.
+TEST(HandleScenarios, AdaptiveRunsBesideTheMethodsAndReportsItsShareOfReducedSteps)
+{
+  const HandleScenario scenario =
+      parse("[{name: lift, move_time: 0.1, hold_time: 0.1, handles: [{particles: [0, 1, 2, 3], translation: [0, 0, 0.05]}]}]")
+          .front();
+  ExperimentSetup setup = heldSheet(scenario);
+  setup.sim.num_modes = 3;
+  setup.sim.adaptive_method = Method::Physical;
+  AccuracyOptions options;
+  options.methods = {Method::Physical};
+  options.adaptive = true;
+  options.sample = 10;
+  options.steps = options.interval = 200;
+  options.snapshots = false;
+  auto summaryOf = [](const AccuracyResult& result, const std::string& method) {
+    for (const AccuracySummary& s : summarizeAccuracy(result.errors))
+      if (s.method == method)
+        return s;
+    ADD_FAILURE() << "no summary for " << method;
+    return AccuracySummary{};
+  };
+  setup.sim.error_tolerance = 1.0;
+  const AccuracyResult loose = runAccuracy(setup, options);
+  const AccuracySummary physical = summaryOf(loose, "physical"), adaptive = summaryOf(loose, "adaptive");
+  EXPECT_EQ(adaptive.reduced_share, 1.0);
+  EXPECT_EQ(adaptive.switches, 0);
+  EXPECT_EQ(adaptive.mean_rms, physical.mean_rms);
+  EXPECT_GT(physical.mean_rms, 0.0);
+  EXPECT_EQ(physical.switches, -1);
+
+  setup.sim.error_tolerance = 1e-15;
+  const AccuracySummary tight = summaryOf(runAccuracy(setup, options), "adaptive");
+  EXPECT_EQ(tight.switches, 1);
+  EXPECT_NEAR(tight.reduced_share, 10.0 / options.steps, 1e-12);  // the steps before the first check
+  EXPECT_LT(tight.mean_rms, 0.1 * physical.mean_rms);
 }

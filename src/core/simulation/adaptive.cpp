@@ -8,6 +8,16 @@
 namespace modal_mass_spring
 {
 
+AdaptiveSettings adaptiveSettings(const SimulationParams& p)
+{
+  AdaptiveSettings s;
+  s.reduced = p.adaptive_method;
+  s.tolerance = p.error_tolerance;
+  s.dwell = p.adaptive_dwell;
+  s.check_steps = p.adaptive_check_steps;
+  return s;
+}
+
 void validateAdaptiveSettings(const AdaptiveSettings& s)
 {
   if (!std::isfinite(s.tolerance) || s.tolerance <= 0.0)
@@ -17,7 +27,7 @@ void validateAdaptiveSettings(const AdaptiveSettings& s)
   if (s.check_steps < 1)
     rejectParameter("adaptive_check_steps", s.check_steps, "must be an integer >= 1");
   if (s.reduced != Method::Physical && s.reduced != Method::Cubature)
-    rejectParameter("adaptive_method", toString(s.reduced), "must be one of physical, cubature");
+    rejectParameter("adaptive_method", "'" + toString(s.reduced) + "'", "must be one of physical, cubature");
   if (!std::isfinite(s.indicator_scale) || s.indicator_scale <= 0.0)
     rejectParameter("indicator_scale", s.indicator_scale, "must be a finite number > 0");
 }

@@ -63,6 +63,11 @@ SimulationParams loadSimulationParams(const ParameterSource& s)
     p.implicit_solver = parseImplicitSolver(*name);
   p.newton_max_iterations = s.getInt("newton_max_iterations").value_or(p.newton_max_iterations);
   p.tangent_refresh_steps = s.getInt("tangent_refresh_steps").value_or(p.tangent_refresh_steps);
+  if (const auto name = s.getString("adaptive_method"))
+    p.adaptive_method = parseMethod(*name);
+  p.error_tolerance = s.getDouble("error_tolerance").value_or(p.error_tolerance);
+  p.adaptive_dwell = s.getDouble("adaptive_dwell").value_or(p.adaptive_dwell);
+  p.adaptive_check_steps = s.getInt("adaptive_check_steps").value_or(p.adaptive_check_steps);
   p.equilibrium_max_iterations = s.getInt("equilibrium_max_iterations").value_or(p.equilibrium_max_iterations);
   p.hht_alpha = s.getDouble("hht_alpha").value_or(p.hht_alpha);
   p.energy_tolerance = s.getDouble("energy_tolerance").value_or(p.energy_tolerance);

@@ -2,6 +2,7 @@
 // hold against memory_limit_gb.
 #include "modal_mass_spring/validation.h"
 
+#include "modal_mass_spring/adaptive.h"
 #include "modal_mass_spring/simulation.h"
 
 #include <algorithm>
@@ -143,6 +144,7 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
                     "must be a finite number > 0 (the energy rise, relative to the grid's energy scale, that counts as divergence)");
   if (p.newton_max_iterations < 1)
     rejectParameter("newton_max_iterations", p.newton_max_iterations, "must be an integer >= 1");
+  validateAdaptiveSettings(adaptiveSettings(p));
   if (p.tangent_refresh_steps < 1)
     rejectParameter("tangent_refresh_steps", p.tangent_refresh_steps, "must be an integer >= 1");
   if (p.equilibrium_max_iterations < 1)
