@@ -1,15 +1,21 @@
 // A reduced method that falls back to `full` where its span cannot follow the motion (after Kim and
 // James 2009): every check_steps steps, a reduced step's error indicator (Simulation::errorIndicator)
 // times its calibration decides whether the motion is still within `tolerance` of `full`; if not,
-// the simulation switches to `full`, carrying the state over. Under `full`, it switches back once the
-// state has stayed within `tolerance` of the reduced span (Simulation::spanDistance) for `dwell`
-// seconds; the part outside the span is then kept frozen, as every switch does (Simulation::setMethod).
+// the steps since the last check that passed are taken again under `full` from the state saved there
+// (with the handle and collider motions they had), so that the error the check found is not carried
+// into `full`. Under `full`, it switches back once the state has stayed within `tolerance` of the
+// reduced span (Simulation::spanDistance) for `dwell` seconds; the part outside the span is then kept
+// frozen, as every switch does (Simulation::setMethod).
 #pragma once
 
 #include "modal_mass_spring/options.h"
 #include "modal_mass_spring/simulation.h"
 
+#include <Eigen/Geometry>
+
+#include <sstream>
 #include <string>
+#include <vector>
 
 namespace modal_mass_spring
 {
@@ -52,7 +58,19 @@ public:
   const std::string& lastSwitch() const { return last_switch_; }
 
 private:
-  void check();
+  // What the caller gave a step: the handles' motion, B's, the colliders' poses.
+  struct Motion
+  {
+    HandleMotion handles;
+    FrameMotion frame;
+    std::vector<Eigen::Isometry3d> colliders;
+    std::vector<bool> active;
+  };
+  Motion motion() const;
+  void apply(const Motion& m);
+  // Back to the last check that passed, then its steps again under `full`.
+  StepResult fallBack(std::ostringstream& why);
+  StepResult check();
 
   Simulation& sim_;
   AdaptiveSettings settings_;
@@ -61,6 +79,9 @@ private:
   double last_estimate_ = 0.0;
   double within_since_ = -1.0;  // under full: the time the state came within tolerance of the span (-1: not)
   std::string last_switch_;
+  SimulationState checkpoint_;       // the reduced state at the last check that passed
+  std::vector<Motion> since_check_;  // the motions of the reduced steps since
+  Eigen::VectorXd handle_reference_;  // the handle dofs' positions at zero displacement
 };
 
 }  // namespace modal_mass_spring

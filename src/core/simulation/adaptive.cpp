@@ -37,32 +37,91 @@ AdaptiveStepper::AdaptiveStepper(Simulation& sim, const AdaptiveSettings& settin
   validateAdaptiveSettings(settings_);
   if (sim_.method() != settings_.reduced)
     sim_.setMethod(settings_.reduced);
+  handle_reference_ = sim_.handlePositions();
+  if (sim_.handleMotion().displacement.size() > 0)
+    handle_reference_ -= sim_.handleMotion().displacement;
+  checkpoint_ = sim_.saveState();
+}
+
+AdaptiveStepper::Motion AdaptiveStepper::motion() const
+{
+  Motion m{sim_.handleMotion(), sim_.frameMotion(), {}, {}};
+  if (const Contact* contact = sim_.contact())
+    for (int i = 0; i < static_cast<int>(contact->colliders().size()); ++i)
+    {
+      m.colliders.push_back(contact->pose(i));
+      m.active.push_back(contact->active(i));
+    }
+  return m;
+}
+
+void AdaptiveStepper::apply(const Motion& m)
+{
+  if (sim_.handleFormulation() == HandleFormulation::MovingFrame)
+    sim_.setHandleFrameMotion(m.frame);
+  else if (handle_reference_.size() > 0)
+  {
+    const Eigen::VectorXd at = m.handles.displacement.size() > 0
+                                   ? Eigen::VectorXd(handle_reference_ + m.handles.displacement)
+                                   : handle_reference_;
+    sim_.setHandleMotion(at, m.handles.velocity, m.handles.acceleration);
+  }
+  for (size_t i = 0; i < m.colliders.size(); ++i)
+    if (m.active[i])
+      sim_.setColliderPose(static_cast<int>(i), m.colliders[i]);
 }
 
 StepResult AdaptiveStepper::step()
 {
   const bool was_reduced = reduced();
-  const StepResult result = sim_.step();
+  StepResult result = sim_.step();
   if (result.diverged)
     return result;
   ++steps_;
-  reduced_steps_ += was_reduced ? 1 : 0;
+  if (was_reduced)
+  {
+    ++reduced_steps_;
+    since_check_.push_back(motion());
+  }
   if (steps_ % settings_.check_steps == 0)
-    check();
+    result = check();
   return result;
 }
 
-void AdaptiveStepper::check()
+StepResult AdaptiveStepper::fallBack(std::ostringstream& why)
+{
+  sim_.restoreState(checkpoint_);
+  sim_.setMethod(Method::Full);
+  StepResult result;
+  for (const Motion& m : since_check_)
+  {
+    apply(m);
+    result = sim_.step();
+    --reduced_steps_;
+    if (result.diverged)
+      break;
+  }
+  why << "; its last " << since_check_.size() << " steps taken again under full";
+  since_check_.clear();
+  return result;
+}
+
+StepResult AdaptiveStepper::check()
 {
   std::ostringstream why;
+  StepResult result;
   if (reduced())
   {
     last_estimate_ = settings_.indicator_scale * sim_.errorIndicator();
     if (last_estimate_ <= settings_.tolerance)
-      return;
+    {
+      checkpoint_ = sim_.saveState();
+      since_check_.clear();
+      return result;
+    }
     why << "to full at t = " << sim_.time() << " s: estimated distance " << last_estimate_
         << " m above error_tolerance " << settings_.tolerance << " m";
-    sim_.setMethod(Method::Full);
+    result = fallBack(why);
     within_since_ = -1.0;
   }
   else
@@ -71,18 +130,21 @@ void AdaptiveStepper::check()
     if (last_estimate_ > settings_.tolerance)
     {
       within_since_ = -1.0;
-      return;
+      return result;
     }
     if (within_since_ < 0.0)
       within_since_ = sim_.time();
     if (sim_.time() - within_since_ < settings_.dwell)
-      return;
+      return result;
     why << "to " << toString(settings_.reduced) << " at t = " << sim_.time() << " s: within "
         << last_estimate_ << " m of its span for " << sim_.time() - within_since_ << " s";
     sim_.setMethod(settings_.reduced);
+    checkpoint_ = sim_.saveState();
+    since_check_.clear();
   }
   ++switches_;
   last_switch_ = why.str();
+  return result;
 }
 
 }  // namespace modal_mass_spring

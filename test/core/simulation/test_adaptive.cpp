@@ -114,6 +114,7 @@ TEST(Adaptive, FallsBackToFullWhereTheSpanCannotTurnTheCloth)
   EXPECT_GE(adaptive.switches(), 1);
   EXPECT_FALSE(adaptive.reduced());
   EXPECT_TRUE(contains(adaptive.lastSwitch(), "to full at t = ")) << adaptive.lastSwitch();
+  EXPECT_TRUE(contains(adaptive.lastSwitch(), "steps taken again under full")) << adaptive.lastSwitch();
   EXPECT_GT(modes_distance, 0.05);
   EXPECT_LT(adaptive_distance, 0.2 * modes_distance);
 }
