@@ -349,6 +349,14 @@ public:
   // the springs' pull on its particles plus their weight and external force minus their mass times
   // their prescribed acceleration. A grid hanging at rest pulls its whole weight.
   std::vector<Eigen::Vector3d> handleForces() const;
+  // The same forces with their torque about a point per handle (grid coordinates, N m): the sum over
+  // its particles of (x_p - origin) x f_p, what a force-torque sensor at the gripper's origin reads
+  // reversed. `origins` holds one point per handle (std::invalid_argument otherwise).
+  struct Wrench
+  {
+    Eigen::Vector3d force = Eigen::Vector3d::Zero(), torque = Eigen::Vector3d::Zero();
+  };
+  std::vector<Wrench> handleWrenches(const std::vector<Eigen::Vector3d>& origins) const;
 
   bool diverged() const { return diverged_; }
   long stepCount() const { return step_count_; }

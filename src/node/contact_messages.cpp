@@ -85,7 +85,7 @@ visualization_msgs::MarkerArray colliderMarkers(const Contact& contact, const st
 }
 
 geometry_msgs::WrenchStamped forceWrench(const Eigen::Vector3d& force, const std::string& frame_id,
-                                         const ros::Time& stamp)
+                                         const ros::Time& stamp, const Eigen::Vector3d& torque)
 {
   geometry_msgs::WrenchStamped w;
   w.header.frame_id = frame_id;
@@ -93,6 +93,9 @@ geometry_msgs::WrenchStamped forceWrench(const Eigen::Vector3d& force, const std
   w.wrench.force.x = force.x();
   w.wrench.force.y = force.y();
   w.wrench.force.z = force.z();
+  w.wrench.torque.x = torque.x();
+  w.wrench.torque.y = torque.y();
+  w.wrench.torque.z = torque.z();
   return w;
 }
 

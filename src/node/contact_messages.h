@@ -19,8 +19,8 @@ visualization_msgs::MarkerArray colliderMarkers(const Contact& contact, const st
                                                 const Eigen::Vector3d& offset, const std::string& ns,
                                                 const ros::Time& stamp);
 
-// A force (N) as a wrench without torque.
+// A force (N) and its torque about the frame's origin (N m; none: zero) as a wrench.
 geometry_msgs::WrenchStamped forceWrench(const Eigen::Vector3d& force, const std::string& frame_id,
-                                         const ros::Time& stamp);
+                                         const ros::Time& stamp, const Eigen::Vector3d& torque = Eigen::Vector3d::Zero());
 
 }  // namespace modal_mass_spring

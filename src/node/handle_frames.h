@@ -71,6 +71,8 @@ public:
   // Where handle h's frame is now (the fixed frame; the pose its particles follow, held while the frame
   // is missing); meaningful once everFound(h).
   const FramePose& current(size_t h) const { return handles_[h].current; }
+  // Handle h's frame origin now, in grid coordinates.
+  Eigen::Vector3d originInGrid(size_t h) const { return handles_[h].current.translation - grid_offset_; }
   // Puts handle h's frame at `pose` now, with no motion over the next tick (a state restored with
   // its frames' poses); offsets are kept. A frame never looked up is left as it is.
   void place(size_t h, const FramePose& pose);

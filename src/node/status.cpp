@@ -144,19 +144,27 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     }
     if (!track.handle_force_pubs.empty())
     {
-      const std::vector<Eigen::Vector3d> forces = simulation.handleForces();
-      for (size_t h = 0; h < track.handle_force_pubs.size() && h < forces.size(); ++h)
+      // Torques about each handle frame's origin (before it is found, about the grid's: unused).
+      std::vector<Eigen::Vector3d> origins(simulation.grid().handles().size(), Eigen::Vector3d::Zero());
+      for (size_t h = 0; h < origins.size() && h < handle_frames_->size(); ++h)
+        if (handle_frames_->everFound(h))
+          origins[h] = handle_frames_->originInGrid(h);
+      const std::vector<Simulation::Wrench> wrenches = simulation.handleWrenches(origins);
+      for (size_t h = 0; h < track.handle_force_pubs.size() && h < wrenches.size(); ++h)
       {
-        if (!forces[h].allFinite())
+        if (!wrenches[h].force.allFinite() || !wrenches[h].torque.allFinite())
           continue;
         // In the handle's own frame once it was found (what a force-torque sensor at the gripper
-        // reads; tf2 turns it into any other frame), in fixed_frame axes before.
+        // reads; tf2 turns it into any other frame), the force alone in fixed_frame axes before.
         if (handle_frames_->everFound(h))
+        {
+          const Eigen::Quaterniond to_frame = handle_frames_->current(h).rotation.conjugate();
           grid.wrenches.emplace_back(track.handle_force_pubs[h],
-                                     forceWrench(handle_frames_->current(h).rotation.conjugate() * forces[h],
-                                                 handle_frames_->frame(h), stamp));
+                                     forceWrench(to_frame * wrenches[h].force, handle_frames_->frame(h), stamp,
+                                                 to_frame * wrenches[h].torque));
+        }
         else
-          grid.wrenches.emplace_back(track.handle_force_pubs[h], forceWrench(forces[h], options.frame_id, stamp));
+          grid.wrenches.emplace_back(track.handle_force_pubs[h], forceWrench(wrenches[h].force, options.frame_id, stamp));
       }
     }
     if (measured && ref->shadow)

@@ -5,7 +5,8 @@ held 0.07 m off the hanging cloth, moved 0.2 m along -y through the cloth's plan
 sphere's marker is where the frame is, at rest and along the motion; the cloth is pushed away and no
 particle is more than 1 mm inside the sphere at any tick; the collider on `never` (not broadcast) is
 warned about on /rosout, its marker deleted, and the node keeps RUNNING; ~handle_force/handle_0 comes
-in the gripper's frame: the cloth's weight along the gripper's -y while the pusher is off."""
+in the gripper's frame: the cloth's weight along the gripper's -y while the pusher is off, with no
+torque about the gripper's origin (the middle of the row the cloth hangs from)."""
 import math
 import sys
 import threading
@@ -166,6 +167,10 @@ class CollidersFollowTheirFrames(unittest.TestCase):
         self.assertAlmostEqual(f.y, -WEIGHT, delta=0.05 * WEIGHT)
         self.assertAlmostEqual(f.x, 0.0, delta=0.05 * WEIGHT)
         self.assertAlmostEqual(f.z, 0.0, delta=0.05 * WEIGHT)
+        # Its torque about the gripper's origin, the middle of the row the cloth hangs from
+        # symmetrically: none (about the grid's origin, the row's end, it would be 0.175 m x WEIGHT).
+        t = framed[-1].wrench.torque
+        self.assertLess(math.sqrt(t.x ** 2 + t.y ** 2 + t.z ** 2), 0.02 * GRIPPER[0] * WEIGHT, t)
         self.assertTrue(all(w.header.frame_id in ("gripper", "world") for _, w in wrenches))
 
 

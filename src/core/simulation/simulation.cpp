@@ -981,21 +981,36 @@ void Simulation::placeCollider(int i, const Eigen::Isometry3d& pose)
 
 std::vector<Eigen::Vector3d> Simulation::handleForces() const
 {
+  std::vector<Eigen::Vector3d> origins(grid_.handles().size(), Eigen::Vector3d::Zero());
+  std::vector<Eigen::Vector3d> forces;
+  for (const Wrench& w : handleWrenches(origins))
+    forces.push_back(w.force);
+  return forces;
+}
+
+std::vector<Simulation::Wrench> Simulation::handleWrenches(const std::vector<Eigen::Vector3d>& origins) const
+{
+  if (origins.size() != grid_.handles().size())
+    rejectParameter("origins", origins.size(),
+                    "must hold one point per handle (" + std::to_string(grid_.handles().size()) + ")");
   const int dim = grid_.dimension();
   const Eigen::VectorXd x = positions();
   std::vector<int> handle_of(grid_.numParticles(), -1);
   for (size_t h = 0; h < grid_.handles().size(); ++h)
     for (int p : grid_.handles()[h])
       handle_of[p] = static_cast<int>(h);
-  std::vector<Eigen::Vector3d> forces(grid_.handles().size(), Eigen::Vector3d::Zero());
+  auto point = [&](const Eigen::VectorXd& v, int particle) {
+    return dim == 3 ? Eigen::Vector3d(v.segment<3>(3 * particle))
+                    : Eigen::Vector3d(v[2 * particle], 0.0, v[2 * particle + 1]);
+  };
+  std::vector<Wrench> wrenches(grid_.handles().size());
   auto add = [&](int particle, const Eigen::VectorXd& f) {
     const int h = handle_of[particle];
     if (h < 0)
       return;
-    if (dim == 3)
-      forces[h] += f.head<3>();
-    else
-      forces[h] += Eigen::Vector3d(f[0], 0.0, f[1]);
+    const Eigen::Vector3d f3 = dim == 3 ? Eigen::Vector3d(f.head<3>()) : Eigen::Vector3d(f[0], 0.0, f[1]);
+    wrenches[h].force += f3;
+    wrenches[h].torque += (point(x, particle) - origins[h]).cross(f3);
   };
   // Only the springs that touch a handle particle.
   for (const Spring& s : grid_.springs())
@@ -1019,7 +1034,7 @@ std::vector<Eigen::Vector3d> Simulation::handleForces() const
       f -= grid_.particleMass() * handle_current_.acceleration.segment(k, dim);
     add(particle, f);
   }
-  return forces;
+  return wrenches;
 }
 
 }  // namespace modal_mass_spring

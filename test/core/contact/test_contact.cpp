@@ -512,6 +512,38 @@ TEST(Contact, HandleForceOfAHangingClothIsItsWeight)
   EXPECT_NEAR(forces[0].z(), forces[1].z(), 1e-6 * weight);
 }
 
+// The torque of the same hanging cloth's grips: about the middle of the whole top row, which holds
+// it as one, the two cancel (the cloth hangs symmetrically); about any other point q each grip's
+// torque is the one about its origin o less (q - o) x F.
+TEST(Contact, HandleTorqueMovesWithItsOriginAsStaticsSays)
+{
+  GridParams g = flatSheet();
+  g.rotation_deg = 0.0;
+  g.fixed = {};
+  g.handles = {{0, 1, 2, 3, 4}, {5, 6, 7, 8, 9}};
+  SimulationParams s;
+  s.method = Method::Full;
+  s.linearization = Linearization::Equilibrium;
+  s.initial_state = InitialState::Equilibrium;
+  Simulation sim(g, s);
+  const Eigen::Matrix3Xd x = sim.points();
+  const Eigen::Vector3d middle = 0.5 * (x.col(4) + x.col(5));
+  const std::vector<Simulation::Wrench> about_middle = sim.handleWrenches({middle, middle});
+  const double weight = 9.81 * g.mass * g.rows * g.cols;
+  const double scale = weight * 0.45;  // the weight times the cloth's width
+  EXPECT_LT((about_middle[0].torque + about_middle[1].torque).norm(), 1e-6 * scale);
+  EXPECT_GT(about_middle[0].torque.norm(), 0.01 * scale);  // each grip alone does carry a torque
+  const Eigen::Vector3d q(0.1, -0.2, 0.3);
+  const std::vector<Simulation::Wrench> about_q = sim.handleWrenches({q, q});
+  for (int h = 0; h < 2; ++h)
+  {
+    EXPECT_EQ(about_q[h].force, about_middle[h].force);
+    EXPECT_LT((about_q[h].torque - (about_middle[h].torque - (q - middle).cross(about_middle[h].force))).norm(),
+              1e-9 * scale);
+  }
+  EXPECT_THROW(sim.handleWrenches({q}), std::invalid_argument);
+}
+
 TEST(Contact, BadCollidersAreRefusedByName)
 {
   const GridParams g = flatSheet();
