@@ -490,18 +490,33 @@ TEST(Contact, SkinningSheetDrapesOverATableEdgeWithoutPenetratingAMillimetre)
   }
 }
 
-// The handles carry what the cloth pulls: hanging at rest, its whole weight.
-TEST(Contact, HandleForceOfAHangingClothIsItsWeight)
+namespace
+{
+// The sheet hanging at rest from two grips that share its top row.
+GridParams hangingFromTwoGrips()
 {
   GridParams g = flatSheet();
   g.rotation_deg = 0.0;  // hanging
   g.fixed = {};
   g.handles = {{0, 1, 2, 3, 4}, {5, 6, 7, 8, 9}};
+  return g;
+}
+
+SimulationParams hangingFullParams()
+{
   SimulationParams s;
   s.method = Method::Full;
   s.linearization = Linearization::Equilibrium;
   s.initial_state = InitialState::Equilibrium;
-  Simulation sim(g, s);
+  return s;
+}
+}  // namespace
+
+// The handles carry what the cloth pulls: hanging at rest, its whole weight.
+TEST(Contact, HandleForceOfAHangingClothIsItsWeight)
+{
+  const GridParams g = hangingFromTwoGrips();
+  Simulation sim(g, hangingFullParams());
   const std::vector<Eigen::Vector3d> forces = sim.handleForces();
   ASSERT_EQ(forces.size(), 2u);
   const Eigen::Vector3d total = forces[0] + forces[1];
@@ -517,15 +532,8 @@ TEST(Contact, HandleForceOfAHangingClothIsItsWeight)
 // torque is the one about its origin o less (q - o) x F.
 TEST(Contact, HandleTorqueMovesWithItsOriginAsStaticsSays)
 {
-  GridParams g = flatSheet();
-  g.rotation_deg = 0.0;
-  g.fixed = {};
-  g.handles = {{0, 1, 2, 3, 4}, {5, 6, 7, 8, 9}};
-  SimulationParams s;
-  s.method = Method::Full;
-  s.linearization = Linearization::Equilibrium;
-  s.initial_state = InitialState::Equilibrium;
-  Simulation sim(g, s);
+  const GridParams g = hangingFromTwoGrips();
+  Simulation sim(g, hangingFullParams());
   const Eigen::Matrix3Xd x = sim.points();
   const Eigen::Vector3d middle = 0.5 * (x.col(4) + x.col(5));
   const std::vector<Simulation::Wrench> about_middle = sim.handleWrenches({middle, middle});
