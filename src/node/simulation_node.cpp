@@ -310,6 +310,17 @@ const SimulationNode::Track* SimulationNode::reference() const
   return nullptr;
 }
 
+bool SimulationNode::followsFrames() const
+{
+  for (size_t h = 0; h < handle_frames_->size(); ++h)
+    if (handle_frames_->following(h))
+      return true;
+  for (size_t k = 0; k < collider_frames_->size(); ++k)
+    if (collider_frames_->following(k))
+      return true;
+  return false;
+}
+
 std::optional<FramePose> SimulationNode::lookupFrame(const std::string& frame, bool ever_found, std::string& problem)
 {
   problem.clear();
@@ -323,7 +334,13 @@ std::optional<FramePose> SimulationNode::lookupFrame(const std::string& frame, b
     return std::nullopt;
   try
   {
-    const auto stamped = tf_buffer_.lookupTransform(config_.node.fixed_frame, frame, ros::Time(0));
+    // Under simulated time a broadcaster (scripts/gripper.py) answers the clock this node published
+    // last: the frame is taken at that stamp, interpolated between its samples, so that the motion
+    // keeps its pace in simulated time however slowly the node steps. A stamp not yet answered, or
+    // wall time, takes the latest sample.
+    const ros::Time at_clock(clock_seconds_);
+    const bool at_stamp = use_sim_time_ && tf_buffer_.canTransform(config_.node.fixed_frame, frame, at_clock);
+    const auto stamped = tf_buffer_.lookupTransform(config_.node.fixed_frame, frame, at_stamp ? at_clock : ros::Time(0));
     const auto& t = stamped.transform;
     FramePose pose;
     pose.translation = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);

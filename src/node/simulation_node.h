@@ -191,6 +191,8 @@ private:
   // The latest pose of `frame` in fixed_frame (tf_buffer_), or nothing and why (`problem`): not
   // available (tf2's reason in brackets), stale, non-finite; a frame never seen yet is waited for
   // quietly (nothing, `problem` empty) during its first seconds. Handles and colliders alike.
+  // Whether a handle or a collider follows a TF frame now.
+  bool followsFrames() const;
   std::optional<FramePose> lookupFrame(const std::string& frame, bool ever_found, std::string& problem);
   // Colliders on TF frames: looks their frames up, warns for the missing ones (throttled).
   void updateColliderTargets();  // with mutex_ held

@@ -321,13 +321,19 @@ void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& statu
                   1e3 * mean_cost, 1e3 * period, diag_late_ticks_, diag_ticks_);
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, behind);
     // On the console too, with what costs: the steps a tick asks for and what one takes.
+    // Frames moved in wall time then move faster in simulated time than their broadcaster meant.
+    const bool compressed = !use_sim_time_ && followsFrames();
     ROS_WARN_THROTTLE(kBehindWarningPeriod,
                       "%s: %s takes %.3g ms a step and a tick asks for %.1f steps (real_time_factor / "
                       "(publish_rate time_step)); a smaller real_time_factor, a larger time_step or a cheaper "
-                      "method keeps up",
+                      "method keeps up%s",
                       behind, lockstep() ? "the slowest method in lockstep" : ("method " + toString(simulation.method())).c_str(),
                       1e3 * step_seconds,
-                      params.real_time_factor / (params.publish_rate * config_.simulation.time_step));
+                      params.real_time_factor / (params.publish_rate * config_.simulation.time_step),
+                      compressed ? ". The TF frames the cloth follows move in wall time, so their motion is compressed "
+                                   "into less simulated time: with use_sim_time:=true the node publishes /clock and "
+                                   "their broadcasters keep its pace"
+                                 : "");
   }
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, paused_ ? "paused" : "stepping");
