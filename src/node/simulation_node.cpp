@@ -100,9 +100,7 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
     track.markers_pub = track_nh.advertise<visualization_msgs::MarkerArray>("markers", 1);
     track.status_pub = track_nh.advertise<Status>("status", 10);
     track.points_pub = track_nh.advertise<sensor_msgs::PointCloud2>("points", 1);
-    for (size_t h = 0; h < params.handles.size(); ++h)
-      track.handle_force_pubs.push_back(
-          track_nh.advertise<geometry_msgs::WrenchStamped>("handle_force/handle_" + std::to_string(h), 10));
+    advertiseHandleForces(track, params.handles.size());
     for (size_t i = 0; i < config_.simulation.colliders.size(); ++i)
       track.contact_force_pubs.push_back(
           track_nh.advertise<geometry_msgs::WrenchStamped>("contact_force/collider_" + std::to_string(i), 10));
@@ -125,6 +123,8 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
   pause_srv_ = service_nh.advertiseService("pause", &SimulationNode::pause, this);
   step_srv_ = service_nh.advertiseService("step", &SimulationNode::step, this);
   clear_forces_srv_ = service_nh.advertiseService("clear_forces", &SimulationNode::clearForces, this);
+  attach_srv_ = service_nh.advertiseService("attach", &SimulationNode::attach, this);
+  detach_srv_ = service_nh.advertiseService("detach", &SimulationNode::detach, this);
   applied_forces_ = std::make_unique<AppliedForces>(primary().simulation->grid());
   external_force_ = Eigen::VectorXd::Zero(primary().simulation->positions().size());
   tf_listener_ = std::make_unique<tf2_ros::TransformListener>(tf_buffer_);
@@ -547,7 +547,10 @@ void SimulationNode::onTick()
                                                   [](const Track& t) { return !t.simulation->diverged(); })
                                     : !primary().simulation->diverged();
     if (!paused_ && running)
+    {
       stepTick(lock, period);
+      releaseSlippingGrasps();
+    }
     for (Track& track : tracks_)
     {
       tick_steps_ = std::max(tick_steps_, track.tick_steps);
