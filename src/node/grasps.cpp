@@ -241,7 +241,7 @@ bool SimulationNode::attach(Attach::Request& request, Attach::Response& response
   for (size_t h = 0; h < config_.node.handles.size(); ++h)
     keep.push_back(static_cast<int>(h));
   keep.push_back(-1);
-  const std::string failure = changeHandles(&lock, next, keep, Grip{pose, request.snap});
+  const std::string failure = changeHandles(&lock, next, keep, Grip{pose, request.snap != 0});
   if (!failure.empty())
   {
     response.message = refused + failure;

@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Rostest checker of grasps while running (grasps.test): ~attach, ~detach, a grasp that slips beyond
-its max_force, and the refusals of bad requests, each naming the value."""
+its max_force, and the refusals of bad requests, each naming the value. The corner is read on the
+physical track, the grasp's wrench on the full one."""
 import math
 import sys
 import threading
@@ -29,8 +30,8 @@ class Recorder:
         self.statuses = []
         self.warnings = []
         self.subs = [rospy.Subscriber("/tf", TFMessage, self.on_tf, queue_size=1000),
-                     rospy.Subscriber(NODE + "/handle_force/handle_0", WrenchStamped, self.on_wrench, queue_size=100),
-                     rospy.Subscriber(NODE + "/status", Status, self.on_status, queue_size=100),
+                     rospy.Subscriber(NODE + "/full/handle_force/handle_0", WrenchStamped, self.on_wrench, queue_size=100),
+                     rospy.Subscriber(NODE + "/physical/status", Status, self.on_status, queue_size=100),
                      rospy.Subscriber("/rosout", Log, self.on_log, queue_size=1000)]
 
     def on_tf(self, msg):
@@ -38,7 +39,7 @@ class Recorder:
         for t in msg.transforms:
             p = t.transform.translation
             with self.lock:
-                if t.child_frame_id == "grid/particle_%d" % CORNER:
+                if t.child_frame_id == "physical/grid/particle_%d" % CORNER:
                     self.corner.append((now, np.array([p.x, p.y, p.z])))
                 elif t.child_frame_id == "corner":
                     self.frame.append((now, np.array([p.x, p.y, p.z])))
