@@ -110,6 +110,8 @@ std::vector<int> surfaceLines(int count, int stride)
 namespace
 {
 
+using visualization_msgs::Marker;
+
 // How a grid is drawn: the options, its points and the colours they share.
 struct MarkerStyle
 {
@@ -122,9 +124,8 @@ struct MarkerStyle
   geometry_msgs::Point at(int k) const { return point(points.col(k) + options.offset); }
 };
 
-visualization_msgs::Marker particlesMarker(const Grid& grid, const MarkerStyle& style)
+Marker particlesMarker(const Grid& grid, const MarkerStyle& style)
 {
-  using visualization_msgs::Marker;
   const MarkerOptions& options = style.options;
   if (!options.particles)
     return deleted(options, "particles", style.stamp);
@@ -143,9 +144,8 @@ visualization_msgs::Marker particlesMarker(const Grid& grid, const MarkerStyle& 
   return particles;
 }
 
-visualization_msgs::Marker springsMarker(const Grid& grid, const MarkerStyle& style)
+Marker springsMarker(const Grid& grid, const MarkerStyle& style)
 {
-  using visualization_msgs::Marker;
   const MarkerOptions& options = style.options;
   if (!options.springs)
     return deleted(options, "springs", style.stamp);
@@ -167,10 +167,9 @@ visualization_msgs::Marker springsMarker(const Grid& grid, const MarkerStyle& st
   return springs;
 }
 
-visualization_msgs::Marker surfaceMarker(const Grid& grid, const MarkerStyle& style,
+Marker surfaceMarker(const Grid& grid, const MarkerStyle& style,
                                          const Eigen::VectorXd& particle_strains)
 {
-  using visualization_msgs::Marker;
   const MarkerOptions& options = style.options;
   const GridParams& g = grid.params();
   if (!(options.surface && g.rows > 1 && g.cols > 1))
@@ -207,9 +206,8 @@ visualization_msgs::Marker surfaceMarker(const Grid& grid, const MarkerStyle& st
   return surface;
 }
 
-visualization_msgs::Marker labelMarker(const Grid& grid, const MarkerStyle& style)
+Marker labelMarker(const Grid& grid, const MarkerStyle& style)
 {
-  using visualization_msgs::Marker;
   const MarkerOptions& options = style.options;
   const GridParams& g = grid.params();
   Marker label = baseMarker(options, "label", Marker::TEXT_VIEW_FACING, style.stamp);
