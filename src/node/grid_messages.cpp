@@ -107,106 +107,136 @@ std::vector<int> surfaceLines(int count, int stride)
   return lines;
 }
 
+namespace
+{
+
+using visualization_msgs::Marker;
+
+// How a grid is drawn: the options, its points and the colours they share.
+struct MarkerStyle
+{
+  const MarkerOptions& options;
+  const Eigen::Matrix3Xd& points;
+  const ros::Time& stamp;
+  bool strain_colours;  // by strain, not for the ghost
+  float alpha;
+  std_msgs::ColorRGBA ghost_colour;
+  geometry_msgs::Point at(int k) const { return point(points.col(k) + options.offset); }
+};
+
+Marker particlesMarker(const Grid& grid, const MarkerStyle& style)
+{
+  const MarkerOptions& options = style.options;
+  if (!options.particles)
+    return deleted(options, "particles", style.stamp);
+  Marker particles = baseMarker(options, "particles", Marker::SPHERE_LIST, style.stamp);
+  particles.scale.x = particles.scale.y = particles.scale.z = options.particle_diameter;
+  const std_msgs::ColorRGBA free_colour = rgba(0.2f, 0.5f, 1.0f, style.alpha),
+                            fixed_colour = rgba(0.9f, 0.2f, 0.15f, style.alpha);
+  particles.color = options.ghost ? style.ghost_colour : free_colour;
+  particles.points.reserve(style.points.cols());
+  for (int k = 0; k < style.points.cols(); ++k)
+  {
+    particles.points.push_back(style.at(k));
+    if (!options.ghost)
+      particles.colors.push_back(grid.isFixed(k) ? fixed_colour : free_colour);
+  }
+  return particles;
+}
+
+Marker springsMarker(const Grid& grid, const MarkerStyle& style)
+{
+  const MarkerOptions& options = style.options;
+  if (!options.springs)
+    return deleted(options, "springs", style.stamp);
+  Marker springs = baseMarker(options, "springs", Marker::LINE_LIST, style.stamp);
+  springs.scale.x = options.spring_width;
+  const std_msgs::ColorRGBA rest = options.ghost ? style.ghost_colour : rgba(0.8f, 0.8f, 0.8f);
+  springs.color = rest;
+  springs.points.reserve(2 * grid.springs().size());
+  for (const Spring& spring : grid.springs())
+  {
+    springs.points.push_back(style.at(spring.i));
+    springs.points.push_back(style.at(spring.j));
+    if (!style.strain_colours)
+      continue;
+    const std_msgs::ColorRGBA c = strainColour(rest, springStrain(spring, style.points), options.strain_scale);
+    springs.colors.push_back(c);
+    springs.colors.push_back(c);
+  }
+  return springs;
+}
+
+Marker surfaceMarker(const Grid& grid, const MarkerStyle& style,
+                                         const Eigen::VectorXd& particle_strains)
+{
+  const MarkerOptions& options = style.options;
+  const GridParams& g = grid.params();
+  if (!(options.surface && g.rows > 1 && g.cols > 1))
+    return deleted(options, "surface", style.stamp);
+  Marker surface = baseMarker(options, "surface", Marker::TRIANGLE_LIST, style.stamp);
+  surface.scale.x = surface.scale.y = surface.scale.z = 1.0;
+  const std_msgs::ColorRGBA rest = options.ghost ? style.ghost_colour : rgba(0.85f, 0.8f, 0.65f);
+  surface.color = rest;
+  const int stride = surfaceStride(g.rows, g.cols, options.surface_max_cells);
+  const std::vector<int> rows = surfaceLines(g.rows, stride), cols = surfaceLines(g.cols, stride);
+  const bool strain_colours = style.strain_colours;
+  const Eigen::VectorXd strains = !strain_colours             ? Eigen::VectorXd()
+                                  : particle_strains.size() > 0 ? particle_strains
+                                                                : particleStrains(grid, style.points);
+  const size_t vertices = 12 * (rows.size() - 1) * (cols.size() - 1);
+  surface.points.reserve(vertices);
+  if (strain_colours)
+    surface.colors.reserve(vertices);
+  auto vertex = [&](int k) {
+    surface.points.push_back(style.at(k));
+    if (strain_colours)
+      surface.colors.push_back(strainColour(rest, strains[k], options.strain_scale));
+  };
+  // Two triangles per cell, each in both windings: a viewer culls back faces and lights each side
+  // by its own normal, so the sheet is seen from either side.
+  for (size_t r = 0; r + 1 < rows.size(); ++r)
+    for (size_t c = 0; c + 1 < cols.size(); ++c)
+    {
+      const int a = grid.particleIndex(rows[r], cols[c]), b = grid.particleIndex(rows[r], cols[c + 1]);
+      const int d = grid.particleIndex(rows[r + 1], cols[c]), e = grid.particleIndex(rows[r + 1], cols[c + 1]);
+      for (const int k : {a, d, b, b, d, e, a, b, d, b, e, d})
+        vertex(k);
+    }
+  return surface;
+}
+
+Marker labelMarker(const Grid& grid, const MarkerStyle& style)
+{
+  const MarkerOptions& options = style.options;
+  const GridParams& g = grid.params();
+  Marker label = baseMarker(options, "label", Marker::TEXT_VIEW_FACING, style.stamp);
+  // Readable beside the grid at the distance that shows it whole; centred above the top row, clear
+  // of the grid (a sheet tilted towards the viewer would hide its lower lines) and of the frame names.
+  label.scale.z = 0.02 + 0.05 * (std::max(g.rows, g.cols) - 1) * g.spacing;
+  const Eigen::Vector3d top = 0.5 * (style.points.col(0) + style.points.col(g.cols - 1)) + options.offset;
+  const double lines = 1.0 + std::count(options.label.begin(), options.label.end(), '\n');
+  label.pose.position = point(top + Eigen::Vector3d(0.0, 0.0, 0.6 * lines * label.scale.z + g.spacing));
+  label.color = rgba(1.0f, 1.0f, 1.0f);
+  label.text = options.label;
+  return label;
+}
+
+}  // namespace
+
 visualization_msgs::MarkerArray makeMarkers(const Grid& grid, const MarkerOptions& options,
                                             const Eigen::Matrix3Xd& points, const ros::Time& stamp,
                                             const Eigen::VectorXd& particle_strains)
 {
-  using visualization_msgs::Marker;
-  visualization_msgs::MarkerArray array;
-  const bool strain_colours = options.color_by_strain && !options.ghost;
   const float alpha = options.ghost ? 0.4f : 1.0f;
-  const std_msgs::ColorRGBA ghost_colour = rgba(0.4f, 0.9f, 1.0f, alpha);
-  auto at = [&](int k) { return point(points.col(k) + options.offset); };
-
-  if (options.particles)
-  {
-    Marker particles = baseMarker(options, "particles", Marker::SPHERE_LIST, stamp);
-    particles.scale.x = particles.scale.y = particles.scale.z = options.particle_diameter;
-    const std_msgs::ColorRGBA free_colour = rgba(0.2f, 0.5f, 1.0f, alpha), fixed_colour = rgba(0.9f, 0.2f, 0.15f, alpha);
-    particles.color = options.ghost ? ghost_colour : free_colour;
-    particles.points.reserve(points.cols());
-    for (int k = 0; k < points.cols(); ++k)
-    {
-      particles.points.push_back(at(k));
-      if (!options.ghost)
-        particles.colors.push_back(grid.isFixed(k) ? fixed_colour : free_colour);
-    }
-    array.markers.push_back(std::move(particles));
-  }
-  else
-    array.markers.push_back(deleted(options, "particles", stamp));
-
-  if (options.springs)
-  {
-    Marker springs = baseMarker(options, "springs", Marker::LINE_LIST, stamp);
-    springs.scale.x = options.spring_width;
-    const std_msgs::ColorRGBA rest = options.ghost ? ghost_colour : rgba(0.8f, 0.8f, 0.8f);
-    springs.color = rest;
-    springs.points.reserve(2 * grid.springs().size());
-    for (const Spring& spring : grid.springs())
-    {
-      springs.points.push_back(at(spring.i));
-      springs.points.push_back(at(spring.j));
-      if (!strain_colours)
-        continue;
-      const std_msgs::ColorRGBA c = strainColour(rest, springStrain(spring, points), options.strain_scale);
-      springs.colors.push_back(c);
-      springs.colors.push_back(c);
-    }
-    array.markers.push_back(std::move(springs));
-  }
-  else
-    array.markers.push_back(deleted(options, "springs", stamp));
-
-  const GridParams& g = grid.params();
-  if (options.surface && g.rows > 1 && g.cols > 1)
-  {
-    Marker surface = baseMarker(options, "surface", Marker::TRIANGLE_LIST, stamp);
-    surface.scale.x = surface.scale.y = surface.scale.z = 1.0;
-    const std_msgs::ColorRGBA rest = options.ghost ? ghost_colour : rgba(0.85f, 0.8f, 0.65f);
-    surface.color = rest;
-    const int stride = surfaceStride(g.rows, g.cols, options.surface_max_cells);
-    const std::vector<int> rows = surfaceLines(g.rows, stride), cols = surfaceLines(g.cols, stride);
-    const Eigen::VectorXd strains = !strain_colours             ? Eigen::VectorXd()
-                                    : particle_strains.size() > 0 ? particle_strains
-                                                                  : particleStrains(grid, points);
-    const size_t vertices = 12 * (rows.size() - 1) * (cols.size() - 1);
-    surface.points.reserve(vertices);
-    if (strain_colours)
-      surface.colors.reserve(vertices);
-    auto vertex = [&](int k) {
-      surface.points.push_back(at(k));
-      if (strain_colours)
-        surface.colors.push_back(strainColour(rest, strains[k], options.strain_scale));
-    };
-    // Two triangles per cell, each in both windings: a viewer culls back faces and lights each side
-    // by its own normal, so the sheet is seen from either side.
-    for (size_t r = 0; r + 1 < rows.size(); ++r)
-      for (size_t c = 0; c + 1 < cols.size(); ++c)
-      {
-        const int a = grid.particleIndex(rows[r], cols[c]), b = grid.particleIndex(rows[r], cols[c + 1]);
-        const int d = grid.particleIndex(rows[r + 1], cols[c]), e = grid.particleIndex(rows[r + 1], cols[c + 1]);
-        for (const int k : {a, d, b, b, d, e, a, b, d, b, e, d})
-          vertex(k);
-      }
-    array.markers.push_back(std::move(surface));
-  }
-  else
-    array.markers.push_back(deleted(options, "surface", stamp));
-
+  const MarkerStyle style{options, points, stamp, options.color_by_strain && !options.ghost, alpha,
+                          rgba(0.4f, 0.9f, 1.0f, alpha)};
+  visualization_msgs::MarkerArray array;
+  array.markers.push_back(particlesMarker(grid, style));
+  array.markers.push_back(springsMarker(grid, style));
+  array.markers.push_back(surfaceMarker(grid, style, particle_strains));
   if (!options.label.empty())
-  {
-    Marker label = baseMarker(options, "label", Marker::TEXT_VIEW_FACING, stamp);
-    // Readable beside the grid at the distance that shows it whole; centred above the top row, clear
-    // of the grid (a sheet tilted towards the viewer would hide its lower lines) and of the frame names.
-    label.scale.z = 0.02 + 0.05 * (std::max(g.rows, g.cols) - 1) * g.spacing;
-    const Eigen::Vector3d top = 0.5 * (points.col(0) + points.col(g.cols - 1)) + options.offset;
-    const double lines = 1.0 + std::count(options.label.begin(), options.label.end(), '\n');
-    label.pose.position = point(top + Eigen::Vector3d(0.0, 0.0, 0.6 * lines * label.scale.z + g.spacing));
-    label.color = rgba(1.0f, 1.0f, 1.0f);
-    label.text = options.label;
-    array.markers.push_back(std::move(label));
-  }
+    array.markers.push_back(labelMarker(grid, style));
   return array;
 }
 

@@ -107,22 +107,9 @@ std::string frameId(const ParameterSource& s, const std::string& name, const std
   return value;
 }
 
-}  // namespace
-
-std::string particleFrame(const std::string& grid_frame, int particle)
+// real_time_factor and publish_rate, and the steps per tick they give at the time step.
+void loadPacing(const NodeParameterSource& s, const SimulationParams& sim, NodeParams& p)
 {
-  return grid_frame + "/particle_" + std::to_string(particle);
-}
-
-Eigen::Vector3d methodOffset(const NodeParams& params, size_t index)
-{
-  const double centre = 0.5 * (static_cast<double>(params.methods.size()) - 1.0);
-  return params.offset + Eigen::Vector3d((static_cast<double>(index) - centre) * params.method_spacing, 0.0, 0.0);
-}
-
-NodeParams loadNodeParams(const NodeParameterSource& s, const GridParams& grid, const SimulationParams& sim)
-{
-  NodeParams p;
   p.real_time_factor = positive(s, "real_time_factor", p.real_time_factor, 1000.0, "");
   p.publish_rate = positive(s, "publish_rate", p.publish_rate, 1000.0, " Hz");
   const double steps_per_tick = p.real_time_factor / (p.publish_rate * sim.time_step);
@@ -137,7 +124,11 @@ NodeParams loadNodeParams(const NodeParameterSource& s, const GridParams& grid, 
             << " (lower real_time_factor, raise publish_rate or time_step)";
     rejectParameter("real_time_factor, publish_rate, time_step", value.str(), allowed.str());
   }
+}
 
+// The fixed and grid frames, the particles given TF frames, and where the grid is drawn.
+void loadFrames(const NodeParameterSource& s, const GridParams& grid, NodeParams& p)
+{
   p.fixed_frame = frameId(s, "fixed_frame", p.fixed_frame);
   p.grid_frame = frameId(s, "grid_frame", p.grid_frame);
   if (p.grid_frame == p.fixed_frame)
@@ -162,19 +153,28 @@ NodeParams loadNodeParams(const NodeParameterSource& s, const GridParams& grid, 
       rejectParameter("offset", *bad, "must be a list of 3 numbers [x, y, z] in m, each in [-1e+06, 1e+06]");
     p.offset = Eigen::Vector3d((*offset)[0], (*offset)[1], (*offset)[2]);
   }
+}
+
+// How the markers look: colours, sizes, which namespaces are drawn.
+void loadDrawing(const NodeParameterSource& s, const GridParams& grid, NodeParams& p)
+{
   p.color_by_strain = s.getBool("color_by_strain").value_or(p.color_by_strain);
   p.strain_scale = positive(s, "strain_scale", p.strain_scale, kMaxLength, "");
   p.particle_diameter = positive(s, "particle_diameter", 0.3 * grid.spacing, kMaxLength, " m");
   p.spring_width = positive(s, "spring_width", 0.06 * grid.spacing, kMaxLength, " m");
   p.detail_max_particles = intInRange(s, "detail_max_particles", p.detail_max_particles, 0, kMaxParticles);
-  const bool detailed = n <= p.detail_max_particles;
+  const bool detailed = grid.rows * grid.cols <= p.detail_max_particles;
   p.show_surface = s.getBool("show_surface").value_or(p.show_surface);
   p.show_particles = s.getBool("show_particles").value_or(detailed);
   p.show_springs = s.getBool("show_springs").value_or(detailed);
   p.surface_max_cells = intInRange(s, "surface_max_cells", p.surface_max_cells, 1, kMaxSurfaceCells);
   p.show_labels = s.getBool("show_labels").value_or(p.show_labels);
   p.show_shadow = s.getBool("show_shadow").value_or(p.show_shadow);
+}
 
+// The methods compared in lockstep and their spacing, or the shadow full beside a single one.
+void loadMethods(const NodeParameterSource& s, const GridParams& grid, NodeParams& p)
+{
   if (const auto names = s.getStringList("methods"))
   {
     std::string allowed;
@@ -197,6 +197,28 @@ NodeParams loadNodeParams(const NodeParameterSource& s, const GridParams& grid, 
   if (p.shadow_full && !p.methods.empty())
     rejectParameter("shadow_full", "true",
                     "must be false when methods is set (list full among the methods to compare with it)");
+}
+
+}  // namespace
+
+std::string particleFrame(const std::string& grid_frame, int particle)
+{
+  return grid_frame + "/particle_" + std::to_string(particle);
+}
+
+Eigen::Vector3d methodOffset(const NodeParams& params, size_t index)
+{
+  const double centre = 0.5 * (static_cast<double>(params.methods.size()) - 1.0);
+  return params.offset + Eigen::Vector3d((static_cast<double>(index) - centre) * params.method_spacing, 0.0, 0.0);
+}
+
+NodeParams loadNodeParams(const NodeParameterSource& s, const GridParams& grid, const SimulationParams& sim)
+{
+  NodeParams p;
+  loadPacing(s, sim, p);
+  loadFrames(s, grid, p);
+  loadDrawing(s, grid, p);
+  loadMethods(s, grid, p);
   p.status_log_period = nonNegative(s, "status_log_period", p.status_log_period, 86400.0, " s (0: no status lines)");
   p.diagnostic_period = positive(s, "diagnostic_period", p.diagnostic_period, 3600.0, " s");
   // The spring acts from the state at the start of each step: a stiffer one than this the step cannot hold.

@@ -104,7 +104,139 @@ RolloutOutcome outcomeMessage(const CandidateOutcome& outcome)
   return m;
 }
 
+// The goal's method: `full` when it names none.
+Method rolloutMethod(const std::string& name)
+{
+  try
+  {
+    return name.empty() ? Method::Full : parseMethod(name);
+  }
+  catch (const std::invalid_argument&)
+  {
+    throw std::invalid_argument("method '" + name + "': must be full, linear, physical or cubature (empty: full)");
+  }
+}
+
+// The goal's candidates, each handle frame's times and poses as waypoints; throws
+// std::invalid_argument for a handle whose times and poses differ in number.
+std::vector<CandidateMotion> candidateMotions(const RolloutGoal& goal)
+{
+  std::vector<CandidateMotion> candidates;
+  for (const auto& candidate : goal.candidates)
+  {
+    CandidateMotion motion;
+    for (const auto& handle : candidate.handles)
+    {
+      std::vector<HandleWaypoint> waypoints;
+      if (handle.times.size() != handle.poses.size())
+        throw std::invalid_argument("candidates[" + std::to_string(candidates.size()) + "]: handle frame '" +
+                                    handle.frame + "' has " + std::to_string(handle.times.size()) + " times and " +
+                                    std::to_string(handle.poses.size()) + " poses: must have one pose per time");
+      for (size_t i = 0; i < handle.times.size(); ++i)
+        waypoints.push_back(HandleWaypoint{handle.times[i], framePose(handle.poses[i])});
+      motion.frames.emplace_back(handle.frame, std::move(waypoints));
+    }
+    candidates.push_back(std::move(motion));
+  }
+  return candidates;
+}
+
+// "3 of 3 candidates (0 diverged) x 1 s simulated with full at time_step 0.001 s in ... s wall on 2
+// threads, ... s of their CPU", with the seconds of it `built` building the workers when not 0.
+std::string rolloutSummary(const std::vector<CandidateOutcome>& outcomes, const RolloutRequest& request,
+                           size_t threads, double wall, double cpu, double built)
+{
+  const long diverged = std::count_if(outcomes.begin(), outcomes.end(), [](const auto& o) { return o.diverged; });
+  std::ostringstream message;
+  message << outcomes.size() << " of " << request.candidates.size() << " candidates (" << diverged << " diverged) x "
+          << request.horizon << " s simulated with " << toString(request.method) << " at time_step "
+          << request.time_step << " s in " << wall << " s wall on " << threads << " threads, " << cpu
+          << " s of their CPU"
+          << (built > 0.0 ? " (" + std::to_string(built) + " s of it building their simulations)" : std::string());
+  return message.str();
+}
+
 }  // namespace
+
+// What a goal runs from: its request and the node's limits, and the live simulation's grid,
+// parameters and build, copied under the lock.
+struct SimulationNode::RolloutSetup
+{
+  RolloutRequest request;
+  RolloutLimits limits;
+  GridParams grid;
+  SimulationParams params;
+  long build = 0;
+};
+
+SimulationNode::RolloutSetup SimulationNode::rolloutSetup(const RolloutGoal& goal)
+{
+  RolloutSetup setup;
+  RolloutRequest& request = setup.request;
+  {
+    ServiceLock lock(*this);
+    const Simulation& live = *primary().simulation;
+    setup.grid = live.grid().params();
+    setup.params = live.params();
+    setup.build = live_builds_;
+    request.frames = *handle_frames_;
+    request.grid_offset = primary().offset;
+    setup.limits = RolloutLimits{config_.node.rollout_threads, config_.node.rollout_max_horizon,
+                                 config_.node.rollout_max_candidates, setup.params.memory_limit_gb};
+    request.state = goal.use_state ? simulationState(goal.state, request.frames) : live.saveState();
+    if (goal.use_state)
+      placeHandleFrames(goal.state, request.frames);
+  }
+  request.method = rolloutMethod(goal.method);
+  request.time_step = goal.time_step == 0.0 ? setup.params.time_step : goal.time_step;
+  request.horizon = goal.horizon;
+  request.sample_times = goal.sample_times;
+  request.candidates = candidateMotions(goal);
+  checkRolloutRequest(request, setup.limits, setup.grid, setup.params);
+  return setup;
+}
+
+double SimulationNode::prepareRolloutWorkers(const RolloutSetup& setup)
+{
+  const auto start = std::chrono::steady_clock::now();
+  double built = 0.0;
+  const SimulationParams& params = setup.params;
+  // Self-collision is tuned live without a rebuild: workers built with other settings are built anew.
+  const auto tunedSince = [&params](const Simulation& worker) {
+    const SimulationParams& p = worker.params();
+    return p.self_collision != params.self_collision || p.self_collision_thickness != params.self_collision_thickness ||
+           p.self_friction != params.self_friction;
+  };
+  if (rollout_workers_build_ != setup.build ||
+      rollout_workers_.size() != static_cast<size_t>(setup.limits.threads) || tunedSince(*rollout_workers_.front()))
+  {
+    rollout_workers_.clear();
+    for (int k = 0; k < setup.limits.threads; ++k)
+      rollout_workers_.push_back(
+          buildSimulation(setup.grid, params, false, "building rollout worker " + std::to_string(k)));
+    rollout_workers_build_ = setup.build;
+    built = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  }
+  rolloutStart(*rollout_workers_.front(), setup.request);  // a start that does not fit is refused here
+  return built;
+}
+
+std::vector<CandidateOutcome> SimulationNode::runRolloutWorkers(const RolloutRequest& request, double& cpu)
+{
+  std::vector<Simulation*> workers;
+  for (const auto& worker : rollout_workers_)
+    workers.push_back(worker.get());
+  int finished = 0;
+  const int total = static_cast<int>(request.candidates.size());
+  return runRollouts(workers, request, rollout_cancel_, [&](const CandidateOutcome& outcome) {
+    RolloutFeedback feedback;
+    feedback.candidate = outcome.candidate;
+    feedback.finished = ++finished;
+    feedback.total = total;
+    feedback.diverged = outcome.diverged;
+    rollout_server_->publishFeedback(feedback);
+  }, &cpu);
+}
 
 void SimulationNode::executeRollout(const RolloutGoalConstPtr& goal)
 {
@@ -117,67 +249,10 @@ void SimulationNode::executeRollout(const RolloutGoalConstPtr& goal)
     rollout_server_->setAborted(result, result.message);
   };
   // The start and the limits, copied under the lock; nothing after this touches the live simulation.
-  RolloutRequest request;
-  RolloutLimits limits;
-  GridParams grid;
-  SimulationParams params;
-  long build = 0;
-  {
-    ServiceLock lock(*this);
-    const Simulation& live = *primary().simulation;
-    grid = live.grid().params();
-    params = live.params();
-    build = live_builds_;
-    request.frames = *handle_frames_;
-    request.grid_offset = primary().offset;
-    limits = RolloutLimits{config_.node.rollout_threads, config_.node.rollout_max_horizon,
-                           config_.node.rollout_max_candidates, params.memory_limit_gb};
-    try
-    {
-      request.state = goal->use_state ? simulationState(goal->state, request.frames) : live.saveState();
-    }
-    catch (const std::invalid_argument& error)
-    {
-      refuse(error.what());
-      return;
-    }
-    if (goal->use_state)
-      placeHandleFrames(goal->state, request.frames);
-  }
+  RolloutSetup setup;
   try
   {
-    request.method = goal->method.empty() ? Method::Full : parseMethod(goal->method);
-  }
-  catch (const std::invalid_argument&)
-  {
-    refuse("method '" + goal->method + "': must be full, linear, physical or cubature (empty: full)");
-    return;
-  }
-  request.time_step = goal->time_step == 0.0 ? params.time_step : goal->time_step;
-  request.horizon = goal->horizon;
-  request.sample_times = goal->sample_times;
-  for (const auto& candidate : goal->candidates)
-  {
-    CandidateMotion motion;
-    for (const auto& handle : candidate.handles)
-    {
-      std::vector<HandleWaypoint> waypoints;
-      if (handle.times.size() != handle.poses.size())
-      {
-        refuse("candidates[" + std::to_string(request.candidates.size()) + "]: handle frame '" + handle.frame +
-               "' has " + std::to_string(handle.times.size()) + " times and " + std::to_string(handle.poses.size()) +
-               " poses: must have one pose per time");
-        return;
-      }
-      for (size_t i = 0; i < handle.times.size(); ++i)
-        waypoints.push_back(HandleWaypoint{handle.times[i], framePose(handle.poses[i])});
-      motion.frames.emplace_back(handle.frame, std::move(waypoints));
-    }
-    request.candidates.push_back(std::move(motion));
-  }
-  try
-  {
-    checkRolloutRequest(request, limits, grid, params);
+    setup = rolloutSetup(*goal);
   }
   catch (const std::invalid_argument& error)
   {
@@ -191,22 +266,7 @@ void SimulationNode::executeRollout(const RolloutGoalConstPtr& goal)
   double built = 0.0;  // s: building the workers' simulations (the first goal's)
   try
   {
-    // Self-collision is tuned live without a rebuild: workers built with other settings are built anew.
-    const auto tunedSince = [&params](const Simulation& worker) {
-      const SimulationParams& p = worker.params();
-      return p.self_collision != params.self_collision || p.self_collision_thickness != params.self_collision_thickness ||
-             p.self_friction != params.self_friction;
-    };
-    if (rollout_workers_build_ != build || rollout_workers_.size() != static_cast<size_t>(limits.threads) ||
-        tunedSince(*rollout_workers_.front()))
-    {
-      rollout_workers_.clear();
-      for (int k = 0; k < limits.threads; ++k)
-        rollout_workers_.push_back(buildSimulation(grid, params, false, "building rollout worker " + std::to_string(k)));
-      rollout_workers_build_ = build;
-      built = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    }
-    rolloutStart(*rollout_workers_.front(), request);  // a start that does not fit is refused here
+    built = prepareRolloutWorkers(setup);
   }
   catch (const std::invalid_argument& error)
   {
@@ -221,23 +281,12 @@ void SimulationNode::executeRollout(const RolloutGoalConstPtr& goal)
     rollout_server_->setAborted(result, result.message);
     return;
   }
-  std::vector<Simulation*> workers;
-  for (const auto& worker : rollout_workers_)
-    workers.push_back(worker.get());
-  int finished = 0;
-  const int total = static_cast<int>(request.candidates.size());
+  const RolloutRequest& request = setup.request;
   std::vector<CandidateOutcome> outcomes;
   double cpu = 0.0;
   try
   {
-    outcomes = runRollouts(workers, request, rollout_cancel_, [&](const CandidateOutcome& outcome) {
-      RolloutFeedback feedback;
-      feedback.candidate = outcome.candidate;
-      feedback.finished = ++finished;
-      feedback.total = total;
-      feedback.diverged = outcome.diverged;
-      rollout_server_->publishFeedback(feedback);
-    }, &cpu);
+    outcomes = runRolloutWorkers(request, cpu);
   }
   catch (const std::exception& error)
   {
@@ -250,13 +299,7 @@ void SimulationNode::executeRollout(const RolloutGoalConstPtr& goal)
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   for (const CandidateOutcome& outcome : outcomes)
     result.outcomes.push_back(outcomeMessage(outcome));
-  const long diverged = std::count_if(outcomes.begin(), outcomes.end(), [](const auto& o) { return o.diverged; });
-  std::ostringstream message;
-  message << outcomes.size() << " of " << total << " candidates (" << diverged << " diverged) x " << request.horizon
-          << " s simulated with " << toString(request.method) << " at time_step " << request.time_step << " s in "
-          << wall << " s wall on " << workers.size() << " threads, " << cpu << " s of their CPU"
-          << (built > 0.0 ? " (" + std::to_string(built) + " s of it building their simulations)" : std::string());
-  result.message = message.str();
+  result.message = rolloutSummary(outcomes, request, rollout_workers_.size(), wall, cpu, built);
   if (rollout_cancel_)
   {
     result.success = false;

@@ -52,10 +52,10 @@ FramePose poseAt(const FramePose& start, const std::vector<HandleWaypoint>& wayp
 
 long stepIndex(double t, double dt) { return std::lround(t / dt); }
 
-}  // namespace
-
-void checkRolloutRequest(const RolloutRequest& request, const RolloutLimits& limits, const GridParams& grid,
-                         const SimulationParams& params)
+// The candidates' number, the horizon, the time step (`rollout`: the live parameters in the
+// request's method and time step) and the sample times.
+void checkRolloutTimes(const RolloutRequest& request, const RolloutLimits& limits, const GridParams& grid,
+                       const SimulationParams& rollout)
 {
   const size_t candidates = request.candidates.size();
   const std::string candidate_range =
@@ -67,9 +67,6 @@ void checkRolloutRequest(const RolloutRequest& request, const RolloutLimits& lim
   if (!std::isfinite(request.horizon) || request.horizon <= 0.0 || request.horizon > limits.max_horizon)
     rejectParameter("horizon", number(request.horizon) + " s",
                     "must be > 0 and <= rollout_max_horizon = " + number(limits.max_horizon) + " s");
-  SimulationParams rollout = params;
-  rollout.method = request.method;
-  rollout.time_step = request.time_step;
   validateParameters(grid, rollout);  // names time_step and its range
   if (request.time_step > request.horizon)
     rejectParameter("time_step", number(request.time_step) + " s",
@@ -83,12 +80,45 @@ void checkRolloutRequest(const RolloutRequest& request, const RolloutLimits& lim
                       "must be increasing, > 0 and <= horizon = " + number(request.horizon) + " s");
     last = t;
   }
+}
 
+// One handle frame's waypoints (`name`: candidates[c].handles[j]), from where the frame is now.
+void checkWaypoints(const std::string& name, const std::vector<HandleWaypoint>& waypoints, FramePose previous)
+{
+  if (waypoints.empty())
+    rejectParameter(name + ".poses", "none", "must have one pose per time, at least one");
+  double previous_time = 0.0;
+  for (size_t i = 0; i < waypoints.size(); ++i)
+  {
+    const HandleWaypoint& w = waypoints[i];
+    const std::string at = "[" + std::to_string(i) + "]";
+    if (!std::isfinite(w.time) || w.time <= previous_time)
+      rejectParameter(name + ".times" + at, number(w.time) + " s", "must be finite, > 0 and increasing");
+    if (!w.pose.translation.allFinite() || !w.pose.rotation.coeffs().allFinite())
+      rejectParameter(name + ".poses" + at, "a non-finite value", "must be finite");
+    if (std::abs(w.pose.rotation.norm() - 1.0) > 1e-3)
+      rejectParameter(name + ".poses" + at + ".orientation", "norm " + number(w.pose.rotation.norm()),
+                      "must be a unit quaternion (norm within 1e-3 of 1)");
+    // The live node refuses a frame that moves this far between two ticks (a glitch): so do waypoints.
+    const double jump = (w.pose.translation - previous.translation).norm();
+    const double turn = previous.rotation.angularDistance(w.pose.rotation.normalized());
+    if (jump > HandleFrames::kMaxJumpPerTick || turn > HandleFrames::kMaxTurnPerTick)
+      rejectParameter(name + ".poses" + at, "a move of " + number(jump) + " m and " + number(turn) + " rad",
+                      "must move at most " + number(HandleFrames::kMaxJumpPerTick) + " m and turn at most " +
+                          number(HandleFrames::kMaxTurnPerTick) + " rad from the pose before (add waypoints)");
+    previous = w.pose;
+    previous_time = w.time;
+  }
+}
+
+// Every candidate's handle frames: each a handle frame the node has looked up, its waypoints checked.
+void checkCandidateFrames(const RolloutRequest& request)
+{
   std::string frames;
   for (size_t h = 0; h < request.frames.size(); ++h)
     if (frames.find("'" + request.frames.frame(h) + "'") == std::string::npos)
       frames += (frames.empty() ? "'" : ", '") + request.frames.frame(h) + "'";
-  for (size_t c = 0; c < candidates; ++c)
+  for (size_t c = 0; c < request.candidates.size(); ++c)
     for (size_t j = 0; j < request.candidates[c].frames.size(); ++j)
     {
       const auto& [frame, waypoints] = request.candidates[c].frames[j];
@@ -103,34 +133,23 @@ void checkRolloutRequest(const RolloutRequest& request, const RolloutLimits& lim
       if (!request.frames.everFound(*handle))
         rejectParameter(name + ".frame", "'" + frame + "'",
                         "must be a handle frame the node has looked up (it has no pose yet to start from)");
-      if (waypoints.empty())
-        rejectParameter(name + ".poses", "none", "must have one pose per time, at least one");
-      FramePose previous = request.frames.current(*handle);
-      double previous_time = 0.0;
-      for (size_t i = 0; i < waypoints.size(); ++i)
-      {
-        const HandleWaypoint& w = waypoints[i];
-        const std::string at = "[" + std::to_string(i) + "]";
-        if (!std::isfinite(w.time) || w.time <= previous_time)
-          rejectParameter(name + ".times" + at, number(w.time) + " s", "must be finite, > 0 and increasing");
-        if (!w.pose.translation.allFinite() || !w.pose.rotation.coeffs().allFinite())
-          rejectParameter(name + ".poses" + at, "a non-finite value", "must be finite");
-        if (std::abs(w.pose.rotation.norm() - 1.0) > 1e-3)
-          rejectParameter(name + ".poses" + at + ".orientation", "norm " + number(w.pose.rotation.norm()),
-                          "must be a unit quaternion (norm within 1e-3 of 1)");
-        // The live node refuses a frame that moves this far between two ticks (a glitch): so do waypoints.
-        const double jump = (w.pose.translation - previous.translation).norm();
-        const double turn = previous.rotation.angularDistance(w.pose.rotation.normalized());
-        if (jump > HandleFrames::kMaxJumpPerTick || turn > HandleFrames::kMaxTurnPerTick)
-          rejectParameter(name + ".poses" + at, "a move of " + number(jump) + " m and " + number(turn) + " rad",
-                          "must move at most " + number(HandleFrames::kMaxJumpPerTick) + " m and turn at most " +
-                              number(HandleFrames::kMaxTurnPerTick) + " rad from the pose before (add waypoints)");
-        previous = w.pose;
-        previous_time = w.time;
-      }
+      checkWaypoints(name, waypoints, request.frames.current(*handle));
     }
+}
+
+}  // namespace
+
+void checkRolloutRequest(const RolloutRequest& request, const RolloutLimits& limits, const GridParams& grid,
+                         const SimulationParams& params)
+{
+  SimulationParams rollout = params;
+  rollout.method = request.method;
+  rollout.time_step = request.time_step;
+  checkRolloutTimes(request, limits, grid, rollout);
+  checkCandidateFrames(request);
 
   // Each worker holds a simulation; the samples hold every particle, handle and collider.
+  const size_t candidates = request.candidates.size();
   const Grid g(grid);
   const double per_sample = 8.0 * 3.0 * (g.numParticles() + grid.handles.size() + params.colliders.size());
   const double samples = std::max<size_t>(request.sample_times.size(), 1);
@@ -152,6 +171,36 @@ SimulationState rolloutStart(Simulation& simulation, const RolloutRequest& reque
   return simulation.saveState();
 }
 
+namespace
+{
+
+// The times a candidate's frames are placed at: every waypoint and sample time within the horizon,
+// and the horizon.
+std::vector<double> candidateTicks(const RolloutRequest& request, const CandidateMotion& motion)
+{
+  std::vector<double> ticks = request.sample_times;
+  ticks.push_back(request.horizon);
+  for (const auto& [frame, path] : motion.frames)
+    for (const HandleWaypoint& w : path)
+      if (w.time < request.horizon)
+        ticks.push_back(w.time);
+  std::sort(ticks.begin(), ticks.end());
+  return ticks;
+}
+
+GridSample gridSample(const Simulation& simulation, double time, const Eigen::Vector3d& grid_offset)
+{
+  GridSample sample;
+  sample.time = time;
+  sample.positions = simulation.points().colwise() + grid_offset;
+  sample.handle_forces = simulation.handleForces();
+  if (simulation.contact())
+    sample.contact_forces = simulation.contact()->report().force;
+  return sample;
+}
+
+}  // namespace
+
 CandidateOutcome runCandidate(Simulation& simulation, const SimulationState& start, const RolloutRequest& request,
                             int candidate, const std::atomic<bool>& cancel)
 {
@@ -171,20 +220,12 @@ CandidateOutcome runCandidate(Simulation& simulation, const SimulationState& sta
       if (frame == frames.frame(h))
         waypoints[h] = &path;
   }
-  // The ticks: every waypoint and sample time within the horizon, and the horizon.
-  std::vector<double> ticks = request.sample_times;
-  ticks.push_back(request.horizon);
-  for (const auto& [frame, path] : motion.frames)
-    for (const HandleWaypoint& w : path)
-      if (w.time < request.horizon)
-        ticks.push_back(w.time);
-  std::sort(ticks.begin(), ticks.end());
   const std::vector<double> samples =
       request.sample_times.empty() ? std::vector<double>{request.horizon} : request.sample_times;
   size_t next_sample = 0;
   const long first_step = simulation.stepCount();
   long step = 0;  // since the start
-  for (const double tick : ticks)
+  for (const double tick : candidateTicks(request, motion))
   {
     const long steps = stepIndex(tick, dt) - step;
     if (steps > 0)
@@ -222,13 +263,8 @@ CandidateOutcome runCandidate(Simulation& simulation, const SimulationState& sta
     // Every sample due by now (a sample within half a step of the last one lands on its step).
     while (next_sample < samples.size() && stepIndex(samples[next_sample], dt) <= step)
     {
-      GridSample sample;
-      sample.time = samples[next_sample++];
-      sample.positions = simulation.points().colwise() + request.grid_offset;
-      sample.handle_forces = simulation.handleForces();
-      if (simulation.contact())
-        sample.contact_forces = simulation.contact()->report().force;
-      outcome.samples.push_back(std::move(sample));
+      outcome.samples.push_back(gridSample(simulation, samples[next_sample], request.grid_offset));
+      ++next_sample;
     }
   }
   outcome.simulated_time = step * dt;

@@ -73,16 +73,7 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
 {
   // Every parameter is read and checked before anything is built, so a bad one fails at once even on
   // a grid whose basis would take minutes.
-  XmlRpc::XmlRpcValue private_params;
-  if (!ros::param::get(private_nh_.getNamespace(), private_params))
-    private_params = XmlRpc::XmlRpcValue();
-  const XmlRpcParameterSource source(private_params);
-  config_ = loadNodeConfiguration(source, source.keys());
-  private_params_ = private_params;
-  accepted_ = config_;
-  for (const auto& key : config_.unknown_keys)
-    ROS_WARN("parameter '%s/%s' is not a parameter of this node and is ignored", private_nh_.getNamespace().c_str(),
-             key.c_str());
+  loadConfiguration();
   const NodeParams& params = config_.node;
   // diagnostic_updater reads ~diagnostic_period itself, and only as a number: give it the checked one.
   private_nh_.setParam("diagnostic_period", params.diagnostic_period);
@@ -91,20 +82,7 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
 
   buildTracks();
 
-  for (Track& track : tracks_)
-  {
-    if (track.shadow)
-      continue;  // drawn with the method it shadows
-    // A comparison publishes each method below its name: ~linear/markers, ~full/status, ...
-    ros::NodeHandle track_nh = lockstep() ? ros::NodeHandle(private_nh_, track.name) : private_nh_;
-    track.markers_pub = track_nh.advertise<visualization_msgs::MarkerArray>("markers", 1);
-    track.status_pub = track_nh.advertise<Status>("status", 10);
-    track.points_pub = track_nh.advertise<sensor_msgs::PointCloud2>("points", 1);
-    advertiseHandleForces(track, params.handles.size());
-    for (size_t i = 0; i < config_.simulation.colliders.size(); ++i)
-      track.contact_force_pubs.push_back(
-          track_nh.advertise<geometry_msgs::WrenchStamped>("contact_force/collider_" + std::to_string(i), 10));
-  }
+  advertiseTracks();
   if (use_sim_time_)
     clock_pub_ = nh_.advertise<rosgraph_msgs::Clock>("/clock", 10);
   publishStaticFrames();
@@ -115,6 +93,51 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
                               std::to_string(grid.params().cols) + " grid");
   diagnostics_->add("simulation", this, &SimulationNode::diagnose);
 
+  startServices();
+  startLiveTuning();
+
+  last_status_log_ = ros::WallTime::now();
+  const double period = 1.0 / params.publish_rate;
+  if (use_sim_time_)
+    wall_timer_ = nh_.createWallTimer(ros::WallDuration(period), [this](const ros::WallTimerEvent&) { onTick(); });
+  else
+    timer_ = nh_.createTimer(ros::Duration(period), [this](const ros::TimerEvent&) { onTick(); });
+}
+
+void SimulationNode::loadConfiguration()
+{
+  XmlRpc::XmlRpcValue private_params;
+  if (!ros::param::get(private_nh_.getNamespace(), private_params))
+    private_params = XmlRpc::XmlRpcValue();
+  const XmlRpcParameterSource source(private_params);
+  config_ = loadNodeConfiguration(source, source.keys());
+  private_params_ = private_params;
+  accepted_ = config_;
+  for (const auto& key : config_.unknown_keys)
+    ROS_WARN("parameter '%s/%s' is not a parameter of this node and is ignored", private_nh_.getNamespace().c_str(),
+             key.c_str());
+}
+
+void SimulationNode::advertiseTracks()
+{
+  for (Track& track : tracks_)
+  {
+    if (track.shadow)
+      continue;  // drawn with the method it shadows
+    // A comparison publishes each method below its name: ~linear/markers, ~full/status, ...
+    ros::NodeHandle track_nh = lockstep() ? ros::NodeHandle(private_nh_, track.name) : private_nh_;
+    track.markers_pub = track_nh.advertise<visualization_msgs::MarkerArray>("markers", 1);
+    track.status_pub = track_nh.advertise<Status>("status", 10);
+    track.points_pub = track_nh.advertise<sensor_msgs::PointCloud2>("points", 1);
+    advertiseHandleForces(track, config_.node.handles.size());
+    for (size_t i = 0; i < config_.simulation.colliders.size(); ++i)
+      track.contact_force_pubs.push_back(
+          track_nh.advertise<geometry_msgs::WrenchStamped>("contact_force/collider_" + std::to_string(i), 10));
+  }
+}
+
+void SimulationNode::startServices()
+{
   // Services have their own queue and thread: a call waits for the step in progress, not the tick.
   ros::NodeHandle service_nh(private_nh_);
   service_nh.setCallbackQueue(&service_queue_);
@@ -125,6 +148,19 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
   clear_forces_srv_ = service_nh.advertiseService("clear_forces", &SimulationNode::clearForces, this);
   attach_srv_ = service_nh.advertiseService("attach", &SimulationNode::attach, this);
   detach_srv_ = service_nh.advertiseService("detach", &SimulationNode::detach, this);
+  startForcesAndFrames();
+  get_state_srv_ = service_nh.advertiseService("get_state", &SimulationNode::getState, this);
+  set_state_srv_ = service_nh.advertiseService("set_state", &SimulationNode::setState, this);
+  startRollouts();
+  apply_force_sub_ = private_nh_.subscribe("apply_force", 10, &SimulationNode::applyForce, this);
+  startInteraction();
+  service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
+  service_spinner_->start();
+}
+
+void SimulationNode::startForcesAndFrames()
+{
+  const NodeParams& params = config_.node;
   applied_forces_ = std::make_unique<AppliedForces>(primary().simulation->grid());
   external_force_ = Eigen::VectorXd::Zero(primary().simulation->positions().size());
   tf_listener_ = std::make_unique<tf2_ros::TransformListener>(tf_buffer_);
@@ -134,32 +170,15 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
   for (size_t k = 0; k < collider_frames_->size(); ++k)
     ROS_INFO("collider %d follows the TF frame '%s' relative to '%s' (inactive until the frame is found)",
              collider_frames_->collider(k), collider_frames_->frame(k).c_str(), params.fixed_frame.c_str());
-  if (!params.handles.empty())
-  {
-    std::string frames;
-    for (size_t h = 0; h < params.handles.size(); ++h)
-      frames += (h ? ", '" : "'") + params.handles[h].frame + "' (" +
-                std::to_string(params.handles[h].particles.size()) + " particles)";
-    ROS_INFO("handles following the TF frames %s relative to '%s', offsets taken at each frame's first lookup",
-             frames.c_str(), params.fixed_frame.c_str());
-    ROS_INFO("%s", describeHandleFormulation(config_.grid, config_.simulation, handleFrames(params.handles)).c_str());
-  }
-  get_state_srv_ = service_nh.advertiseService("get_state", &SimulationNode::getState, this);
-  set_state_srv_ = service_nh.advertiseService("set_state", &SimulationNode::setState, this);
-  startRollouts();
-  apply_force_sub_ = private_nh_.subscribe("apply_force", 10, &SimulationNode::applyForce, this);
-  startInteraction();
-  service_spinner_ = std::make_unique<ros::AsyncSpinner>(1, &service_queue_);
-  service_spinner_->start();
-
-  startLiveTuning();
-
-  last_status_log_ = ros::WallTime::now();
-  const double period = 1.0 / params.publish_rate;
-  if (use_sim_time_)
-    wall_timer_ = nh_.createWallTimer(ros::WallDuration(period), [this](const ros::WallTimerEvent&) { onTick(); });
-  else
-    timer_ = nh_.createTimer(ros::Duration(period), [this](const ros::TimerEvent&) { onTick(); });
+  if (params.handles.empty())
+    return;
+  std::string frames;
+  for (size_t h = 0; h < params.handles.size(); ++h)
+    frames += (h ? ", '" : "'") + params.handles[h].frame + "' (" +
+              std::to_string(params.handles[h].particles.size()) + " particles)";
+  ROS_INFO("handles following the TF frames %s relative to '%s', offsets taken at each frame's first lookup",
+           frames.c_str(), params.fixed_frame.c_str());
+  ROS_INFO("%s", describeHandleFormulation(config_.grid, config_.simulation, handleFrames(params.handles)).c_str());
 }
 
 SimulationNode::~SimulationNode()

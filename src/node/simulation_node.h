@@ -19,6 +19,7 @@
 #include "modal_mass_spring/Step.h"
 #include "modal_mass_spring/simulation.h"
 #include "node_params.h"
+#include "rollouts.h"
 #include "tick_pacing.h"
 
 #include <actionlib/server/simple_action_server.h>
@@ -67,6 +68,13 @@ public:
   ~SimulationNode();
 
 private:
+  // The constructor's steps: the parameters read and checked (the unknown ones warned about); each
+  // drawn track's topics; the services on their own queue and thread, with what they act on (the
+  // applied forces, the handle and collider frames followed in TF, the rollouts, the drag marker).
+  void loadConfiguration();
+  void advertiseTracks();
+  void startServices();
+  void startForcesAndFrames();
   // Holds the simulation for a service callback; the timer's step loop lets it in between two steps.
   class ServiceLock;
   // One simulated grid: a method of the comparison, the single method, or the shadow full.
@@ -130,6 +138,17 @@ private:
   std::string statusLine() const;  // with mutex_ held
   // What a tick publishes, and the state and diagnostics (status.cpp).
   Output snapshot(const ros::Time& stamp);  // with mutex_ held
+  // The snapshot's steps, with mutex_ held: every track's last finite positions and energy and its
+  // distances to the reference; a drawn track's markers, wrenches, point cloud and ~status; the TF
+  // frames of its tf_particles.
+  void keepLastStates();
+  void addGrid(const Track& track, const Track* ref, const ros::Time& stamp, Output& output);
+  std::string trackLabel(const Track& track, bool measured) const;
+  void addHandleWrenches(const Track& track, const std::string& frame_id, const ros::Time& stamp,
+                         std::vector<std::pair<ros::Publisher, geometry_msgs::WrenchStamped>>& wrenches);
+  Status trackStatus(const Track& track, bool measured, const ros::Time& stamp);
+  void addBasisStatus(const Simulation& simulation, Status& status) const;  // the basis, cubature and cache
+  void addParticleFrames(const Track& track, const ros::Time& stamp, Output& output) const;
   void send(const Output& output);
   ros::Time stamp() const;  // with mutex_ held: the simulated clock under use_sim_time, else now
   void publishStaticFrames();
@@ -196,6 +215,13 @@ private:
   bool setState(SetState::Request& request, SetState::Response& response);
   void startRollouts();
   void executeRollout(const RolloutGoalConstPtr& goal);
+  // The goal's steps: its request checked against the node's limits, with the live simulation's
+  // grid and parameters copied under the lock (throws std::invalid_argument: the goal is refused);
+  // the workers built unless built for them (the seconds it took, else 0), then run.
+  struct RolloutSetup;
+  RolloutSetup rolloutSetup(const RolloutGoal& goal);
+  double prepareRolloutWorkers(const RolloutSetup& setup);
+  std::vector<CandidateOutcome> runRolloutWorkers(const RolloutRequest& request, double& cpu);
 
   // External forces (services.cpp): ~apply_force messages (checked, turned into the fixed frame with
   // tf2, summed) and ~clear_forces; every track gets the same total.

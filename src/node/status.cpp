@@ -71,9 +71,27 @@ std::string formatCpuPace(double step_cpu_seconds, double time_step)
 
 SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
 {
-  const NodeParams& params = config_.node;
   Output output;
   output.stamp = stamp;
+  keepLastStates();
+  const Track* ref = reference();
+  // tf2 rejects a second transform of a frame at the same stamp (e.g. a paused /clock): skip it.
+  const bool send_tf = stamp > last_tf_stamp_ && !config_.node.tf_particles.empty();
+  if (send_tf)
+    last_tf_stamp_ = stamp;
+  for (const Track& track : tracks_)
+  {
+    if (track.shadow)
+      continue;
+    addGrid(track, ref, stamp, output);
+    if (send_tf)
+      addParticleFrames(track, stamp, output);
+  }
+  return output;
+}
+
+void SimulationNode::keepLastStates()
+{
   // The core keeps the last good state on divergence; never publish a non-finite one anyway.
   // The positions are reconstructed here, once per published tick (x_ref + Phi X costs O(n r)), not
   // at every step.
@@ -97,159 +115,177 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
     track.rms_distance = d.rms;
     track.max_distance = d.max;
   }
+}
 
-  // tf2 rejects a second transform of a frame at the same stamp (e.g. a paused /clock): skip it.
-  const bool send_tf = stamp > last_tf_stamp_ && !params.tf_particles.empty();
-  if (send_tf)
-    last_tf_stamp_ = stamp;
-  for (const Track& track : tracks_)
+void SimulationNode::addGrid(const Track& track, const Track* ref, const ros::Time& stamp, Output& output)
+{
+  const NodeParams& params = config_.node;
+  const Simulation& simulation = *track.simulation;
+  const bool measured = ref && &track != ref;
+  Output::Grid grid;
+  grid.markers_pub = track.markers_pub;
+  grid.status_pub = track.status_pub;
+  grid.points_pub = track.points_pub;
+
+  MarkerOptions options = markerOptions(params);
+  options.offset = track.offset;
+  options.ns_prefix = track.ns_prefix;
+  if (params.show_labels)
+    options.label = trackLabel(track, measured);
+  // One pass over the springs for both the surface's colours and the cloud.
+  const Eigen::VectorXd strains = particleStrains(simulation.grid(), track.last_points);
+  grid.markers = makeMarkers(simulation.grid(), options, track.last_points, stamp, strains);
+  if (const Contact* contact = simulation.contact())
   {
-    if (track.shadow)
-      continue;
-    const Simulation& simulation = *track.simulation;
-    const bool measured = ref && &track != ref;
-    Output::Grid grid;
-    grid.markers_pub = track.markers_pub;
-    grid.status_pub = track.status_pub;
-    grid.points_pub = track.points_pub;
+    const auto colliders = colliderMarkers(*contact, options.frame_id, track.offset, track.ns_prefix + "colliders", stamp);
+    grid.markers.markers.insert(grid.markers.markers.end(), colliders.markers.begin(), colliders.markers.end());
+    for (size_t i = 0; i < track.contact_force_pubs.size() && i < contact->report().force.size(); ++i)
+      grid.wrenches.emplace_back(track.contact_force_pubs[i],
+                                 forceWrench(contact->report().force[i], options.frame_id, stamp));
+  }
+  addHandleWrenches(track, options.frame_id, stamp, grid.wrenches);
+  if (measured && ref->shadow)
+  {
+    // The reference drawn faintly where the method is: the gap between them is the error.
+    MarkerOptions ghost = options;
+    ghost.ns_prefix = ref->ns_prefix;
+    ghost.ghost = true;
+    ghost.surface = ghost.particles = params.show_shadow;
+    ghost.springs = false;
+    ghost.label.clear();
+    const auto shadow = makeMarkers(simulation.grid(), ghost, ref->last_points, stamp);
+    grid.markers.markers.insert(grid.markers.markers.end(), shadow.markers.begin(), shadow.markers.end());
+  }
+  grid.points = makePointCloud(track.last_points, strains,
+                               track.offset, params.fixed_frame, stamp);
+  grid.status = trackStatus(track, measured, stamp);
+  output.grids.push_back(std::move(grid));
+}
 
-    MarkerOptions options = markerOptions(params);
-    options.offset = track.offset;
-    options.ns_prefix = track.ns_prefix;
-    if (params.show_labels)
-    {
-      options.label = toString(simulation.method()) +
+std::string SimulationNode::trackLabel(const Track& track, bool measured) const
+{
+  const Simulation& simulation = *track.simulation;
+  std::string label = toString(simulation.method()) +
                       (measured ? "\nRMS " + formatDistance(track.rms_distance) + " to full" : "") + "\n" +
                       formatCost(track.step_seconds) + "\n" +
                       formatCpuPace(track.step_cpu_seconds, config_.simulation.time_step) +
                       (simulation.selfCollision() ? "\nself-collision " + formatCost(simulation.lastSelfCollisionSeconds())
                                                   : "");
-      if (lockstep())
-      {
-        char pace[64];
-        std::snprintf(pace, sizeof pace, "\n%.2f x real time", achieved_factor_);
-        options.label += pace;
-      }
-    }
-    // One pass over the springs for both the surface's colours and the cloud.
-    const Eigen::VectorXd strains = particleStrains(simulation.grid(), track.last_points);
-    grid.markers = makeMarkers(simulation.grid(), options, track.last_points, stamp, strains);
-    if (const Contact* contact = simulation.contact())
-    {
-      const auto colliders = colliderMarkers(*contact, options.frame_id, track.offset, track.ns_prefix + "colliders", stamp);
-      grid.markers.markers.insert(grid.markers.markers.end(), colliders.markers.begin(), colliders.markers.end());
-      for (size_t i = 0; i < track.contact_force_pubs.size() && i < contact->report().force.size(); ++i)
-        grid.wrenches.emplace_back(track.contact_force_pubs[i],
-                                   forceWrench(contact->report().force[i], options.frame_id, stamp));
-    }
-    if (!track.handle_force_pubs.empty())
-    {
-      // Torques about each handle frame's origin (before it is found, about the grid's: unused).
-      std::vector<Eigen::Vector3d> origins(simulation.grid().handles().size(), Eigen::Vector3d::Zero());
-      for (size_t h = 0; h < origins.size() && h < handle_frames_->size(); ++h)
-        if (handle_frames_->everFound(h))
-          origins[h] = handle_frames_->originInGrid(h);
-      const std::vector<Simulation::Wrench> wrenches = simulation.handleWrenches(origins);
-      for (size_t h = 0; h < track.handle_force_pubs.size() && h < wrenches.size(); ++h)
-      {
-        if (!wrenches[h].force.allFinite() || !wrenches[h].torque.allFinite())
-          continue;
-        // In the handle's own frame once it was found (what a force-torque sensor at the gripper
-        // reads; tf2 turns it into any other frame), the force alone in fixed_frame axes before.
-        if (handle_frames_->everFound(h))
-        {
-          const Eigen::Quaterniond to_frame = handle_frames_->current(h).rotation.conjugate();
-          grid.wrenches.emplace_back(track.handle_force_pubs[h],
-                                     forceWrench(to_frame * wrenches[h].force, handle_frames_->frame(h), stamp,
-                                                 to_frame * wrenches[h].torque));
-        }
-        else
-          grid.wrenches.emplace_back(track.handle_force_pubs[h], forceWrench(wrenches[h].force, options.frame_id, stamp));
-      }
-    }
-    if (measured && ref->shadow)
-    {
-      // The reference drawn faintly where the method is: the gap between them is the error.
-      MarkerOptions ghost = options;
-      ghost.ns_prefix = ref->ns_prefix;
-      ghost.ghost = true;
-      ghost.surface = ghost.particles = params.show_shadow;
-      ghost.springs = false;
-      ghost.label.clear();
-      const auto shadow = makeMarkers(simulation.grid(), ghost, ref->last_points, stamp);
-      grid.markers.markers.insert(grid.markers.markers.end(), shadow.markers.begin(), shadow.markers.end());
-    }
-    grid.points = makePointCloud(track.last_points, strains,
-                                 track.offset, params.fixed_frame, stamp);
-
-    Status& status = grid.status;
-    status.header.stamp = stamp;
-    status.header.frame_id = params.fixed_frame;
-    status.method = toString(simulation.method());
-    status.linearization = toString(simulation.params().linearization);
-    status.integrator = toString(simulation.params().integrator);
-    status.newton_iterations = simulation.lastNewtonIterations();
-    status.step_count = steps(track);
-    status.sim_time = simTime(track);
-    status.tick_steps = track.tick_steps;
-    status.tick_step_seconds = lockstep() ? track.tick_seconds : tick_step_seconds_;
-    status.total_energy = track.last_energy;
-    status.state = state(track);
-    // Why it diverged, else what a training in the background has done so far.
-    status.message = simulation.diverged() ? track.divergence_message
-                     : training_ && &track == &primary() ? trainingProgress() : "";
-    status.handles = handle_frames_->status();
-    status.handle_formulation =
-        handle_frames_->empty() ? "" : toString(simulation.handleFormulation());
-    status.applied_forces = static_cast<uint32_t>(applied_forces_->size());
-    status.dragged_particle = hand_forces_ ? hand_forces_->draggedParticle() : -1;
-    status.reference = measured ? "full" : "";
-    status.rms_distance = track.rms_distance;
-    status.max_distance = track.max_distance;
-    status.step_seconds = track.step_seconds;
-    status.step_cpu_seconds = track.step_cpu_seconds;
-    status.cpu_per_simulated_second =
-        track.step_cpu_seconds > 0.0 ? track.step_cpu_seconds / config_.simulation.time_step : 0.0;
-    status.real_time_factor = achieved_factor_;
-    if (const SelfCollision* self = simulation.selfCollision())
-    {
-      status.self_collision_seconds = simulation.lastSelfCollisionSeconds();
-      status.self_collision_contacts = static_cast<uint32_t>(self->report().contacts);
-    }
-    const DerivativeBasisInfo& derivatives = simulation.derivativeInfo();
-    status.basis = toString(simulation.params().basis);
-    status.linear_modes = simulation.basis().phi.cols();
-    status.derivative_directions = derivatives.derivative_directions;
-    status.basis_seconds = simulation.basis().build_seconds + derivatives.seconds + simulation.skinningInfo().seconds;
-    status.largest_dropped_singular_value = derivatives.largest_dropped_singular_value;
-    if (const Cubature* cubature = simulation.cubature())
-    {
-      status.cubature_springs = static_cast<uint32_t>(cubature->springs.size());
-      status.cubature_training_error = cubature->training_error;
-      status.cubature_heldout_error = cubature->heldout_error;
-      status.cubature_training_seconds = cubature->training_seconds;
-    }
-    const CacheReport& cache = simulation.cacheReport();
-    status.basis_from_cache = cache.basis_loaded;
-    status.cubature_from_cache = cache.cubature_loaded;
-    status.cache = describeCache(cache);
-
-    if (send_tf)
-      for (int particle : params.tf_particles)
-      {
-        geometry_msgs::TransformStamped frame;
-        frame.header.stamp = stamp;
-        frame.header.frame_id = track.grid_frame;
-        frame.child_frame_id = particleFrame(track.grid_frame, particle);
-        frame.transform.translation.x = track.last_points(0, particle);
-        frame.transform.translation.y = track.last_points(1, particle);
-        frame.transform.translation.z = track.last_points(2, particle);
-        frame.transform.rotation.w = 1.0;
-        output.frames.push_back(frame);
-      }
-    output.grids.push_back(std::move(grid));
+  if (lockstep())
+  {
+    char pace[64];
+    std::snprintf(pace, sizeof pace, "\n%.2f x real time", achieved_factor_);
+    label += pace;
   }
-  return output;
+  return label;
+}
+
+void SimulationNode::addHandleWrenches(const Track& track, const std::string& frame_id, const ros::Time& stamp,
+                                       std::vector<std::pair<ros::Publisher, geometry_msgs::WrenchStamped>>& wrenches)
+{
+  if (track.handle_force_pubs.empty())
+    return;
+  const Simulation& simulation = *track.simulation;
+  // Torques about each handle frame's origin (before it is found, about the grid's: unused).
+  std::vector<Eigen::Vector3d> origins(simulation.grid().handles().size(), Eigen::Vector3d::Zero());
+  for (size_t h = 0; h < origins.size() && h < handle_frames_->size(); ++h)
+    if (handle_frames_->everFound(h))
+      origins[h] = handle_frames_->originInGrid(h);
+  const std::vector<Simulation::Wrench> handle_wrenches = simulation.handleWrenches(origins);
+  for (size_t h = 0; h < track.handle_force_pubs.size() && h < handle_wrenches.size(); ++h)
+  {
+    const Simulation::Wrench& wrench = handle_wrenches[h];
+    if (!wrench.force.allFinite() || !wrench.torque.allFinite())
+      continue;
+    // In the handle's own frame once it was found (what a force-torque sensor at the gripper
+    // reads; tf2 turns it into any other frame), the force alone in fixed_frame axes before.
+    if (handle_frames_->everFound(h))
+    {
+      const Eigen::Quaterniond to_frame = handle_frames_->current(h).rotation.conjugate();
+      wrenches.emplace_back(track.handle_force_pubs[h], forceWrench(to_frame * wrench.force, handle_frames_->frame(h),
+                                                                    stamp, to_frame * wrench.torque));
+    }
+    else
+      wrenches.emplace_back(track.handle_force_pubs[h], forceWrench(wrench.force, frame_id, stamp));
+  }
+}
+
+Status SimulationNode::trackStatus(const Track& track, bool measured, const ros::Time& stamp)
+{
+  const Simulation& simulation = *track.simulation;
+  Status status;
+  status.header.stamp = stamp;
+  status.header.frame_id = config_.node.fixed_frame;
+  status.method = toString(simulation.method());
+  status.linearization = toString(simulation.params().linearization);
+  status.integrator = toString(simulation.params().integrator);
+  status.newton_iterations = simulation.lastNewtonIterations();
+  status.step_count = steps(track);
+  status.sim_time = simTime(track);
+  status.tick_steps = track.tick_steps;
+  status.tick_step_seconds = lockstep() ? track.tick_seconds : tick_step_seconds_;
+  status.total_energy = track.last_energy;
+  status.state = state(track);
+  // Why it diverged, else what a training in the background has done so far.
+  status.message = simulation.diverged() ? track.divergence_message
+                   : training_ && &track == &primary() ? trainingProgress() : "";
+  status.handles = handle_frames_->status();
+  status.handle_formulation =
+      handle_frames_->empty() ? "" : toString(simulation.handleFormulation());
+  status.applied_forces = static_cast<uint32_t>(applied_forces_->size());
+  status.dragged_particle = hand_forces_ ? hand_forces_->draggedParticle() : -1;
+  status.reference = measured ? "full" : "";
+  status.rms_distance = track.rms_distance;
+  status.max_distance = track.max_distance;
+  status.step_seconds = track.step_seconds;
+  status.step_cpu_seconds = track.step_cpu_seconds;
+  status.cpu_per_simulated_second =
+      track.step_cpu_seconds > 0.0 ? track.step_cpu_seconds / config_.simulation.time_step : 0.0;
+  status.real_time_factor = achieved_factor_;
+  if (const SelfCollision* self = simulation.selfCollision())
+  {
+    status.self_collision_seconds = simulation.lastSelfCollisionSeconds();
+    status.self_collision_contacts = static_cast<uint32_t>(self->report().contacts);
+  }
+  addBasisStatus(simulation, status);
+  return status;
+}
+
+void SimulationNode::addBasisStatus(const Simulation& simulation, Status& status) const
+{
+  const DerivativeBasisInfo& derivatives = simulation.derivativeInfo();
+  status.basis = toString(simulation.params().basis);
+  status.linear_modes = simulation.basis().phi.cols();
+  status.derivative_directions = derivatives.derivative_directions;
+  status.basis_seconds = simulation.basis().build_seconds + derivatives.seconds + simulation.skinningInfo().seconds;
+  status.largest_dropped_singular_value = derivatives.largest_dropped_singular_value;
+  if (const Cubature* cubature = simulation.cubature())
+  {
+    status.cubature_springs = static_cast<uint32_t>(cubature->springs.size());
+    status.cubature_training_error = cubature->training_error;
+    status.cubature_heldout_error = cubature->heldout_error;
+    status.cubature_training_seconds = cubature->training_seconds;
+  }
+  const CacheReport& cache = simulation.cacheReport();
+  status.basis_from_cache = cache.basis_loaded;
+  status.cubature_from_cache = cache.cubature_loaded;
+  status.cache = describeCache(cache);
+}
+
+void SimulationNode::addParticleFrames(const Track& track, const ros::Time& stamp, Output& output) const
+{
+  for (int particle : config_.node.tf_particles)
+  {
+    geometry_msgs::TransformStamped frame;
+    frame.header.stamp = stamp;
+    frame.header.frame_id = track.grid_frame;
+    frame.child_frame_id = particleFrame(track.grid_frame, particle);
+    frame.transform.translation.x = track.last_points(0, particle);
+    frame.transform.translation.y = track.last_points(1, particle);
+    frame.transform.translation.z = track.last_points(2, particle);
+    frame.transform.rotation.w = 1.0;
+    output.frames.push_back(frame);
+  }
 }
 
 void SimulationNode::send(const Output& output)

@@ -1,0 +1,387 @@
+// The accuracy experiment: every method stepped beside the reference, sampled against it, and its
+// summary per variant and method.
+#include "experiment_support.h"
+#include "experiments.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+
+namespace modal_mass_spring
+{
+
+using namespace experiment_support;
+
+namespace
+{
+
+// Per-particle distances between two sets of points, over the free particles.
+void distances(const Grid& grid, const Eigen::Matrix3Xd& a, const Eigen::Matrix3Xd& b, double& max, double& rms)
+{
+  max = 0.0;
+  double sum2 = 0.0;
+  int count = 0;
+  for (int p = 0; p < grid.numParticles(); ++p)
+  {
+    if (grid.isFixed(p) || grid.isHandle(p))
+      continue;
+    const double d = (a.col(p) - b.col(p)).norm();
+    max = std::max(max, d);
+    sum2 += d * d;
+    ++count;
+  }
+  rms = count ? std::sqrt(sum2 / count) : 0.0;
+}
+
+double maxDisplacement(const Grid& grid, const Eigen::Matrix3Xd& points)
+{
+  const Eigen::Matrix3Xd initial = grid.toPoints(grid.initialPositions());
+  return (points - initial).colwise().norm().maxCoeff();
+}
+
+}  // namespace
+
+int referenceSubsteps(double time_step, double reference_time_step)
+{
+  const double ratio = time_step / reference_time_step;
+  const double whole = std::round(ratio);
+  // Checked before the conversion: a ratio beyond int is undefined behaviour to convert.
+  if (!(reference_time_step > 0.0) || !std::isfinite(ratio) || whole < 1.0 || whole > kMaxReferenceSubsteps ||
+      std::abs(ratio - whole) > 1e-6 * ratio)
+  {
+    std::ostringstream allowed;
+    allowed << "must divide time_step = " << time_step << " s a whole number of times, at most "
+            << kMaxReferenceSubsteps;
+    rejectParameter("--reference-time-step", reference_time_step, allowed.str());
+  }
+  return static_cast<int>(whole);
+}
+
+namespace
+{
+
+// One simulation of the accuracy experiment, stepped `steps_per_sample` steps between samples.
+struct AccuracyRun
+{
+  std::string name;
+  std::unique_ptr<Simulation> sim;
+  int steps_per_sample = 0;
+  bool timed = false;  // its wall time per step is reported
+  bool diverged = false;
+  double step_seconds = 0.0, step_cpu_seconds = 0.0;
+  std::unique_ptr<HandleDriver> driver = nullptr;  // moves the handles of a handle scenario, one step at a time
+  std::unique_ptr<AdaptiveStepper> adaptive = nullptr;  // steps `sim` for method "adaptive"
+
+  void advance(const std::string& variant, std::vector<std::string>& messages)
+  {
+    if (diverged)
+      return;
+    const auto start = Clock::now();
+    const double cpu_start = threadCpuSeconds();
+    StepResult r;
+    if (driver || adaptive)
+      for (int k = 0; k < steps_per_sample && !r.diverged; ++k)
+      {
+        if (driver)
+          driver->drive(*sim);
+        r = adaptive ? adaptive->step() : sim->step();
+      }
+    else
+      r = sim->step(steps_per_sample);
+    step_seconds = seconds(start) / steps_per_sample;
+    step_cpu_seconds = (threadCpuSeconds() - cpu_start) / steps_per_sample;
+    if (r.diverged)
+    {
+      diverged = true;
+      messages.push_back(variant + ": " + name + ": " + r.message);
+    }
+  }
+};
+
+// The reference (runs[0]: `full` at the setup's step, or the converged `full` at the reference
+// step) and every compared method; the check at half the reference step goes into `check`.
+std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const AccuracyOptions& options, int divisor,
+                                      std::unique_ptr<AccuracyRun>& check,
+                                      std::vector<std::pair<std::string, std::string>>& not_built)
+{
+  auto referenceParams = [&](int divide) {
+    SimulationParams p = withMethod(setup.sim, Method::Full);
+    p.integrator = IntegratorKind::Explicit;
+    p.linearization = Linearization::Rest;
+    // In the world, handles prescribed: the same reference whichever formulation the methods use.
+    p.handle_formulation = HandleFormulation::ConstraintModes;
+    // `full` projects onto no basis: the same reference whichever basis the methods are given (an
+    // enriched basis could not even be built at rest).
+    p.basis = BasisKind::LinearModes;
+    p.num_derivative_modes = 0;
+    p.num_skinning_weights = 0;
+    p.time_step = setup.sim.time_step / divide;
+    return p;
+  };
+  std::vector<AccuracyRun> runs;
+  if (divisor == 0)
+    runs.push_back({"full", std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, Method::Full), StageFn{}, options.cache),
+                    options.sample, true});
+  else
+  {
+    runs.push_back({"reference", std::make_unique<Simulation>(setup.grid, referenceParams(divisor), StageFn{}, options.cache),
+                    options.sample * divisor, false});
+    check.reset(new AccuracyRun{"reference at half its step",
+                                std::make_unique<Simulation>(setup.grid, referenceParams(2 * divisor), StageFn{}, options.cache),
+                                2 * options.sample * divisor, false});
+  }
+  std::vector<Method> compared;
+  for (Method m : options.methods)
+    if ((divisor > 0 || m != Method::Full) && std::find(compared.begin(), compared.end(), m) == compared.end())
+      compared.push_back(m);
+  // A method that cannot be built on this setup (a basis or constraint modes that do not exist) is
+  // reported and left out; the reference must build.
+  for (Method m : compared)
+    try
+    {
+      runs.push_back({toString(m), std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, m), StageFn{}, options.cache),
+                      options.sample, true});
+    }
+    catch (const std::bad_alloc&)
+    {
+      throw;
+    }
+    catch (const std::exception& e)
+    {
+      not_built.emplace_back(toString(m), e.what());
+    }
+  if (options.adaptive)
+    try
+    {
+      AccuracyRun run{"adaptive",
+                      std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, setup.sim.adaptive_method),
+                                                   StageFn{}, options.cache),
+                      options.sample, true};
+      run.adaptive = std::make_unique<AdaptiveStepper>(*run.sim, adaptiveSettings(setup.sim));
+      runs.push_back(std::move(run));
+    }
+    catch (const std::bad_alloc&)
+    {
+      throw;
+    }
+    catch (const std::exception& e)
+    {
+      not_built.emplace_back("adaptive", e.what());
+    }
+  if (setup.handle_scenario)
+  {
+    for (AccuracyRun& run : runs)
+      run.driver = std::make_unique<HandleDriver>(*setup.handle_scenario, *run.sim);
+    if (check)
+      check->driver = std::make_unique<HandleDriver>(*setup.handle_scenario, *check->sim);
+  }
+  return runs;
+}
+
+// One run at one step against the reference's points; no distances once either has diverged.
+ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, const AccuracyRun& run, const std::string& method,
+                   long step, const Eigen::Matrix3Xd& reference, bool reference_diverged)
+{
+  ErrorSample e;
+  e.variant = setup.variant;
+  e.method = method;
+  e.step = step;
+  e.time = step * setup.sim.time_step;
+  e.diverged = run.diverged || reference_diverged;
+  e.step_seconds = run.timed && step > 0 ? run.step_seconds : 0.0;
+  e.step_cpu_seconds = run.timed && step > 0 ? run.step_cpu_seconds : 0.0;
+  if (e.diverged)
+  {
+    e.max_distance = e.rms_distance = e.max_displacement = e.energy = e.center_y = std::numeric_limits<double>::quiet_NaN();
+    return e;
+  }
+  distances(grid, run.sim->points(), reference, e.max_distance, e.rms_distance);
+  e.max_displacement = maxDisplacement(grid, run.sim->points());
+  e.energy = run.sim->totalEnergy();
+  e.center_y = run.sim->points().row(1).mean();
+  if (run.adaptive)
+  {
+    e.reduced_share = run.adaptive->reducedShare();
+    e.switches = run.adaptive->switches();
+    e.error_indicator = run.adaptive->reduced() ? run.sim->errorIndicator() : std::numeric_limits<double>::quiet_NaN();
+  }
+  else if (method != "full" && method != "reference" && method != "reference_half_step")
+    e.error_indicator = run.sim->errorIndicator();
+  return e;
+}
+
+}  // namespace
+
+AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& options, const ProgressFn& progress)
+{
+  if (options.steps < 1 || options.interval < 1 || options.sample < 1 || options.interval % options.sample != 0)
+    throw std::invalid_argument("accuracy: steps, interval and sample must be >= 1 and sample must divide interval");
+  if (options.reference_time_step < 0.0)
+    throw std::invalid_argument("accuracy: reference_time_step must be >= 0");
+  const int divisor =
+      options.reference_time_step > 0.0 ? referenceSubsteps(setup.sim.time_step, options.reference_time_step) : 0;
+  std::unique_ptr<AccuracyRun> check;
+  AccuracyResult result;
+  std::vector<AccuracyRun> runs = accuracyRuns(setup, options, divisor, check, result.not_built);
+  const Grid& grid = runs[0].sim->grid();
+
+  const Simulation& modal = *runs.back().sim;  // every run of the setup has the same basis
+  result.frequencies = modal.basis().frequencies;
+  result.num_zero_modes = modal.basis().num_zero_modes;
+  result.basis = setup.sim.basis;
+  result.derivatives = modal.derivativeInfo();
+  result.skinning = modal.skinningInfo();
+  result.physical_frequencies = modal.physicalBasis().frequencies;
+  for (const AccuracyRun& run : runs)
+    if (const Cubature* c = run.sim->cubature())
+      result.cubature = CubatureRow{setup.variant, static_cast<int>(c->springs.size()),
+                                    static_cast<int>(grid.springs().size()), c->training_poses,
+                                    setup.sim.cubature_tolerance, c->training_error, c->heldout_error,
+                                    c->training_seconds, c->validation_error,
+                                    run.sim->cacheReport().cubature_loaded};
+
+  auto record = [&](long step) {
+    const Eigen::Matrix3Xd reference = runs[0].sim->points();
+    const bool snapshot = options.snapshots && (step % options.interval == 0 || step == options.steps);
+    for (const AccuracyRun& run : runs)
+    {
+      result.errors.push_back(sample(setup, grid, run, run.name, step, reference, runs[0].diverged));
+      if (snapshot && !result.errors.back().diverged)
+        result.snapshots.push_back({setup.variant, run.name, step, result.errors.back().time, run.sim->points()});
+    }
+    if (!check)
+      return;
+    const ErrorSample e = sample(setup, grid, *check, "reference_half_step", step, reference, runs[0].diverged);
+    if (!e.diverged)
+    {
+      result.reference_check_max_rms = std::max(result.reference_check_max_rms, e.rms_distance);
+      result.reference_check_max_distance = std::max(result.reference_check_max_distance, e.max_distance);
+    }
+    result.reference_check.push_back(e);
+  };
+
+  record(0);
+  for (long step = options.sample; step <= options.steps; step += options.sample)
+  {
+    for (AccuracyRun& run : runs)
+      run.advance(setup.variant, result.messages);
+    if (check)
+      check->advance(setup.variant, result.messages);
+    record(step);
+    report(progress, "accuracy " + setup.variant, static_cast<double>(step) / options.steps);
+  }
+  if (check && check->diverged)
+    result.reference_check_max_rms = result.reference_check_max_distance = std::numeric_limits<double>::infinity();
+  return result;
+}
+
+double rankCorrelation(const std::vector<double>& a, const std::vector<double>& b)
+{
+  const size_t n = a.size();
+  if (n < 3 || b.size() != n)
+    return std::numeric_limits<double>::quiet_NaN();
+  auto ranks = [n](const std::vector<double>& v) {
+    std::vector<size_t> order(n);
+    for (size_t i = 0; i < n; ++i)
+      order[i] = i;
+    std::sort(order.begin(), order.end(), [&](size_t i, size_t j) { return v[i] < v[j]; });
+    Eigen::VectorXd r(n);
+    for (size_t i = 0; i < n;)
+    {
+      size_t j = i;
+      while (j + 1 < n && v[order[j + 1]] == v[order[i]])
+        ++j;
+      for (size_t k = i; k <= j; ++k)
+        r[order[k]] = 0.5 * static_cast<double>(i + j);
+      i = j + 1;
+    }
+    return Eigen::VectorXd(r.array() - r.mean());
+  };
+  const Eigen::VectorXd ra = ranks(a), rb = ranks(b);
+  const double norms = ra.norm() * rb.norm();
+  return norms > 0.0 ? ra.dot(rb) / norms : std::numeric_limits<double>::quiet_NaN();
+}
+
+std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& rows)
+{
+  std::vector<AccuracySummary> out;
+  std::vector<std::vector<double>> times, cpu_times, indicators, distances;
+  std::vector<int> counts;
+  std::vector<double> time_steps;  // of each summary's samples: time / step
+  for (const ErrorSample& e : rows)
+  {
+    auto it = std::find_if(out.begin(), out.end(), [&](const AccuracySummary& s) {
+      return s.variant == e.variant && s.method == e.method;
+    });
+    if (it == out.end())
+    {
+      out.emplace_back();
+      out.back().variant = e.variant;
+      out.back().method = e.method;
+      times.emplace_back();
+      cpu_times.emplace_back();
+      indicators.emplace_back();
+      distances.emplace_back();
+      counts.push_back(0);
+      time_steps.push_back(0.0);
+      it = out.end() - 1;
+    }
+    const size_t k = it - out.begin();
+    AccuracySummary& s = *it;
+    if (e.step == 0)
+      continue;
+    time_steps[k] = e.time / static_cast<double>(e.step);
+    if (e.diverged)
+    {
+      s.diverged = true;
+      continue;
+    }
+    s.mean_rms += e.rms_distance;
+    s.mean_max += e.max_distance;
+    s.max_rms = std::max(s.max_rms, e.rms_distance);
+    s.final_rms = e.rms_distance;
+    if (e.step_seconds > 0.0)
+      times[k].push_back(e.step_seconds);
+    if (e.step_cpu_seconds > 0.0)
+      cpu_times[k].push_back(e.step_cpu_seconds);
+    s.reduced_share = e.reduced_share;
+    s.switches = e.switches;
+    if (!std::isnan(e.error_indicator))
+    {
+      indicators[k].push_back(e.error_indicator);
+      distances[k].push_back(e.rms_distance);
+    }
+    ++counts[k];
+  }
+  for (size_t k = 0; k < out.size(); ++k)
+  {
+    AccuracySummary& s = out[k];
+    if (counts[k] > 0)
+    {
+      s.mean_rms /= counts[k];
+      s.mean_max /= counts[k];
+    }
+    else
+    {
+      // Not one sample after step 0 (diverged before the first): no error to report, never 0.
+      s.mean_rms = s.max_rms = s.mean_max = std::numeric_limits<double>::quiet_NaN();
+    }
+    if (s.diverged)
+      s.final_rms = std::numeric_limits<double>::quiet_NaN();
+    s.step_seconds_median = median(times[k]);
+    s.step_cpu_seconds_median = median(cpu_times[k]);
+    s.indicator_rank_correlation = rankCorrelation(indicators[k], distances[k]);
+    s.cpu_per_simulated_second = cpuPerSimulatedSecond(s.step_cpu_seconds_median, time_steps[k]);
+    s.real_time_factor = realTimeFactor(s.step_cpu_seconds_median, time_steps[k]);
+    double sum = 0.0;
+    for (double t : times[k])
+      sum += t;
+    s.step_seconds_mean = times[k].empty() ? std::numeric_limits<double>::quiet_NaN() : sum / times[k].size();
+  }
+  return out;
+}
+
+}  // namespace modal_mass_spring
