@@ -2,7 +2,7 @@
 """A method's live distance to the shadow `full` (the `rms_distance` of the node's ~status) over a
 stretch of simulated time, on a launch file's gripper motion, with and without simulated time.
 
-Starts `roslaunch modal_mass_spring LAUNCH shadow_full:=true rviz:=false ARGS...` (on its own master),
+Starts `roslaunch -p 11399 modal_mass_spring LAUNCH ARGS... shadow_full:=true rviz:=false` (its own master),
 reads /modal_mass_spring/status until --seconds of simulated time have passed after --skip seconds,
 then stops the launch. Prints the median, 95th percentile and largest rms_distance, the mean achieved
 real-time factor, and the wall time taken. Run it on a quiet machine: a node that falls behind is what
@@ -21,6 +21,7 @@ import threading
 import time
 
 import numpy as np
+import rosgraph
 import rospy
 from modal_mass_spring.msg import Status
 
@@ -35,15 +36,19 @@ def main():
     if args.seconds <= 0.0 or args.skip < 0.0:
         parser.error("--seconds must be positive and --skip not negative")
 
-    env = dict(os.environ, ROS_MASTER_URI="http://localhost:11399")
+    port = "11399"
+    env = dict(os.environ, ROS_MASTER_URI="http://localhost:" + port)
     os.environ["ROS_MASTER_URI"] = env["ROS_MASTER_URI"]
-    command = ["roslaunch", "--core", "-p", "11399"]
-    master = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                              start_new_session=True)
-    time.sleep(3.0)
-    launch = subprocess.Popen(["roslaunch", "modal_mass_spring"] + args.launch +
+    launch = subprocess.Popen(["roslaunch", "-p", port, "modal_mass_spring"] + args.launch +
                               ["shadow_full:=true", "rviz:=false"], env=env, stdout=subprocess.DEVNULL,
                               stderr=subprocess.DEVNULL, start_new_session=True)
+    master = rosgraph.Master("/shadow_distance")
+    for _ in range(120):
+        if master.is_online() or launch.poll() is not None:
+            break
+        time.sleep(0.5)
+    if launch.poll() is not None:
+        sys.exit("roslaunch ended at once (exit code %d): run it by hand to see why" % launch.returncode)
     samples, factors = [], []
     done = threading.Event()
     lock = threading.Lock()
@@ -63,13 +68,11 @@ def main():
         rospy.Subscriber("/modal_mass_spring/status", Status, on_status, queue_size=100)
         finished = done.wait(args.timeout)
     finally:
-        for process in (launch, master):
-            os.killpg(process.pid, signal.SIGINT)
-        for process in (launch, master):
-            try:
-                process.wait(30)
-            except subprocess.TimeoutExpired:
-                os.killpg(process.pid, signal.SIGKILL)
+        os.killpg(launch.pid, signal.SIGINT)
+        try:
+            launch.wait(30)
+        except subprocess.TimeoutExpired:
+            os.killpg(launch.pid, signal.SIGKILL)
     wall = time.time() - start
     with lock:
         distances = np.array(samples)

@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <numeric>
 
 #include <geometry_msgs/WrenchStamped.h>
 
@@ -91,7 +92,110 @@ std::string joinParticles(const std::vector<int>& particles)
   return "[" + text + "]";
 }
 
+// What is wrong with the request's own values (frame, radius, max_force, particles or radius), or empty.
+std::string requestProblem(const Attach::Request& request, const std::vector<HandleParam>& handles)
+{
+  if (request.frame.empty())
+    return "frame is empty: give the TF frame the particles are to follow";
+  for (size_t h = 0; h < handles.size(); ++h)
+    if (handles[h].frame == request.frame)
+      return "frame '" + request.frame + "' already holds handle " + std::to_string(h) +
+             "; ~detach it first, or grasp with another frame";
+  if (!std::isfinite(request.radius) || request.radius < 0.0)
+    return "radius = " + std::to_string(request.radius) + ": must be a finite number of metres >= 0 (0: the particles listed)";
+  if (!std::isfinite(request.max_force) || request.max_force < 0.0)
+    return "max_force = " + std::to_string(request.max_force) +
+           ": must be a finite number of newtons >= 0 (0: the grasp never lets go)";
+  if ((request.radius > 0.0) == !request.particles.empty())
+    return "give either a radius > 0 or a list of particles, not both and not neither";
+  return "";
+}
+
+// The free particles within `radius` of `origin` (grid coordinates) into `grasped`, or why none.
+std::string particlesWithin(const Grid& grid, const Eigen::Matrix3Xd& points, const Eigen::Vector3d& origin,
+                            double radius, const std::string& frame, std::vector<int>& grasped)
+{
+  double nearest = INFINITY;
+  for (int p = 0; p < grid.numParticles(); ++p)
+  {
+    if (grid.isFixed(p) || grid.isHandle(p))
+      continue;
+    const double distance = (points.col(p) - origin).norm();
+    nearest = std::min(nearest, distance);
+    if (distance <= radius)
+      grasped.push_back(p);
+  }
+  if (!grasped.empty())
+    return "";
+  char text[200];
+  std::snprintf(text, sizeof text, "no free particle within radius %.4g m of frame '%s' (the nearest is %.4g m away)",
+                radius, frame.c_str(), nearest);
+  return text;
+}
+
+// The listed particles into `grasped`, each on the grid, free and listed once; or why not.
+std::string listedParticles(const Grid& grid, const std::vector<int>& listed, std::vector<int>& grasped)
+{
+  for (int p : listed)
+  {
+    if (p < 0 || p >= grid.numParticles())
+      return "particle " + std::to_string(p) + " is not on the grid (0 to " + std::to_string(grid.numParticles() - 1) + ")";
+    if (grid.isFixed(p) || grid.isHandle(p))
+      return "particle " + std::to_string(p) + " is " + (grid.isFixed(p) ? "fixed" : "held by another handle") +
+             "; only free particles are grasped";
+    if (std::find(grasped.begin(), grasped.end(), p) != grasped.end())
+      return "particle " + std::to_string(p) + " is listed twice";
+    grasped.push_back(p);
+  }
+  return "";
+}
+
+// Snapping moves the particles' centre onto the frame's origin in a tick: no farther than a frame may jump.
+std::string snapProblem(const Eigen::Matrix3Xd& points, const std::vector<int>& grasped, const Eigen::Vector3d& origin)
+{
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (int p : grasped)
+    centre += points.col(p);
+  centre /= static_cast<double>(grasped.size());
+  const double distance = (centre - origin).norm();
+  if (distance <= HandleFrames::kMaxJumpPerTick)
+    return "";
+  char text[200];
+  std::snprintf(text, sizeof text, "snap would move the particles' centre %.3g m in a tick, above %.3g m; "
+                "grasp closer or with snap false", distance, HandleFrames::kMaxJumpPerTick);
+  return text;
+}
+
 }  // namespace
+
+std::string SimulationNode::graspChangeRefusal() const
+{
+  if (rebuilding())
+    return "a rebuild or a cubature training is under way (~status REBUILDING); call again after it";
+  if (tracks_.front().simulation->diverged())
+    return "the simulation diverged; ~reset first";
+  if (config_.simulation.handle_formulation == HandleFormulation::MovingFrame)
+    return "handle_formulation is moving_frame, which holds every handle on one body from the start; grasps "
+           "while running need constraint_modes or auto";
+  return "";
+}
+
+std::string SimulationNode::lookupGraspFrame(const std::string& frame, FramePose& pose)
+{
+  try
+  {
+    const auto t = tf_buffer_.lookupTransform(config_.node.fixed_frame, frame, ros::Time(0)).transform;
+    pose.translation = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);
+    pose.rotation = Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z).normalized();
+  }
+  catch (const tf2::TransformException& error)
+  {
+    return "frame '" + frame + "' is not available in '" + config_.node.fixed_frame + "' (" + error.what() + ")";
+  }
+  if (!pose.translation.allFinite() || !pose.rotation.coeffs().allFinite())
+    return "frame '" + frame + "' has a non-finite pose";
+  return "";
+}
 
 bool SimulationNode::attach(Attach::Request& request, Attach::Response& response)
 {
@@ -99,160 +203,43 @@ bool SimulationNode::attach(Attach::Request& request, Attach::Response& response
   ServiceLock lock(*this);
   response.success = false;
   response.handle = -1;
-  const Simulation& simulation = *primary().simulation;
-  const Grid& grid = simulation.grid();
-  const std::string refused = "attach refused: ";
-  if (rebuilding())
-  {
-    response.message = refused + "a rebuild or a cubature training is under way (~status REBUILDING); call again after it";
-    return true;
-  }
-  if (simulation.diverged())
-  {
-    response.message = refused + "the simulation diverged; ~reset first";
-    return true;
-  }
-  if (config_.simulation.handle_formulation == HandleFormulation::MovingFrame)
-  {
-    response.message = refused + "handle_formulation is moving_frame, which holds every handle on one body from the "
-                                 "start; a grasp while running needs constraint_modes or auto";
-    return true;
-  }
-  if (request.frame.empty())
-  {
-    response.message = refused + "frame is empty: give the TF frame the particles are to follow";
-    return true;
-  }
-  for (size_t h = 0; h < config_.node.handles.size(); ++h)
-    if (config_.node.handles[h].frame == request.frame)
-    {
-      response.message = refused + "frame '" + request.frame + "' already holds handle " + std::to_string(h) +
-                         "; ~detach it first, or grasp with another frame";
-      return true;
-    }
-  if (!std::isfinite(request.radius) || request.radius < 0.0)
-  {
-    response.message = refused + "radius = " + std::to_string(request.radius) +
-                       ": must be a finite number of metres >= 0 (0: the particles listed)";
-    return true;
-  }
-  if (!std::isfinite(request.max_force) || request.max_force < 0.0)
-  {
-    response.message = refused + "max_force = " + std::to_string(request.max_force) +
-                       ": must be a finite number of newtons >= 0 (0: the grasp never lets go)";
-    return true;
-  }
-  if ((request.radius > 0.0) == !request.particles.empty())
-  {
-    response.message = refused + "give either a radius > 0 or a list of particles, not both and not neither";
-    return true;
-  }
-
-  FramePose pose;
-  try
-  {
-    const auto t = tf_buffer_.lookupTransform(config_.node.fixed_frame, request.frame, ros::Time(0)).transform;
-    pose.translation = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);
-    pose.rotation = Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z).normalized();
-  }
-  catch (const tf2::TransformException& error)
-  {
-    response.message = refused + "frame '" + request.frame + "' is not available in '" + config_.node.fixed_frame +
-                       "' (" + error.what() + ")";
-    return true;
-  }
-  if (!pose.translation.allFinite() || !pose.rotation.coeffs().allFinite())
-  {
-    response.message = refused + "frame '" + request.frame + "' has a non-finite pose";
-    return true;
-  }
-
-  // The particles, checked: in range, free (neither fixed nor held).
+  const Grid& grid = primary().simulation->grid();
   const Eigen::Matrix3Xd& points = primary().last_points;  // grid coordinates
+  FramePose pose;
+  std::vector<int> grasped;
+  std::string why = graspChangeRefusal();
+  if (why.empty())
+    why = requestProblem(request, config_.node.handles);
+  if (why.empty())
+    why = lookupGraspFrame(request.frame, pose);
   const Eigen::Vector3d origin = pose.translation - config_.node.offset;
-  std::vector<int> particles;
-  if (request.radius > 0.0)
+  if (why.empty())
+    why = request.radius > 0.0 ? particlesWithin(grid, points, origin, request.radius, request.frame, grasped)
+                               : listedParticles(grid, request.particles, grasped);
+  if (why.empty() && request.snap)
+    why = snapProblem(points, grasped, origin);
+  if (why.empty())
   {
-    double nearest = INFINITY;
-    for (int p = 0; p < grid.numParticles(); ++p)
-    {
-      if (grid.isFixed(p) || grid.isHandle(p))
-        continue;
-      const double distance = (points.col(p) - origin).norm();
-      nearest = std::min(nearest, distance);
-      if (distance <= request.radius)
-        particles.push_back(p);
-    }
-    if (particles.empty())
-    {
-      char text[200];
-      std::snprintf(text, sizeof text, "no free particle within radius %.4g m of frame '%s' (the nearest is %.4g m away)",
-                    request.radius, request.frame.c_str(), nearest);
-      response.message = refused + text;
-      return true;
-    }
+    NodeConfiguration next = config_;
+    next.grid.fixed = effectiveFixed(config_.grid);  // the top row by default stays fixed with handles
+    next.grid.handles.push_back(grasped);
+    next.node.handles.push_back({request.frame, grasped});
+    std::vector<int> keep(config_.node.handles.size());
+    std::iota(keep.begin(), keep.end(), 0);
+    keep.push_back(-1);
+    why = changeHandles(&lock, next, keep, Grip{pose, request.snap != 0});
   }
-  else
-    for (int p : request.particles)
-    {
-      if (p < 0 || p >= grid.numParticles())
-      {
-        response.message = refused + "particle " + std::to_string(p) + " is not on the grid (0 to " +
-                           std::to_string(grid.numParticles() - 1) + ")";
-        return true;
-      }
-      if (grid.isFixed(p) || grid.isHandle(p))
-      {
-        response.message = refused + "particle " + std::to_string(p) + " is " +
-                           (grid.isFixed(p) ? "fixed" : "held by another handle") + "; only free particles are grasped";
-        return true;
-      }
-      if (std::find(particles.begin(), particles.end(), p) != particles.end())
-      {
-        response.message = refused + "particle " + std::to_string(p) + " is listed twice";
-        return true;
-      }
-      particles.push_back(p);
-    }
-  if (request.snap)
+  if (!why.empty())
   {
-    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-    for (int p : particles)
-      centre += points.col(p);
-    centre /= static_cast<double>(particles.size());
-    const double distance = (centre - origin).norm();
-    if (distance > HandleFrames::kMaxJumpPerTick)
-    {
-      char text[200];
-      std::snprintf(text, sizeof text, "snap would move the particles' centre %.3g m in a tick, above %.3g m; "
-                    "grasp closer or with snap false", distance, HandleFrames::kMaxJumpPerTick);
-      response.message = refused + text;
-      return true;
-    }
-  }
-
-  NodeConfiguration next = config_;
-  next.grid.fixed = effectiveFixed(config_.grid);  // the top row by default stays fixed with handles
-  next.grid.handles.push_back(particles);
-  next.node.handles.push_back({request.frame, particles});
-  next.simulation.handles_one_body = false;
-  next.simulation.handle_formulation = HandleFormulation::ConstraintModes;  // offsets not at x_ref: no one body
-  std::vector<int> keep;
-  for (size_t h = 0; h < config_.node.handles.size(); ++h)
-    keep.push_back(static_cast<int>(h));
-  keep.push_back(-1);
-  const std::string failure = changeHandles(&lock, next, keep, Grip{pose, request.snap != 0});
-  if (!failure.empty())
-  {
-    response.message = refused + failure;
+    response.message = "attach refused: " + why;
     return true;
   }
   grasp_limits_.resize(config_.node.handles.size(), 0.0);
   grasp_limits_.back() = request.max_force;
   response.success = true;
   response.handle = static_cast<int>(config_.node.handles.size() - 1);
-  response.particles = particles;
-  response.message = "attached particles " + joinParticles(particles) + " to frame '" + request.frame + "' as handle " +
+  response.particles = grasped;
+  response.message = "attached particles " + joinParticles(grasped) + " to frame '" + request.frame + "' as handle " +
                      std::to_string(response.handle) + (request.snap ? ", snapped onto its origin" : "") + " at step " +
                      std::to_string(steps(primary()));
   ROS_INFO("%s", response.message.c_str());
@@ -264,7 +251,6 @@ bool SimulationNode::detach(Detach::Request& request, Detach::Response& response
   boost::recursive_mutex::scoped_lock tuning(tuning_mutex_);
   ServiceLock lock(*this);
   response.success = false;
-  const std::string refused = "detach refused: ";
   int released = -1;
   std::string frames;
   for (size_t h = 0; h < config_.node.handles.size(); ++h)
@@ -273,27 +259,14 @@ bool SimulationNode::detach(Detach::Request& request, Detach::Response& response
     if (config_.node.handles[h].frame == request.frame)
       released = static_cast<int>(h);
   }
-  if (released < 0)
+  std::string why = released < 0 ? "no handle follows frame '" + request.frame + "' (the handles' frames: " +
+                                       (frames.empty() ? std::string("none") : frames) + ")"
+                                 : graspChangeRefusal();
+  if (why.empty())
+    why = releaseHandle(&lock, static_cast<size_t>(released));
+  if (!why.empty())
   {
-    response.message = refused + "no handle follows frame '" + request.frame + "' (the handles' frames: " +
-                       (frames.empty() ? std::string("none") : frames) + ")";
-    return true;
-  }
-  if (rebuilding())
-  {
-    response.message = refused + "a rebuild or a cubature training is under way (~status REBUILDING); call again after it";
-    return true;
-  }
-  if (config_.simulation.handle_formulation == HandleFormulation::MovingFrame)
-  {
-    response.message = refused + "handle_formulation is moving_frame, which holds every handle on one body; "
-                                 "a release while running needs constraint_modes or auto";
-    return true;
-  }
-  const std::string failure = releaseHandle(&lock, static_cast<size_t>(released));
-  if (!failure.empty())
-  {
-    response.message = refused + failure;
+    response.message = "detach refused: " + why;
     return true;
   }
   response.success = true;
@@ -312,8 +285,6 @@ std::string SimulationNode::releaseHandle(ServiceLock* lock, size_t released)
   next.node.handles.erase(next.node.handles.begin() + static_cast<long>(released));
   if (next.grid.handles.empty() && next.grid.fixed.empty())
     return "it is the last thing holding the cloth (no fixed particle, no other handle): a grid needs one";
-  next.simulation.handles_one_body = false;
-  next.simulation.handle_formulation = HandleFormulation::ConstraintModes;
   std::vector<int> keep;
   for (size_t h = 0; h < config_.node.handles.size(); ++h)
     if (h != released)
@@ -324,9 +295,12 @@ std::string SimulationNode::releaseHandle(ServiceLock* lock, size_t released)
   return failure;
 }
 
-std::string SimulationNode::changeHandles(ServiceLock* lock, const NodeConfiguration& next, const std::vector<int>& keep,
+std::string SimulationNode::changeHandles(ServiceLock* lock, NodeConfiguration next, const std::vector<int>& keep,
                                           const std::optional<Grip>& grip)
 {
+  // A grip taken while running is not where x_ref puts it: the handles are no longer one body.
+  next.simulation.handles_one_body = false;
+  next.simulation.handle_formulation = HandleFormulation::ConstraintModes;
   std::vector<Method> methods;
   std::vector<bool> with_basis;
   for (const Track& track : tracks_)
@@ -358,7 +332,13 @@ std::string SimulationNode::changeHandles(ServiceLock* lock, const NodeConfigura
     return failure;
   if (state_changes_ != changes)
     return "the simulation was reset or switched while the new model was built; call again";
+  swapInHeldSet(next, built, keep, grip);
+  return "";
+}
 
+void SimulationNode::swapInHeldSet(const NodeConfiguration& next, std::vector<std::unique_ptr<Simulation>>& built,
+                                   const std::vector<int>& keep, const std::optional<Grip>& grip)
+{
   // The grips: the kept ones as they were, the new one where its particles are now.
   const Eigen::Matrix3Xd points = primary().simulation->points();
   auto frames = std::make_unique<HandleFrames>(next.node.handles, built.front()->grid(),
@@ -402,7 +382,6 @@ std::string SimulationNode::changeHandles(ServiceLock* lock, const NodeConfigura
   private_params_["handle_formulation"] = std::string("constraint_modes");
   ++live_builds_;  // the rollouts' workers are built anew
   ++state_changes_;
-  return "";
 }
 
 void SimulationNode::advertiseHandleForces(Track& track, size_t handles)

@@ -200,8 +200,15 @@ private:
     FramePose pose;
     bool snap = false;
   };
-  std::string changeHandles(ServiceLock* lock, const NodeConfiguration& next, const std::vector<int>& keep,
+  std::string changeHandles(ServiceLock* lock, NodeConfiguration next, const std::vector<int>& keep,
                             const std::optional<Grip>& grip);
+  // With the lock held: the built tracks in, the motion carried over, the grips, the configuration.
+  void swapInHeldSet(const NodeConfiguration& next, std::vector<std::unique_ptr<Simulation>>& built,
+                     const std::vector<int>& keep, const std::optional<Grip>& grip);
+  // Why the held set cannot change now (a rebuild, a divergence, moving_frame), or empty.
+  std::string graspChangeRefusal() const;
+  // `frame`'s latest pose in fixed_frame into `pose`, or why not.
+  std::string lookupGraspFrame(const std::string& frame, FramePose& pose);
   // Lets handle h go (its particles free); `lock` as changeHandles (null: held throughout).
   std::string releaseHandle(ServiceLock* lock, size_t h);
   void advertiseHandleForces(Track& track, size_t handles);  // ~handle_force/handle_<h>
