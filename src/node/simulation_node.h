@@ -296,6 +296,7 @@ private:
   int diag_ticks_ = 0, diag_late_ticks_ = 0;
   double diag_step_seconds_ = 0.0;
   ros::Time last_tf_stamp_;
+  int ticks_since_markers_ = 0;  // markers_rate: the ticks since ~markers last went out
   ros::WallTime last_status_log_;
 
   ros::Publisher clock_pub_;
@@ -394,6 +395,7 @@ struct SimulationNode::Output
   std::vector<Grid> grids;
   std::vector<geometry_msgs::TransformStamped> frames;  // empty: no TF this time
   ros::Time stamp;
+  bool markers = true;  // ~markers go out this tick (markers_rate)
 };
 
 }  // namespace modal_mass_spring

@@ -79,6 +79,12 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
   const bool send_tf = stamp > last_tf_stamp_ && !config_.node.tf_particles.empty();
   if (send_tf)
     last_tf_stamp_ = stamp;
+  const NodeParams& params = config_.node;
+  // Every k-th tick, k the nearest whole number to publish_rate / markers_rate.
+  const int every = params.markers_rate > 0.0 ? std::max(1, static_cast<int>(std::lround(params.publish_rate / params.markers_rate))) : 1;
+  output.markers = ++ticks_since_markers_ >= every;
+  if (output.markers)
+    ticks_since_markers_ = 0;
   for (const Track& track : tracks_)
   {
     if (track.shadow)
@@ -134,17 +140,21 @@ void SimulationNode::addGrid(const Track& track, const Track* ref, const ros::Ti
     options.label = trackLabel(track, measured);
   // One pass over the springs for both the surface's colours and the cloud.
   const Eigen::VectorXd strains = particleStrains(simulation.grid(), track.last_points);
-  grid.markers = makeMarkers(simulation.grid(), options, track.last_points, stamp, strains);
+  if (output.markers)
+    grid.markers = makeMarkers(simulation.grid(), options, track.last_points, stamp, strains);
   if (const Contact* contact = simulation.contact())
   {
-    const auto colliders = colliderMarkers(*contact, options.frame_id, track.offset, track.ns_prefix + "colliders", stamp);
-    grid.markers.markers.insert(grid.markers.markers.end(), colliders.markers.begin(), colliders.markers.end());
+    if (output.markers)
+    {
+      const auto colliders = colliderMarkers(*contact, options.frame_id, track.offset, track.ns_prefix + "colliders", stamp);
+      grid.markers.markers.insert(grid.markers.markers.end(), colliders.markers.begin(), colliders.markers.end());
+    }
     for (size_t i = 0; i < track.contact_force_pubs.size() && i < contact->report().force.size(); ++i)
       grid.wrenches.emplace_back(track.contact_force_pubs[i],
                                  forceWrench(contact->report().force[i], options.frame_id, stamp));
   }
   addHandleWrenches(track, options.frame_id, stamp, grid.wrenches);
-  if (measured && ref->shadow)
+  if (measured && ref->shadow && output.markers)
   {
     // The reference drawn faintly where the method is: the gap between them is the error.
     MarkerOptions ghost = options;
@@ -298,7 +308,8 @@ void SimulationNode::send(const Output& output)
   }
   for (const auto& grid : output.grids)
   {
-    grid.markers_pub.publish(grid.markers);
+    if (output.markers)
+      grid.markers_pub.publish(grid.markers);
     grid.points_pub.publish(grid.points);
   }
   if (!output.frames.empty())
