@@ -301,13 +301,7 @@ std::string SimulationNode::changeHandles(ServiceLock* lock, NodeConfiguration n
   // A grip taken while running is not where x_ref puts it: the handles are no longer one body.
   next.simulation.handles_one_body = false;
   next.simulation.handle_formulation = HandleFormulation::ConstraintModes;
-  std::vector<Method> methods;
-  std::vector<bool> with_basis;
-  for (const Track& track : tracks_)
-  {
-    methods.push_back(track.simulation->method());
-    with_basis.push_back(track.simulation->basisBuilt());
-  }
+  const std::vector<TrackKind> kinds = trackKinds();
   const long changes = state_changes_;
   std::vector<std::unique_ptr<Simulation>> built;
   if (lock)
@@ -315,12 +309,7 @@ std::string SimulationNode::changeHandles(ServiceLock* lock, NodeConfiguration n
   std::string failure;
   try
   {
-    for (size_t k = 0; k < methods.size(); ++k)
-    {
-      SimulationParams params = next.simulation;
-      params.method = methods[k];
-      built.push_back(buildSimulation(next.grid, params, false, "building the new held set", with_basis[k]));
-    }
+    built = buildTracksFor(next, kinds, "building the new held set");
   }
   catch (const std::exception& error)
   {

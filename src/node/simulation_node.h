@@ -168,6 +168,18 @@ private:
   void startLiveTuning();
   void reconfigure(SimulationConfig& config, uint32_t level);
   void rebuildLoop();
+  // What each track runs (its method; whether its basis is built: a full track that switched to a
+  // modal method needs it again), to build it anew; with mutex_ held.
+  struct TrackKind
+  {
+    Method method;
+    bool with_basis;
+  };
+  std::vector<TrackKind> trackKinds() const;
+  // A simulation for each of `kinds` on `config` (no lock needed); throws what buildSimulation throws.
+  std::vector<std::unique_ptr<Simulation>> buildTracksFor(const NodeConfiguration& config,
+                                                          const std::vector<TrackKind>& kinds,
+                                                          const std::string& activity) const;
   void swapRebuilt();  // with mutex_ held, at a tick boundary
   bool rebuilding() const { return rebuilding_ || !rebuilt_.empty() || training_; }
 

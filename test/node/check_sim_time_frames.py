@@ -14,15 +14,10 @@ import rospy
 import rostest
 from tf2_msgs.msg import TFMessage
 
+from check_handles import rotation
+
 HELD = [0, 1, 2]
 TOLERANCE = 1e-9  # m: the TF frames carry float64
-
-
-def rotation(q):
-    x, y, z, w = q
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
 class Recorder:
