@@ -1,6 +1,6 @@
-// The package's own supernodal Cholesky against CHOLMOD's supernodal one (Eigen's CholmodSupernodalLLT,
-// over the system's BLAS: run with OPENBLAS_NUM_THREADS=1), on the two matrices the package factorises:
-// the modal basis's shift-invert M^-1/2 K M^-1/2 - sigma I and the static equilibrium's Newton tangent
+// The package's former supernodal Cholesky (supernodal_cholesky.h, kept here for this comparison)
+// against the core's, CHOLMOD's supernodal one (SparseCholesky, over the system's BLAS on one thread),
+// on the two matrices the package factorises: the modal basis's shift-invert M^-1/2 K M^-1/2 - sigma I and the static equilibrium's Newton tangent
 // K + 1e-8 max K_ii I, both of the swinging cloth (benchmark/swinging_cloth.h) at n x n particles, on its
 // 3D sheet or on the 2D grid of the same size. docs/benchmarks.md, "Sparse Cholesky", has the figures.
 //
@@ -15,13 +15,11 @@
 // one solve with the factor (x <- A^-1 b), what each Lanczos step and each refinement does.
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/spring_forces.h"
-#include "solvers/supernodal_cholesky.h"
+#include "solvers/sparse_cholesky.h"
+#include "supernodal_cholesky.h"
 #include "swinging_cloth.h"
 
-#include <Eigen/CholmodSupport>
 #include <benchmark/benchmark.h>
-
-#include <dlfcn.h>
 
 #include <cmath>
 #include <cstdlib>
@@ -86,13 +84,6 @@ Problem problem(Matrix matrix, int size, int dimension)
   return p;
 }
 
-void useOneBlasThread()
-{
-  using SetThreads = void (*)(int);
-  if (auto set = reinterpret_cast<SetThreads>(dlsym(RTLD_DEFAULT, "openblas_set_num_threads")))
-    set(1);
-}
-
 class Factor
 {
 public:
@@ -120,33 +111,25 @@ private:
   std::unique_ptr<SupernodalCholesky> llt_;
 };
 
+// The core's: CHOLMOD's supernodal factorisation, analysed again only for a new pattern.
 class CholmodFactor : public Factor
 {
 public:
-  CholmodFactor() { useOneBlasThread(); }
   void factorise(const Problem& p) override
   {
-    llt_ = std::make_unique<Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower>>();
-    llt_->setShift(-p.shift);
-    llt_->compute(p.a);
-    if (llt_->info() != Eigen::Success)
-      throw std::runtime_error("CHOLMOD failed");
+    llt_ = std::make_unique<SparseCholesky>();
+    refactorise(p);
   }
   void refactorise(const Problem& p) override
   {
-    llt_->factorize(p.a);
-    if (llt_->info() != Eigen::Success)
+    if (!llt_->factorise(p.a, -p.shift))
       throw std::runtime_error("CHOLMOD failed");
   }
-  void solve(Eigen::VectorXd& x) override { x = llt_->solve(x); }
-  long entries() const override
-  {
-    const cholmod_factor* l = llt_->cholmodFactor();
-    return static_cast<long>(l->is_super ? l->xsize : l->nzmax);
-  }
+  void solve(Eigen::VectorXd& x) override { llt_->solveInPlace(x); }
+  long entries() const override { return llt_->storedEntries(); }
 
 private:
-  std::unique_ptr<Eigen::CholmodSupernodalLLT<SparseMatrix, Eigen::Lower>> llt_;
+  std::unique_ptr<SparseCholesky> llt_;
 };
 
 std::unique_ptr<Factor> makeFactor(Solver solver)
