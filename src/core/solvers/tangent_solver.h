@@ -25,9 +25,9 @@ enum class TangentSolverKind
 };
 
 // One J after another. A direct kind solves exactly; a conjugate gradient kind stops once the
-// residual |b - J x| is below the tolerance given, and falls back on factorising J (and keeping that
-// factor as the preconditioner of the next ones) where it does not get there in a few iterations or
-// finds J not positive definite.
+// residual |b - J x| is below the tolerance given, and falls back on factorising J (CHOLMOD) where it
+// does not get there within its iterations or finds J not positive definite. A benchmark derives its
+// own kinds (solve() and the protected conjugate gradients).
 class TangentSolver
 {
 public:
