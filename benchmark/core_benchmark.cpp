@@ -7,6 +7,7 @@
 #include "modal_mass_spring/spring_forces.h"
 #include "dynamics/integrator.h"
 #include "solvers/equilibrium.h"
+#include "supernodal_cholesky.h"
 #include "swinging_cloth.h"
 
 #include <Eigen/Geometry>
@@ -298,12 +299,82 @@ MassDamping massDamping(const Grid& grid, double alpha)
   return MassDamping{mass, damping};
 }
 
+// Newton's linear solvers measured side by side (range(1) of BM_ImplicitFullSolver): the core's kinds
+// and three of this benchmark's own, which the core left for being slower (docs/benchmarks.md).
+enum class LinearSolver
+{
+  SimplicialLdlt,  // the core's
+  Cholmod,         // the core's
+  Supernodal,      // the package's former supernodal Cholesky (supernodal_cholesky.h), built for every J
+  JacobiCg,        // conjugate gradients preconditioned by J's diagonal
+  CholmodCg,       // conjugate gradients preconditioned by the CHOLMOD factor of an earlier J
+  BlockJacobiCg,   // the core's
+};
+
+// The benchmark's own kinds over the core's CHOLMOD one, which factorises J where they give up.
+class BenchmarkTangentSolver : public TangentSolver
+{
+public:
+  explicit BenchmarkTangentSolver(LinearSolver kind) : TangentSolver(TangentSolverKind::Cholmod), kind_(kind) {}
+
+  bool solve(const SparseMatrix& j, const Eigen::VectorXd& b, Eigen::VectorXd& x, double tolerance) override
+  {
+    auto product = [&](const Eigen::VectorXd& p, Eigen::VectorXd& jp) { jp.noalias() = j * p; };
+    if (kind_ == LinearSolver::Supernodal)
+    {
+      ++factorisations_;
+      const SupernodalCholesky llt(j);
+      if (llt.info() != Eigen::Success)
+        return false;
+      x = b;
+      llt.solveInPlace(x);
+      return x.allFinite();
+    }
+    if (kind_ == LinearSolver::JacobiCg)
+    {
+      inverse_diagonal_ = j.diagonal().cwiseInverse();
+      if (inverse_diagonal_.minCoeff() > 0.0 &&
+          conjugateGradients(product, b, x, tolerance, kMaxJacobiIterations,
+                             [&](Eigen::VectorXd& v) { v.array() *= inverse_diagonal_.array(); }) &&
+          x.allFinite())
+        return true;
+    }
+    // Within a few iterations while J changes little; past this many, factorising the new J costs less.
+    constexpr int kMaxReusedFactorIterations = 8;
+    if (kind_ == LinearSolver::CholmodCg && hasFactor())
+    {
+      // CG from zero is a descent direction of the quadratic whatever the preconditioner.
+      if (conjugateGradients(product, b, x, tolerance, kMaxReusedFactorIterations,
+                             [&](Eigen::VectorXd& v) {
+                               solveWithFactor(v, preconditioned_);
+                               v = preconditioned_;
+                             }) &&
+          x.allFinite())
+        return true;
+    }
+    return TangentSolver::solve(j, b, x, tolerance);
+  }
+
+private:
+  LinearSolver kind_;
+  Eigen::VectorXd inverse_diagonal_, preconditioned_;
+};
+
+TangentSolverKind coreKind(LinearSolver solver)
+{
+  if (solver == LinearSolver::SimplicialLdlt)
+    return TangentSolverKind::SimplicialLdlt;
+  return solver == LinearSolver::BlockJacobiCg ? TangentSolverKind::BlockJacobiCg : TangentSolverKind::Cholmod;
+}
+
 struct SwingingCloth
 {
-  SwingingCloth(int size, TangentSolverKind solver)
+  SwingingCloth(int size, LinearSolver solver)
     : grid(swingingCloth(size)), model(grid, grid.initialPositions()),
-      integrator(massDamping(grid, 0.5), 0.005, 50, -0.1, 1e-9, solver)
+      integrator(massDamping(grid, 0.5), 0.005, 50, -0.1, 1e-9, coreKind(solver))
   {
+    if (solver == LinearSolver::Supernodal || solver == LinearSolver::JacobiCg || solver == LinearSolver::CholmodCg)
+      integrator.setLinearSolver(std::make_unique<BenchmarkTangentSolver>(solver));
     state.q.setZero(grid.numFreeDofs());
     state.v.setZero(grid.numFreeDofs());
     integrator.initialize(model, state);
@@ -317,7 +388,7 @@ struct SwingingCloth
 void BM_ImplicitFullSolver(benchmark::State& state)
 {
   const int size = static_cast<int>(state.range(0));
-  const auto solver = static_cast<TangentSolverKind>(state.range(1));
+  const auto solver = static_cast<LinearSolver>(state.range(1));
   auto cloth = std::make_unique<SwingingCloth>(size, solver);
   if (state.range(2) != 0)
     cloth->integrator.setNewtonStart(NewtonStart::ConstantAcceleration);
@@ -343,7 +414,7 @@ void BM_ImplicitFullSolver(benchmark::State& state)
   state.counters["cg_per_step"] = cloth->integrator.linearSolver().cgIterations() * per_step;
   state.counters["free_dofs"] = cloth->grid.numFreeDofs();
 }
-// range(1): TangentSolverKind (0 simplicial LDL^T, 1 CHOLMOD, 2 this package's supernodal, 3 Jacobi CG,
+// range(1): LinearSolver (0 simplicial LDL^T, 1 CHOLMOD, 2 the former own supernodal, 3 Jacobi CG,
 // 4 CG preconditioned by an earlier CHOLMOD factor, 5 CG preconditioned by J's 3 x 3 particle blocks);
 // range(2): Newton's start (0 constant velocity, 1 constant acceleration); range(3): the inexact
 // Newton's largest forcing term, 10^-range(3). 200 steps (1 s) on 50 x 50, 100 (0.5 s) on 100 x 100,

@@ -2,7 +2,7 @@
 // (self_collision.h).
 #include "modal_mass_spring/self_collision.h"
 
-#include "modal_mass_spring/validation.h"
+#include "modal_mass_spring/parameter_error.h"
 
 #include <Eigen/Geometry>
 

@@ -116,7 +116,7 @@ ImplicitNewmark::ImplicitNewmark(MassDamping system, double dt, int max_iteratio
     gamma_(0.5 - hht_alpha),
     max_iterations_(max_iterations),
     tolerance_(tolerance),
-    linear_solver_(linear_solver)
+    linear_solver_(std::make_unique<TangentSolver>(linear_solver))
 {
   mass_matrix_.resize(system_.mass.size(), system_.mass.size());
   mass_matrix_.setIdentity();
@@ -139,7 +139,7 @@ void ImplicitNewmark::setStepSize(double h)
     return;
   h_ = h;
   inertia_mapped_ = false;
-  linear_solver_.forgetFactor();
+  linear_solver_->forgetFactor();
   inertia_ = (1.0 / (beta_ * h * h)) * mass_matrix_ + ((1.0 + alpha_) * gamma_ / (beta_ * h)) * damping_;
   inertia_diagonal_.resize(0);
   if (isDiagonal(inertia_))
@@ -204,7 +204,7 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
   const bool symmetric = !gyroscopic_ && model.isSymmetric();
   if (solver_ != ImplicitSolver::Newton && symmetric && !model.isLinear() && prepareFactor(model, next.q, false))
     return solveWithFactor(model, s, next, incremental);
-  linear_solver_.setBlockSize(model.blockSize());
+  linear_solver_->setBlockSize(model.blockSize());
   for (last_iterations_ = 1; last_iterations_ <= max_iterations_; ++last_iterations_)
   {
     const double residual_norm = residual(model, s, next);
@@ -404,7 +404,7 @@ bool ImplicitNewmark::solveWithFactor(ForceModel& model, const State& s, State& 
 Eigen::VectorXd ImplicitNewmark::direction(ForceModel& model, const State& next, bool symmetric, double slack)
 {
   Eigen::VectorXd delta;
-  if (symmetric && linear_solver_.kind() == TangentSolverKind::BlockJacobiCg)
+  if (symmetric && linear_solver_->kind() == TangentSolverKind::BlockJacobiCg)
     if (const SpringTangent* k = model.springTangent(next.q))
     {
       // J p = inertia p + (1 + alpha) K p from the springs, J never assembled; where CG does not
@@ -419,7 +419,7 @@ Eigen::VectorXd ImplicitNewmark::direction(ForceModel& model, const State& next,
           jp.noalias() = inertia_ * p;
         k->multiplyAdd(p, 1.0 + alpha_, jp);
       };
-      if (linear_solver_.solveMatrixFree(multiply, jacobian_blocks_, residual_, delta, slack) &&
+      if (linear_solver_->solveMatrixFree(multiply, jacobian_blocks_, residual_, delta, slack) &&
           residual_.dot(delta) > 0.0)
         return -delta;
     }
@@ -442,7 +442,7 @@ Eigen::VectorXd ImplicitNewmark::direction(ForceModel& model, const State& next,
   for (double extra = 0.0; extra < 1e8; extra = std::max(1e-3, 10.0 * extra))
   {
     assembleJacobian(1.0 + extra, 1.0 + alpha_);
-    if (linear_solver_.solve(jacobian_, residual_, delta, slack))
+    if (linear_solver_->solve(jacobian_, residual_, delta, slack))
     {
       delta = -delta;
       break;

@@ -112,7 +112,10 @@ public:
   ImplicitNewmark(MassDamping system, double dt, int max_iterations = 50, double hht_alpha = 0.0,
                   double tolerance = 1e-9, TangentSolverKind linear_solver = TangentSolverKind::BlockJacobiCg);
   // The symmetric tangents' solver, for its counters.
-  const TangentSolver& linearSolver() const { return linear_solver_; }
+  const TangentSolver& linearSolver() const { return *linear_solver_; }
+  // Another solver of the symmetric tangents in place of the one of the kind given at construction
+  // (a benchmark's own kinds).
+  void setLinearSolver(std::unique_ptr<TangentSolver> solver) { linear_solver_ = std::move(solver); }
   bool step(ForceModel& model, const State& state, State& next) override;
   int lastIterations() const override { return last_iterations_; }
   int lastSubsteps() const override { return substeps_; }
@@ -169,7 +172,7 @@ private:
   int substeps_ = 0;
   double h_ = 0.0;             // the step size being solved
   SparseMatrix mass_matrix_;
-  TangentSolver linear_solver_;
+  std::unique_ptr<TangentSolver> linear_solver_;
   Eigen::SparseLU<SparseMatrix> lu_;
   SparsityPattern lu_pattern_;  // what lu_ was analysed for
   SparseMatrix damping_;  // C + G

@@ -4,6 +4,7 @@
 #pragma once
 
 #include "modal_mass_spring/spring_forces.h"
+#include "solvers/sparse_cholesky.h"
 
 #include <Eigen/Core>
 
@@ -14,42 +15,30 @@
 namespace modal_mass_spring
 {
 
-// The sparsity pattern a factorisation was analysed for, so that it is analysed again only when the
-// pattern changes.
-struct SparsityPattern
-{
-  std::vector<int> outer, inner;
-  // True, and `m`'s pattern recorded, when it differs from the one recorded.
-  bool changedTo(const SparseMatrix& m);
-};
-
-// How J x = b is solved. Measured side by side on swinging cloths (docs/benchmarks.md); the default is
-// the fastest of them that converges each step to the same tolerance.
+// How J x = b is solved: the kinds the core uses (other kinds, measured side by side on swinging
+// cloths, are the benchmark's own: docs/benchmarks.md).
 enum class TangentSolverKind
 {
-  SimplicialLdlt,     // Eigen's simplicial LDL^T, refactorised for every J (one column at a time)
-  Cholmod,            // CHOLMOD's supernodal Cholesky (BLAS), analysed once, refactorised for every J
-  Supernodal,         // this package's supernodal Cholesky (SupernodalCholesky), built for every J
-  JacobiCg,           // conjugate gradients preconditioned by J's diagonal
-  CholmodCg,          // conjugate gradients preconditioned by the CHOLMOD factor of an earlier J
-  BlockJacobiCg,      // conjugate gradients preconditioned by J's diagonal blocks (a particle's dofs)
+  SimplicialLdlt,  // Eigen's simplicial LDL^T, refactorised for every J (one column at a time)
+  Cholmod,         // CHOLMOD's supernodal Cholesky (SparseCholesky), analysed once, refactorised for every J
+  BlockJacobiCg,   // conjugate gradients preconditioned by J's diagonal blocks (a particle's dofs)
 };
 
 // One J after another. A direct kind solves exactly; a conjugate gradient kind stops once the
-// residual |b - J x| is below the tolerance given, and falls back on factorising J (and keeping that
-// factor as the preconditioner of the next ones) where it does not get there in a few iterations or
-// finds J not positive definite.
+// residual |b - J x| is below the tolerance given, and falls back on factorising J (CHOLMOD) where it
+// does not get there within its iterations or finds J not positive definite. A benchmark derives its
+// own kinds (solve() and the protected conjugate gradients).
 class TangentSolver
 {
 public:
   explicit TangentSolver(TangentSolverKind kind);
-  ~TangentSolver();
+  virtual ~TangentSolver();
   TangentSolver(TangentSolver&&) noexcept;
   TangentSolver& operator=(TangentSolver&&) noexcept;
 
   // x <- J^-1 b, |b - J x| <= tolerance (direct kinds: exact to round-off). False, x undefined, when J
   // is not positive definite (or not finite).
-  bool solve(const SparseMatrix& j, const Eigen::VectorXd& b, Eigen::VectorXd& x, double tolerance);
+  virtual bool solve(const SparseMatrix& j, const Eigen::VectorXd& b, Eigen::VectorXd& x, double tolerance);
   // The same by conjugate gradients preconditioned by J's diagonal blocks (block size as set) with J
   // given only as its product jp <- J p and those blocks (block_size^2 values a block, column-major),
   // never assembled. False where a block or J is not positive definite or CG does not converge in
@@ -72,13 +61,21 @@ public:
 
   class Factor;  // a sparse Cholesky factorisation (one per direct kind)
 
-private:
+protected:
   // Conjugate gradients from x = 0, preconditioned by `precondition` (z <- P^-1 r); false when they
   // meet a direction of non-positive curvature or stop after max_iterations.
   // jp <- J p by `multiply`.
   template <typename Multiply, typename Precondition>
   bool conjugateGradients(Multiply multiply, const Eigen::VectorXd& b, Eigen::VectorXd& x, double tolerance,
                           int max_iterations, Precondition precondition);
+  // Whether solve() holds the factor of a J still usable (solveWithFactor).
+  bool hasFactor() const { return factor_current_; }
+  // A diagonal preconditioner leaves J's condition number to the square of the grid's size: cap the
+  // iterations there (then the factor).
+  static constexpr int kMaxJacobiIterations = 2000;
+  long factorisations_ = 0, cg_iterations_ = 0;
+
+private:
   int blockSize(Eigen::Index size) const;
 
   // inverse_blocks_ <- J's diagonal blocks, block_size^2 values a block (column-major).
@@ -97,9 +94,39 @@ private:
   TangentSolverKind kind_;
   std::unique_ptr<Factor> factor_;
   bool factor_current_ = false;  // the factor is of a J still usable as a preconditioner
-  long factorisations_ = 0, cg_iterations_ = 0;
   int block_size_ = 1;
   Eigen::VectorXd r_, z_, p_, jp_, inverse_diagonal_, inverse_blocks_;
 };
+
+template <typename Multiply, typename Precondition>
+bool TangentSolver::conjugateGradients(Multiply multiply, const Eigen::VectorXd& b, Eigen::VectorXd& x,
+                                       double tolerance, int max_iterations, Precondition precondition)
+{
+  x.setZero(b.size());
+  r_ = b;
+  z_ = r_;
+  precondition(z_);
+  p_ = z_;
+  double rz = r_.dot(z_);
+  for (int iteration = 0; iteration < max_iterations; ++iteration)
+  {
+    if (r_.norm() <= tolerance)
+      return true;
+    ++cg_iterations_;
+    multiply(p_, jp_);
+    const double curvature = p_.dot(jp_);
+    if (!(curvature > 0.0))
+      return false;
+    const double step = rz / curvature;
+    x += step * p_;
+    r_ -= step * jp_;
+    z_ = r_;
+    precondition(z_);
+    const double rz_next = r_.dot(z_);
+    p_ = z_ + (rz_next / rz) * p_;
+    rz = rz_next;
+  }
+  return r_.norm() <= tolerance;
+}
 
 }  // namespace modal_mass_spring

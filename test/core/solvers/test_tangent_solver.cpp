@@ -21,9 +21,7 @@ using namespace modal_mass_spring;
 namespace
 {
 
-const TangentSolverKind kNewKinds[] = {TangentSolverKind::Cholmod, TangentSolverKind::Supernodal,
-                                       TangentSolverKind::JacobiCg, TangentSolverKind::CholmodCg,
-                                       TangentSolverKind::BlockJacobiCg};
+const TangentSolverKind kNewKinds[] = {TangentSolverKind::Cholmod, TangentSolverKind::BlockJacobiCg};
 
 std::string name(TangentSolverKind kind)
 {
@@ -198,7 +196,7 @@ TEST(TangentSolver, ANonConvergingStepIsStillSplitOrRefused)
   // split in 3 where the others take it whole, presumably because its conjugate gradients converge
   // before they meet J's negative curvature, so no inertia is added (not yet checked); the parts still
   // converge.)
-  for (TangentSolverKind kind : {TangentSolverKind::SimplicialLdlt, TangentSolverKind::CholmodCg, TangentSolverKind::JacobiCg})
+  for (TangentSolverKind kind : {TangentSolverKind::SimplicialLdlt, TangentSolverKind::Cholmod})
   {
     FullForceModel model(grid, grid.initialPositions());
     State state, next;
@@ -265,18 +263,38 @@ GridParams swinging(int n)
   return g;
 }
 
-TEST(TangentSolver, ParticleBlocksNeedFewerIterationsThanTheDiagonalForTheSameSteps)
+TEST(TangentSolver, ParticleBlocksNeedFewerIterationsThanTheDiagonalForTheSameSolution)
 {
+  // Newton's tangent of a 5 ms step (HHT alpha -0.1) on the swinging cloth, disturbed: block Jacobi
+  // with a particle's 3 dofs a block against blocks of one dof (J's diagonal).
   const Grid grid(swinging(12));
-  const Eigen::VectorXd q0 = Eigen::VectorXd::Zero(grid.numFreeDofs());
-  long jacobi = 0, blocks = 0;
-  const Eigen::VectorXd reference =
-      stepWith(TangentSolverKind::JacobiCg, grid, q0, 0.005, 40, nullptr, NewtonStart::ConstantVelocity, nullptr, &jacobi);
-  const Eigen::VectorXd q =
-      stepWith(TangentSolverKind::BlockJacobiCg, grid, q0, 0.005, 40, nullptr, NewtonStart::ConstantVelocity, nullptr, &blocks);
-  ASSERT_GT((reference - q0).norm(), 1e-2);
-  EXPECT_LT((q - reference).norm(), 1e-6 * (reference - q0).norm());
-  EXPECT_LT(blocks, jacobi);
+  const TangentAssembler assembler(grid);
+  Eigen::VectorXd x = grid.initialPositions();
+  grid.addFree(deformation(grid, 1.0, 0.1), x);
+  SparseMatrix k;
+  assembler.assemble(x, k, CompressedSprings::Drop);
+  SparseMatrix inertia(k.rows(), k.rows());
+  inertia.setIdentity();
+  const double beta = 0.25 * 1.1 * 1.1, h = 0.005;
+  const SparseMatrix j = SparseMatrix(grid.particleMass() / (beta * h * h) * inertia + 1.1 * k);
+  std::srand(3);
+  const Eigen::VectorXd b = Eigen::VectorXd::Random(k.rows());
+  const double tolerance = 1e-10 * b.norm();
+  Eigen::VectorXd reference;
+  ASSERT_TRUE(TangentSolver(TangentSolverKind::SimplicialLdlt).solve(j, b, reference, 0.0));
+  long iterations[2] = {0, 0};
+  for (int block_size : {1, 3})
+  {
+    TangentSolver solver(TangentSolverKind::BlockJacobiCg);
+    solver.setBlockSize(block_size);
+    Eigen::VectorXd solved;
+    ASSERT_TRUE(solver.solve(j, b, solved, tolerance)) << block_size;
+    EXPECT_EQ(solver.factorisations(), 0) << block_size;  // converged, no fallback
+    EXPECT_LT((solved - reference).norm(), 1e-8 * reference.norm()) << block_size;
+    iterations[block_size == 3] = solver.cgIterations();
+  }
+  EXPECT_GT(iterations[0], 0);
+  EXPECT_LT(iterations[1], iterations[0]);
 }
 
 TEST(ImplicitNewmark, StartingFromTheConstantAccelerationConvergesToTheSameStepsInNoMoreIterations)

@@ -1,4 +1,5 @@
-// The supernodal Cholesky factor of the modal basis's shift-invert (internal).
+// The supernodal Cholesky the modal basis factorised its shift-invert with until CHOLMOD over OpenBLAS
+// replaced it, kept for benchmark/sparse_cholesky.cpp's comparison (docs/benchmarks.md, "Sparse Cholesky").
 #pragma once
 
 #include <Eigen/Core>
@@ -12,9 +13,8 @@ namespace modal_mass_spring
 
 // Sparse Cholesky factorisation P (A - sigma I) P^T = L L^T of a symmetric positive definite A - sigma I
 // (P an AMD ordering), by supernodes: runs of columns of L with the same rows below them, each kept
-// as one dense block, factorised and updated with dense matrix products; why it is the package's own
-// rather than Eigen's simplicial one or CHOLMOD's: docs/design.md, "The modal basis". The solves,
-// memory-bound, read each supernode's row list once and its entries in order.
+// as one dense block, factorised and updated with dense matrix products. The solves, memory-bound,
+// read each supernode's row list once and its entries in order.
 class SupernodalCholesky
 {
 public:

@@ -1,6 +1,6 @@
 // Left-looking supernodal Cholesky: the symbolic analysis walks the row subtrees of the elimination
 // tree (Liu), the numeric one updates each supernode from the earlier ones whose rows reach it.
-#include "solvers/supernodal_cholesky.h"
+#include "supernodal_cholesky.h"
 
 #include <Eigen/Cholesky>
 #include <Eigen/OrderingMethods>
