@@ -138,7 +138,16 @@ std::string colliderFieldExpected(const std::string& key)
          "(box); center, radius (sphere); a, b, radius (capsule))";
 }
 
-Collider colliderFromFields(const ColliderFields& f, const std::string& name)
+namespace
+{
+
+bool known(const std::vector<std::string>& keys, const std::string& key)
+{
+  return std::find(keys.begin(), keys.end(), key) != keys.end();
+}
+
+// The type named by the fields' `type` (refused when a number or absent).
+ColliderType colliderTypeOf(const ColliderFields& f, const std::string& name)
 {
   if (f.numbers.count("type"))
   {
@@ -153,8 +162,49 @@ Collider colliderFromFields(const ColliderFields& f, const std::string& name)
   const auto type_text = f.text.find("type");
   if (type_text == f.text.end())
     rejectParameter(name + ".type", "(absent)", "every collider needs a type: plane, box, sphere or capsule");
+  return parseColliderType(type_text->second, name + ".type");
+}
+
+// Refuses a field that is not a key of a collider of `type` (its vectors and scalars beside type and
+// frame; `allowed` lists them), or of the wrong kind or size, and a key it needs that is absent.
+void checkColliderFields(const ColliderFields& f, const std::string& name, ColliderType type,
+                         const std::vector<std::string>& vectors, const std::vector<std::string>& scalars,
+                         const std::string& allowed)
+{
+  for (const auto& [key, value] : f.text)
+    if (key != "type" && key != "frame")
+      rejectParameter(name + "." + key, "'" + value + "'",
+                      known(vectors, key) || known(scalars, key) ? "must be " + colliderFieldExpected(key)
+                                                                 : "is not a key of a " + toString(type) + " (its keys: " + allowed + ")");
+  for (const auto& [key, value] : f.numbers)
+  {
+    const std::string field = name + "." + key;
+    if (key == "type" || key == "frame")
+      rejectParameter(field, value.empty() ? 0.0 : value[0], "must be " + colliderFieldExpected(key));
+    if (known(vectors, key))
+    {
+      if (value.size() != 3)
+        rejectParameter(field, std::to_string(value.size()) + " numbers", "must be a list of three numbers [x, y, z]");
+      continue;
+    }
+    if (!known(scalars, key))
+      rejectParameter(field, "(given)", "is not a key of a " + toString(type) + " (its keys: " + allowed + ")");
+    if (value.size() != 1)
+      rejectParameter(field, std::to_string(value.size()) + " numbers", "must be one number");
+  }
+  for (const std::string& key : vectors)
+    if (!f.numbers.count(key))
+      rejectParameter(name + "." + key, "(absent)", "a " + toString(type) + " needs it (its keys: " + allowed + ")");
+  if (known(scalars, "radius") && !f.numbers.count("radius"))
+    rejectParameter(name + ".radius", "(absent)", "a " + toString(type) + " needs a radius");
+}
+
+}  // namespace
+
+Collider colliderFromFields(const ColliderFields& f, const std::string& name)
+{
   Collider c;
-  c.type = parseColliderType(type_text->second, name + ".type");
+  c.type = colliderTypeOf(f, name);
   std::vector<std::string> vectors, scalars{"friction"};
   switch (c.type)
   {
@@ -168,35 +218,7 @@ Collider colliderFromFields(const ColliderFields& f, const std::string& name)
     allowed += ", " + key;
   for (size_t k = 1; k < scalars.size(); ++k)
     allowed += ", " + scalars[k];
-  auto known = [](const std::vector<std::string>& keys, const std::string& key) {
-    return std::find(keys.begin(), keys.end(), key) != keys.end();
-  };
-  for (const auto& [key, value] : f.text)
-    if (key != "type" && key != "frame")
-      rejectParameter(name + "." + key, "'" + value + "'",
-                      known(vectors, key) || known(scalars, key) ? "must be " + colliderFieldExpected(key)
-                                                                 : "is not a key of a " + toString(c.type) + " (its keys: " + allowed + ")");
-  for (const auto& [key, value] : f.numbers)
-  {
-    const std::string field = name + "." + key;
-    if (key == "type" || key == "frame")
-      rejectParameter(field, value.empty() ? 0.0 : value[0], "must be " + colliderFieldExpected(key));
-    if (known(vectors, key))
-    {
-      if (value.size() != 3)
-        rejectParameter(field, std::to_string(value.size()) + " numbers", "must be a list of three numbers [x, y, z]");
-      continue;
-    }
-    if (!known(scalars, key))
-      rejectParameter(field, "(given)", "is not a key of a " + toString(c.type) + " (its keys: " + allowed + ")");
-    if (value.size() != 1)
-      rejectParameter(field, std::to_string(value.size()) + " numbers", "must be one number");
-  }
-  for (const std::string& key : vectors)
-    if (!f.numbers.count(key))
-      rejectParameter(name + "." + key, "(absent)", "a " + toString(c.type) + " needs it (its keys: " + allowed + ")");
-  if (known(scalars, "radius") && !f.numbers.count("radius"))
-    rejectParameter(name + ".radius", "(absent)", "a " + toString(c.type) + " needs a radius");
+  checkColliderFields(f, name, c.type, vectors, scalars, allowed);
   auto vector = [&](const std::string& key) {
     const std::vector<double>& v = f.numbers.at(key);
     return Eigen::Vector3d(v[0], v[1], v[2]);
