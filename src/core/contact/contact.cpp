@@ -119,6 +119,30 @@ struct PassSums<0>
   double before = 0.0, after = 0.0;
 };
 
+// The depth of a corrected particle at x below each surface it touched (placed[touched[0 .. touching)],
+// the first at first_distance before), once all of them corrected it, into `after`. A particle that
+// one collider alone touched and corrected, in 3D, ends at least the thickness out, so it cannot
+// deepen the report and is not measured: every shape is convex, so its signed distance is a convex
+// function whose gradient (a subgradient inside a box) is the normal n the correction used, and the
+// correction moved the particle by the push along n plus a part normal to n: d(after) >= d + n .
+// move = d + push = the thickness. This holds to round-off (far below the thickness, which the test
+// asks) except at a round shape's centre or axis, where n is a fixed direction, and in 2D, where the
+// move loses its out-of-plane part.
+template <int Dim, typename Touched>
+inline void measureDepth(const Placed* placed, const Touched& touched, int touching, bool corrected,
+                         double first_distance, double thickness, const Eigen::Vector3d& x, double& after)
+{
+  if (Dim == 3 && touching == 1 && corrected && first_distance > placed[touched[0]].centre_distance &&
+      thickness > 1e-6 * (placed[touched[0]].scale + x.cwiseAbs().maxCoeff()))
+    return;
+  for (int j = 0; j < touching; ++j)
+  {
+    Eigen::Vector3d unused;
+    const double d = placed[touched[j]].distance(x, -std::numeric_limits<double>::infinity(), unused);
+    after = std::max(after, -d);
+  }
+}
+
 // The contact pass of correctParticles over the `count` placed colliders (Count of them when not 0)
 // on a grid of dimension Dim, particle by particle: a touch corrects only its own particle, so this
 // is the same as finding every collider's touches at the uncorrected positions and then correcting
@@ -187,23 +211,8 @@ PassSums<Count> contactPass(const Placed* placed_all, int count, double thicknes
       addTo(v, p, Dim, dv);
       sums.impulse[k] += mass[Dim * p] * dv;
     }
-    // Its depth below each surface it touched, once all of them corrected it. A particle that one
-    // collider alone touched and corrected, in 3D, ends at least the thickness out, so it cannot
-    // deepen the report and is not measured: every shape is convex, so its signed distance is a
-    // convex function whose gradient (a subgradient inside a box) is the normal n the correction
-    // used, and the correction moved the particle by the push along n plus a part normal to n:
-    // d(after) >= d + n . move = d + push = the thickness. This holds to round-off (far below the
-    // thickness, which the test asks) except at a round shape's centre or axis, where n is a fixed
-    // direction, and in 2D, where the move loses its out-of-plane part.
-    if (Dim == 3 && touching == 1 && corrected && first_distance > placed[sums.touched[0]].centre_distance &&
-        thickness > 1e-6 * (placed[sums.touched[0]].scale + pointOf(x, p, Dim).cwiseAbs().maxCoeff()))
-      continue;
-    for (int j = 0; j < touching; ++j)
-    {
-      Eigen::Vector3d unused;
-      const double d = placed[sums.touched[j]].distance(pointOf(x, p, Dim), -std::numeric_limits<double>::infinity(), unused);
-      sums.after = std::max(sums.after, -d);
-    }
+    measureDepth<Dim>(placed, sums.touched, touching, corrected, first_distance, thickness, pointOf(x, p, Dim),
+                      sums.after);
   }
   return sums;
 }
