@@ -30,10 +30,9 @@ namespace
 // (Spectra's and ARPACK's criterion).
 constexpr double kTolerance = 1e-12;
 
-// A convergence check after j Lanczos steps (a tridiagonal eigensolve) takes about 0.35 ns j^3, a
-// step about 0.85 ns per entry of the factor (measured on a 100 x 100 grid). The next check comes
-// kCheckCost j^3 / entries steps later: those steps cost about 2.4 checks, so the checks take at most
-// about 40% of the steps' time, and stopping comes at most that late.
+// A convergence check after j Lanczos steps (a tridiagonal eigensolve, O(j^3)) is spaced from the
+// last by kCheckCost j^3 / entries of the factor steps, so that the checks cost a bounded fraction of
+// the steps and stopping comes at most that late (the costs behind it: docs/benchmarks.md, "Modal basis").
 constexpr double kCheckCost = 1.0;
 
 // y = P (A - sigma I)^-1 P x, P = I - Q Q^T the projector onto the complement of the

@@ -128,8 +128,8 @@ void Simulation::precompute(const StageFn& on_stage, const IterationFn& on_itera
     data.skinning_info.seconds = 0.0;
     adoptBasis(std::move(data));
   }
-  // `full` needs no basis: it is built at the first switch to a modal method (on a 200 x 200 grid it
-  // took minutes).
+  // `full` needs no basis: it is built at the first switch to a modal method, so that a run of `full`
+  // alone does not wait for it.
   else if (params_.method != Method::Full)
     buildBasis(on_stage, on_iteration);
 }
