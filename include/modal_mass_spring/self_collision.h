@@ -81,6 +81,8 @@ struct SelfCollisionReport
   int position_sweeps = 0, velocity_sweeps = 0;  // the Gauss-Seidel sweeps of the correction
 };
 
+struct Cells;  // the broad phase's cells (internal)
+
 class SelfCollision
 {
 public:
@@ -160,6 +162,29 @@ private:
   // Lists the candidate pairs closer than the thickness plus twice the skin at positions x: every
   // pair when `moved` is empty, else those of the particles in it and of the triangles at them.
   void listCandidates(const Eigen::VectorXd& x, const std::vector<int>& moved);
+  // Its steps (self_collision_candidates.cpp), at positions xs with the listing distance `listed`
+  // and the broad phase's cells `reach` wide. Empties every group (all), or moves the pairs with a
+  // moved particle to the end of their group, [gone_from, gone_end).
+  void dropMovedPairs(bool all, std::vector<int>& gone_from, std::vector<int>& gone_end);
+  // The square of the longest edge of a cell's triangles.
+  double longestCellEdge(const double* xs) const;
+  // The centre and the squared radius of a sphere around the cell anchored at slot s that holds
+  // every point within `listed` of its triangles (found once a listing, cell_sphere_).
+  const Eigen::Vector4d& cellSphere(int s, const double* xs, double listed);
+  // Particle p against the cell anchored at q (both its triangles, or only those with a moved corner
+  // when `moved_only`), when every corner of the cell is more than two springs from p and a triangle
+  // is within `listed`.
+  void listTriangles(int p, int q, bool moved_only, const double* xs, double listed);
+  // The moved particles against everything (a particle pair in both particles' lists).
+  void listAroundMoved(const Cells& cells, const double* xs, double reach, double listed);
+  // The triangles with a moved corner against the particles that have not moved.
+  void listMovedTriangles(const std::vector<int>& moved, const Cells& cells, const double* xs, double reach,
+                          double listed);
+  // A pair listed again takes what was found of it before (its margin, its kept closest point: they
+  // hold for the pair whatever the listing), so that a listing does not send it to the narrow phase;
+  // then the gone pairs are erased.
+  void takeBackFound(const std::vector<int>& gone_from, const std::vector<int>& gone_end);
+  int slotAt(int row, int col) const { return slot_of_[row * grid_.params().cols + col]; }
   // The candidates closer than the thickness at the step's end x, one per closest point.
   void findTouches(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x);
   // Whether slot p's candidates are as they were last looked at within the tolerances (none listed or
@@ -173,11 +198,48 @@ private:
   }
   // Looks at slot p's candidates (those not still apart) and keeps those within reach of the thickness.
   void lookAtGroup(int p, const double* x, const double* x_start);
+  // Whether a pair whose particles have travelled less than its margin since it was last looked at is
+  // still apart (a point's distance to a triangle changes by at most its own and the farthest
+  // corner's displacements); a kept pair is looked at whenever its group is. Else marks it looked at.
+  bool apart(Pair& pair) const;
+  // lookAtGroup's steps: its particle pairs (returns how many particles it puts in `covered`, those
+  // whose triangles have their closest point to p at them), its triangle pairs (not those at a
+  // covered particle), and the pairs within reach kept.
+  int lookAtParticlePairs(int p, const double* x, const double* x_start, int covered[8]);
+  void lookAtTrianglePairs(int p, const double* x, const double* x_start, const int covered[8], int covering);
+  void keepWithinReach(int p);
   // Whether the triangle pair `k` of `group` (one particle's candidates, with this step's geometry)
   // leaves its closest point (on the edge opposite its corner `opposite`) to the triangle sharing
   // that edge, when that one holds the same point.
   bool edgeHeldByNeighbour(const std::vector<Pair>& group, const std::vector<Geometry>& geometry, int k,
                            int opposite) const;
+  // correct's steps. Finds the particles moved half the skin since their pairs were listed (moved_);
+  // true when every pair is to be listed anew.
+  bool findMoved(const Eigen::VectorXd& x);
+  // Adds the path from the last step's end positions to x to each particle's travel; false when not finite.
+  bool addTravel(const Eigen::VectorXd& x);
+  // The particles of the touches that lie on a collider, and the surface's normal there: found anew
+  // for a particle that has travelled the reuse fraction since it was last, and for every particle
+  // once a collider has moved (or none is given).
+  void findSurfaces(const Eigen::VectorXd& x, const Contact* contact);
+  // The touches' inverse masses, their sums and their relative positions at the step's start.
+  void weighTouches(const Eigen::VectorXd& x_start);
+  // The Gauss-Seidel sweeps over the touches: positions pushed apart, then approaching velocities removed.
+  void sweepPositions(Eigen::VectorXd& x);
+  void sweepVelocities(Eigen::VectorXd& v, double dt);
+  // The touch's relative position (or velocity) among `values`: p less the weighted corners.
+  static Eigen::Vector3d relative(const double* values, const Touch& t);
+  // Moves p by delta / (1 + sum w^2) and the corners against it by their weights (each times its
+  // inverse mass): the pair's relative displacement changes by delta and, between free particles, its
+  // momentum not at all.
+  static void apply(double* values, const Touch& t, const Eigen::Vector3d& delta);
+  // The sweeps end after one that moved nothing by more than this (m, and m over the step for
+  // velocities): what it leaves is smaller still, and the next step pushes out what is left. After
+  // the first sweep, a pair is swept again only when a push of more than this moved one of its
+  // particles in the last sweep or this one (stirred, stir): the rule that ends the sweeps, pair by pair.
+  double settledDistance() const { return 1e-3 * thickness_; }
+  bool stirred(const Touch& t, int sweep) const;
+  void stir(const Touch& t, int sweep);
 
   const Grid& grid_;
   double thickness_;

@@ -400,6 +400,9 @@ private:
   void install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder);
   // The equilibrium and the bases: from the cache when it holds them, else computed (and stored).
   void precompute(const StageFn& on_stage, const IterationFn& on_iteration);
+  // precompute's step: the static equilibrium, solved into `data` unless `cached` holds it, taken as
+  // the linearization point and the start where the parameters ask.
+  void linearizeAtEquilibrium(Precomputed& data, bool cached, const StageFn& on_stage, const IterationFn& on_iteration);
   // Takes the bases and what they report, loaded or built.
   void adoptBasis(Precomputed&& data);
   // Loads, or trains and stores, the cubature on the physical basis.

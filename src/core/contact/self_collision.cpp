@@ -1,8 +1,10 @@
-// Self-collision: the broad phase's cells, the pairs within the thickness and their correction
-// (self_collision.h).
+// Self-collision: the pairs within the thickness and their correction (self_collision.h); the
+// candidate pairs are listed in self_collision_candidates.cpp.
 #include "modal_mass_spring/self_collision.h"
 
 #include "modal_mass_spring/parameter_error.h"
+
+#include "contact/geometry.h"
 
 #include <Eigen/Geometry>
 
@@ -13,165 +15,6 @@
 
 namespace modal_mass_spring
 {
-namespace
-{
-
-// The correction Coulomb friction with the bound `limit` makes to a tangential quantity t (as the
-// colliders': cancel it where the bound covers it, else shorten it by the bound).
-Eigen::Vector3d coulomb(const Eigen::Vector3d& t, double limit)
-{
-  const double squared = t.squaredNorm();
-  if (squared <= limit * limit)
-    return -t;
-  return -limit / std::sqrt(squared) * t;
-}
-
-// The point of triangle (a, b, c) closest to p and its barycentric weights (Ericson, Real-Time
-// Collision Detection, 5.1.5).
-Eigen::Vector3d closestOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
-                                  const Eigen::Vector3d& c, double w[3])
-{
-  const Eigen::Vector3d ab = b - a, ac = c - a, ap = p - a;
-  const double d1 = ab.dot(ap), d2 = ac.dot(ap);
-  if (d1 <= 0.0 && d2 <= 0.0)
-  {
-    w[0] = 1.0, w[1] = w[2] = 0.0;
-    return a;
-  }
-  const Eigen::Vector3d bp = p - b;
-  const double d3 = ab.dot(bp), d4 = ac.dot(bp);
-  if (d3 >= 0.0 && d4 <= d3)
-  {
-    w[1] = 1.0, w[0] = w[2] = 0.0;
-    return b;
-  }
-  const double vc = d1 * d4 - d3 * d2;
-  if (vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0)
-  {
-    const double t = d1 / (d1 - d3);
-    w[0] = 1.0 - t, w[1] = t, w[2] = 0.0;
-    return a + t * ab;
-  }
-  const Eigen::Vector3d cp = p - c;
-  const double d5 = ab.dot(cp), d6 = ac.dot(cp);
-  if (d6 >= 0.0 && d5 <= d6)
-  {
-    w[2] = 1.0, w[0] = w[1] = 0.0;
-    return c;
-  }
-  const double vb = d5 * d2 - d1 * d6;
-  if (vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0)
-  {
-    const double t = d2 / (d2 - d6);
-    w[0] = 1.0 - t, w[2] = t, w[1] = 0.0;
-    return a + t * ac;
-  }
-  const double va = d3 * d6 - d5 * d4;
-  if (va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0)
-  {
-    const double t = (d4 - d3) / ((d4 - d3) + (d5 - d6));
-    w[1] = 1.0 - t, w[2] = t, w[0] = 0.0;
-    return b + t * (c - b);
-  }
-  const double denominator = 1.0 / (va + vb + vc);
-  const double v = vb * denominator, u = vc * denominator;
-  w[0] = 1.0 - v - u, w[1] = v, w[2] = u;
-  return a + v * ab + u * ac;
-}
-
-// Points sorted into a uniform grid of cubic cells at least `reach` wide over their bounding box
-// (wider when that would make more than a few cells per point), by a counting sort.
-struct Cells
-{
-  Eigen::Vector3d origin;
-  double size = 0.0;
-  int dims[3] = {1, 1, 1};
-  std::vector<int>* start = nullptr;   // cell c holds sorted[start[c] .. start[c + 1])
-  std::vector<int>* sorted = nullptr;
-
-  void cellOf(const double* point, int out[3]) const
-  {
-    for (int a = 0; a < 3; ++a)
-      out[a] = std::min(dims[a] - 1, std::max(0, static_cast<int>((point[a] - origin[a]) / size)));
-  }
-  int index(int i, int j, int k) const { return i + dims[0] * (j + dims[1] * k); }
-};
-
-Cells sortIntoCells(const double* x, int count, double reach, std::vector<int>& cell_of, std::vector<int>& start,
-                    std::vector<int>& sorted)
-{
-  Cells cells;
-  Eigen::Vector3d low = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), high = -low;
-  for (int p = 0; p < count; ++p)
-  {
-    const Eigen::Map<const Eigen::Vector3d> at(x + 3 * p);
-    low = low.cwiseMin(at);
-    high = high.cwiseMax(at);
-  }
-  if (count == 0)
-    low = high = Eigen::Vector3d::Zero();
-  cells.origin = low;
-  cells.size = reach;
-  const double limit = 4.0 * count + 64.0;  // cells
-  for (;;)
-  {
-    double total = 1.0;
-    for (int a = 0; a < 3; ++a)
-    {
-      cells.dims[a] = static_cast<int>(std::floor((high[a] - low[a]) / cells.size)) + 1;
-      total *= cells.dims[a];
-    }
-    if (total <= limit)
-      break;
-    cells.size *= std::max(1.01, std::cbrt(total / limit));
-  }
-  const int total = cells.dims[0] * cells.dims[1] * cells.dims[2];
-  cell_of.resize(count);
-  start.assign(total + 1, 0);
-  for (int p = 0; p < count; ++p)
-  {
-    int c[3];
-    cells.cellOf(x + 3 * p, c);
-    cell_of[p] = cells.index(c[0], c[1], c[2]);
-    ++start[cell_of[p] + 1];
-  }
-  for (int c = 0; c < total; ++c)
-    start[c + 1] += start[c];
-  sorted.resize(count);
-  std::vector<int> fill(start.begin(), start.end() - 1);
-  for (int p = 0; p < count; ++p)
-    sorted[fill[cell_of[p]]++] = p;
-  cells.start = &start;
-  cells.sorted = &sorted;
-  return cells;
-}
-
-// Calls visit(q) for every point in the 27 cells around `point`.
-template <typename Visit>
-void forNeighbours(const Cells& cells, const double* point, Visit&& visit)
-{
-  int c[3];
-  cells.cellOf(point, c);
-  const std::vector<int>& start = *cells.start;
-  const std::vector<int>& sorted = *cells.sorted;
-  for (int k = std::max(0, c[2] - 1); k <= std::min(cells.dims[2] - 1, c[2] + 1); ++k)
-    for (int j = std::max(0, c[1] - 1); j <= std::min(cells.dims[1] - 1, c[1] + 1); ++j)
-    {
-      const int i0 = std::max(0, c[0] - 1), i1 = std::min(cells.dims[0] - 1, c[0] + 1);
-      // Cells along x are consecutive: one range.
-      for (int s = start[cells.index(i0, j, k)]; s < start[cells.index(i1, j, k) + 1]; ++s)
-        visit(sorted[s]);
-    }
-}
-
-// More than two springs apart: the Chebyshev distance of the grid indices.
-bool separatedIndices(int row_p, int col_p, int row_q, int col_q)
-{
-  return std::max(std::abs(row_p - row_q), std::abs(col_p - col_q)) > 2;
-}
-
-}  // namespace
-
 void validateSelfCollision(const GridParams& grid, bool enabled, double thickness, double friction)
 {
   if (!enabled)
@@ -186,32 +29,6 @@ void validateSelfCollision(const GridParams& grid, bool enabled, double thicknes
                         std::to_string(grid.spacing) + " m): particles one spring apart are that far apart at rest");
   if (!std::isfinite(friction) || friction < 0.0)
     rejectParameter("self_friction", friction, "must be a finite Coulomb coefficient >= 0");
-}
-
-bool selfSeparated(const Grid& grid, int p, int q)
-{
-  const int cols = grid.params().cols;
-  return separatedIndices(p / cols, p % cols, q / cols, q % cols);
-}
-
-double closestSeparatedDistance(const Grid& grid, const Eigen::VectorXd& positions, double cutoff)
-{
-  const int count = grid.numParticles();
-  std::vector<int> cell_of, start, sorted;
-  const Cells cells = sortIntoCells(positions.data(), count, cutoff, cell_of, start, sorted);
-  double closest = std::numeric_limits<double>::infinity();
-  for (int p = 0; p < count; ++p)
-  {
-    const Eigen::Map<const Eigen::Vector3d> at(positions.data() + 3 * p);
-    forNeighbours(cells, positions.data() + 3 * p, [&](int q) {
-      if (q <= p || !selfSeparated(grid, p, q))
-        return;
-      const double d = (Eigen::Map<const Eigen::Vector3d>(positions.data() + 3 * q) - at).norm();
-      if (d < cutoff)
-        closest = std::min(closest, d);
-    });
-  }
-  return closest;
 }
 
 SelfCollision::SelfCollision(const Grid& grid, double thickness, double friction, SelfPrimitive primitive)
@@ -287,179 +104,6 @@ SelfCollision::Geometry SelfCollision::geometry(const Pair& pair, const double* 
   return g;
 }
 
-void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<int>& moved)
-{
-  const int count = static_cast<int>(particle_of_.size());
-  const bool all = moved.empty();
-  candidates_.resize(count);
-  group_changed_.resize(count);
-  is_moved_.assign(count, all ? 1 : 0);
-  for (int p : moved)
-    is_moved_[p] = 1;
-  const int cols = grid_.params().cols;
-  const double* xs = x.data();
-  auto at = [xs](int slot) { return Eigen::Map<const Eigen::Vector3d>(xs + 3 * slot); };
-  auto slotAt = [&](int row, int col) { return slot_of_[row * cols + col]; };
-  const bool triangles = primitive_ == SelfPrimitive::Triangles;
-  // The pairs with a moved particle go; they are listed anew below (moved to the end of their group,
-  // [gone_from, gone_end), until those listed again have taken what was found of them).
-  std::vector<int> gone_from(all ? 0 : count), gone_end(all ? 0 : count);
-  for (int p = 0; p < count; ++p)
-  {
-    std::vector<Pair>& group = candidates_[p];
-    group_changed_[p] = all;
-    if (all)
-    {
-      group.clear();
-      continue;
-    }
-    gone_end[p] = static_cast<int>(group.size());
-    gone_from[p] = static_cast<int>(std::partition(group.begin(), group.end(),
-                                                   [&](const Pair& pair) {
-                                                     return !(is_moved_[pair.p] || is_moved_[pair.c[0]] ||
-                                                              (pair.c[1] >= 0 && (is_moved_[pair.c[1]] ||
-                                                                                  is_moved_[pair.c[2]])));
-                                                   }) -
-                                    group.begin());
-    group_changed_[p] = gone_from[p] != gone_end[p];
-  }
-  const double listed = (1.0 + 2.0 * kSkin) * thickness_;
-  // A triangle within `listed` of a particle has its first corner within `listed` plus its longest
-  // edge. Around each cell, a sphere through its farthest corner from the corners' mean: a particle
-  // farther than `listed` from it is that far from both triangles (the cheap test before the exact
-  // one; at a listing of some particles, found for the cells it meets: a negative radius marks one
-  // not found yet).
-  double longest = 0.0;
-  if (triangles)
-  {
-    cell_sphere_.assign(count, Eigen::Vector4d::Constant(-1.0));
-    for (int s = 0; s < count; ++s)
-      if (anchor_[s])
-      {
-        const int b = slotAt(row_[s], col_[s] + 1), c = slotAt(row_[s] + 1, col_[s]), d = slotAt(row_[s] + 1, col_[s] + 1);
-        longest = std::max({longest, (at(b) - at(s)).squaredNorm(), (at(c) - at(s)).squaredNorm(),
-                            (at(d) - at(s)).squaredNorm(), (at(d) - at(b)).squaredNorm(), (at(d) - at(c)).squaredNorm()});
-      }
-  }
-  auto cellSphere = [&](int s) -> const Eigen::Vector4d& {
-    Eigen::Vector4d& sphere = cell_sphere_[s];
-    if (sphere[3] < 0.0)
-    {
-      const int b = slotAt(row_[s], col_[s] + 1), c = slotAt(row_[s] + 1, col_[s]), d = slotAt(row_[s] + 1, col_[s] + 1);
-      const Eigen::Vector3d centre = 0.25 * (at(s) + at(b) + at(c) + at(d));
-      const double radius = std::sqrt(std::max({(at(s) - centre).squaredNorm(), (at(b) - centre).squaredNorm(),
-                                                (at(c) - centre).squaredNorm(), (at(d) - centre).squaredNorm()})) +
-                            listed;
-      sphere << centre, radius * radius;
-    }
-    return sphere;
-  };
-  if (triangles && all)
-    for (int s = 0; s < count; ++s)
-      if (anchor_[s])
-        cellSphere(s);
-  const double reach = listed + std::sqrt(longest);
-  const double reach2 = reach * reach, listed2 = listed * listed;
-  const Cells cells = sortIntoCells(xs, count, reach, cell_of_, cell_start_, sorted_);
-  // Particle p against the cell anchored at q (both its triangles, or only those with a moved corner
-  // when `moved_only`), when every corner of the cell is more than two springs from p and a triangle
-  // is within `listed`.
-  auto listTriangles = [&](int p, int q, bool moved_only) {
-    const Eigen::Vector3d xp = at(p);
-    const int rp = row_[p], cp = col_[p], rq = row_[q], cq = col_[q];
-    const int dr = rp < rq ? rq - rp : std::max(0, rp - rq - 1);
-    const int dc = cp < cq ? cq - cp : std::max(0, cp - cq - 1);
-    if (std::max(dr, dc) <= 2)
-      return;
-    const Eigen::Vector4d& sphere = cellSphere(q);
-    if ((sphere.head<3>() - xp).squaredNorm() >= sphere[3])
-      return;
-    const int b = slotAt(rq, cq + 1), c = slotAt(rq + 1, cq), d = slotAt(rq + 1, cq + 1);
-    int half = 0;
-    for (const auto& corners : {std::array<int, 3>{q, b, d}, std::array<int, 3>{q, d, c}})
-    {
-      double w[3];
-      if (!moved_only || is_moved_[corners[0]] || is_moved_[corners[1]] || is_moved_[corners[2]])
-      {
-        const Eigen::Vector3d y = closestOnTriangle(xp, at(corners[0]), at(corners[1]), at(corners[2]), w);
-        if ((xp - y).squaredNorm() < listed2)
-        {
-          candidates_[p].push_back(Pair{p, {corners[0], corners[1], corners[2]}, half, -1.0, 0.0, 0, Geometry{}});
-          group_changed_[p] = 1;
-        }
-      }
-      ++half;
-    }
-  };
-  // The moved particles against everything (a particle pair in both particles' lists).
-  for (int p = 0; p < count; ++p)
-  {
-    if (!is_moved_[p])
-      continue;
-    const Eigen::Vector3d xp = at(p);
-    forNeighbours(cells, xs + 3 * p, [&](int q) {
-      const double d2 = (at(q) - xp).squaredNorm();
-      if (q == p || d2 >= reach2)
-        return;
-      if (d2 < listed2 && (q > p || !is_moved_[q]) && separatedIndices(row_[p], col_[p], row_[q], col_[q]))
-      {
-        candidates_[p].push_back(Pair{p, {q, -1, -1}, -1, -1.0, 0.0, 0, Geometry{}});
-        candidates_[q].push_back(Pair{q, {p, -1, -1}, -1, -1.0, 0.0, 0, Geometry{}});
-        group_changed_[p] = group_changed_[q] = 1;
-      }
-      if (triangles && anchor_[q])
-        listTriangles(p, q, false);
-    });
-  }
-  built_at_.resize(x.size());
-  if (all)
-  {
-    built_at_ = x;
-    return;
-  }
-  for (int p : moved)
-    built_at_.segment<3>(3 * p) = at(p);
-  // The triangles with a moved corner against the particles that have not moved.
-  if (triangles)
-  {
-    is_anchor_listed_.assign(count, 0);
-    for (int m : moved)
-      for (int r = std::max(0, row_[m] - 1); r <= row_[m]; ++r)
-        for (int c = std::max(0, col_[m] - 1); c <= col_[m]; ++c)
-        {
-          const int q = slotAt(r, c);
-          if (q < 0 || !anchor_[q] || is_anchor_listed_[q])
-            continue;
-          is_anchor_listed_[q] = 1;
-          forNeighbours(cells, xs + 3 * q, [&](int p) {
-            if (!is_moved_[p] && (at(q) - at(p)).squaredNorm() < reach2)
-              listTriangles(p, q, true);  // the other half kept its pairs
-          });
-        }
-  }
-  // A pair listed again takes what was found of it before (its margin, its kept closest point: they
-  // hold for the pair whatever the listing), so that a listing does not send it to the narrow phase.
-  for (int p = 0; p < count; ++p)
-  {
-    std::vector<Pair>& group = candidates_[p];
-    const int gone = gone_end[p] - gone_from[p];
-    if (gone == 0)
-      continue;
-    int found = 0;
-    for (size_t k = gone_end[p]; k < group.size(); ++k)
-      for (int j = gone_from[p]; j < gone_end[p]; ++j)
-        if (group[j].c[0] == group[k].c[0] && group[j].c[1] == group[k].c[1] && group[j].half == group[k].half)
-        {
-          group[k] = group[j];
-          ++found;
-          break;
-        }
-    // The same pairs as before: the group is as it was looked at.
-    group_changed_[p] = found != gone || static_cast<int>(group.size()) - gone_end[p] != gone;
-    group.erase(group.begin() + gone_from[p], group.begin() + gone_end[p]);
-  }
-}
-
 bool SelfCollision::edgeHeldByNeighbour(const std::vector<Pair>& group, const std::vector<Geometry>& geometry, int k,
                                         int opposite) const
 {
@@ -518,31 +162,36 @@ bool SelfCollision::groupSettled(int p) const
   return true;
 }
 
+
+bool SelfCollision::apart(Pair& pair) const
+{
+  const double travel = travelOf(pair);
+  if (!pair.kept && travel - pair.travel < pair.margin)
+    return true;
+  pair.travel = travel;
+  pair.kept = 0;
+  return false;
+}
+
 void SelfCollision::lookAtGroup(int p, const double* xs, const double* starts)
 {
-  auto at = [xs](int slot) { return Eigen::Map<const Eigen::Vector3d>(xs + 3 * slot); };
-  // Pairs within this of the thickness are kept (their closest points found below as within it); a
-  // triangle pair kept keeps its closest point while its particles have travelled less than `reuse`.
-  const double reach = (1.0 + kReuse) * thickness_, reuse = kReuse * thickness_;
-  std::vector<Pair>& group = candidates_[p];
-  const int size = static_cast<int>(group.size());
-  group_geometry_.resize(size);
-  // A pair whose particles have travelled less than its margin since it was last looked at is still
-  // apart (a point's distance to a triangle changes by at most its own and the farthest corner's
-  // displacements); a kept pair is looked at whenever its group is.
-  auto apart = [&](Pair& pair) {
-    const double travel = travelOf(pair);
-    if (!pair.kept && travel - pair.travel < pair.margin)
-      return true;
-    pair.travel = travel;
-    pair.kept = 0;
-    return false;
-  };
+  group_geometry_.resize(candidates_[p].size());
   // The particles within reach of p whose every triangle has its closest point to p at them (p is
   // in their corner's Voronoi region: Ericson 5.1.5's first test): the particle pair holds that
   // point, so their triangles are not looked at.
-  int covered[8], covering = 0;
-  const Eigen::Vector3d xp = at(p);
+  int covered[8];
+  const int covering = lookAtParticlePairs(p, xs, starts, covered);
+  lookAtTrianglePairs(p, xs, starts, covered, covering);
+  keepWithinReach(p);
+}
+
+int SelfCollision::lookAtParticlePairs(int p, const double* xs, const double* starts, int covered[8])
+{
+  const double reach = (1.0 + kReuse) * thickness_;
+  std::vector<Pair>& group = candidates_[p];
+  const int size = static_cast<int>(group.size());
+  int covering = 0;
+  const Eigen::Vector3d xp = pointAt(xs, p);
   for (int k = 0; k < size; ++k)
   {
     Pair& pair = group[k];
@@ -550,13 +199,13 @@ void SelfCollision::lookAtGroup(int p, const double* xs, const double* starts)
     if (pair.c[1] >= 0 || apart(pair))
       continue;
     const int q = pair.c[0];
-    const Eigen::Vector3d d = xp - at(q);
+    const Eigen::Vector3d d = xp - pointAt(xs, q);
     pair.margin = d.norm() - thickness_;
     if (!(d.squaredNorm() < reach * reach))
       continue;
     bool corner = true;
     for (int e = 0; e < 6 && corner; ++e)
-      corner = fan_[q][e] < 0 || d.dot(at(fan_[q][e]) - at(q)) <= 0.0;
+      corner = fan_[q][e] < 0 || d.dot(pointAt(xs, fan_[q][e]) - pointAt(xs, q)) <= 0.0;
     if (corner && covering < 8)
       covered[covering++] = q;
     // The pair is p's when p comes first (it is in q's list too).
@@ -568,6 +217,15 @@ void SelfCollision::lookAtGroup(int p, const double* xs, const double* starts)
         touches_.push_back(Touch{pair, pair.kept_geometry, {}, 0.0, Eigen::Vector3d::Zero()});
     }
   }
+  return covering;
+}
+
+void SelfCollision::lookAtTrianglePairs(int p, const double* xs, const double* starts, const int covered[8],
+                                        int covering)
+{
+  const double reuse = kReuse * thickness_;
+  std::vector<Pair>& group = candidates_[p];
+  const int size = static_cast<int>(group.size());
   for (int k = 0; k < size; ++k)
   {
     Pair& pair = group[k];
@@ -591,6 +249,13 @@ void SelfCollision::lookAtGroup(int p, const double* xs, const double* starts)
     group_geometry_[k] = geometry(pair, xs, starts);
     pair.margin = group_geometry_[k].gap - thickness_;
   }
+}
+
+void SelfCollision::keepWithinReach(int p)
+{
+  const double reach = (1.0 + kReuse) * thickness_;
+  std::vector<Pair>& group = candidates_[p];
+  const int size = static_cast<int>(group.size());
   for (int k = 0; k < size; ++k)
   {
     const Geometry& g = group_geometry_[k];
@@ -641,11 +306,38 @@ void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::Vec
   }
 }
 
+
 void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double dt,
                             const Contact* contact)
 {
   report_ = SelfCollisionReport{};
   report_.closest_before = report_.closest_after = thickness_;
+  const int particles = static_cast<int>(particle_of_.size());
+  bool all = findMoved(x);
+  if (!addTravel(x))
+  {
+    // After positions that were not finite (a step that diverged, its state then put back): every
+    // margin is forgotten with a listing anew.
+    travel_.assign(particles, 0.0);
+    surface_travel_.clear();
+    all = true;
+    moved_.clear();
+  }
+  report_.relisted = all ? particles : static_cast<int>(moved_.size());
+  if (report_.relisted > 0)
+    listCandidates(x, moved_);
+  findTouches(x_start, x);
+  if (touches_.empty())
+    return;
+  findSurfaces(x, contact);
+  report_.contacts = static_cast<int>(touches_.size());
+  weighTouches(x_start);
+  sweepPositions(x);
+  sweepVelocities(v, dt);
+}
+
+bool SelfCollision::findMoved(const Eigen::VectorXd& x)
+{
   // A particle's pairs are listed anew once it has moved half the skin since they were (the bound:
   // docs/design.md, "Self-collision"); all of them when more than an eighth of the particles have
   // (the listing searches every particle's cells anyway), or at the first step. NaN lists anew.
@@ -665,7 +357,12 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
   }
   if (all)
     moved_.clear();
-  // Each particle's path length over the steps' end positions (the candidates' margins count it).
+  return all;
+}
+
+bool SelfCollision::addTravel(const Eigen::VectorXd& x)
+{
+  const int particles = static_cast<int>(particle_of_.size());
   if (last_x_.size() != x.size())
   {
     last_x_ = x;
@@ -678,24 +375,11 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
     last_x_.segment<3>(3 * p) = x.segment<3>(3 * p);
     finite = finite && std::isfinite(travel_[p]);
   }
-  if (!finite)
-  {
-    // After positions that were not finite (a step that diverged, its state then put back): every
-    // margin is forgotten with a listing anew.
-    travel_.assign(particles, 0.0);
-    surface_travel_.clear();
-    all = true;
-    moved_.clear();
-  }
-  report_.relisted = all ? particles : static_cast<int>(moved_.size());
-  if (report_.relisted > 0)
-    listCandidates(x, moved_);
-  findTouches(x_start, x);
-  if (touches_.empty())
-    return;
-  // The particles of the pairs that lie on a collider, and the surface's normal there: found anew
-  // for a particle that has travelled the reuse fraction since it was last, and for every particle
-  // once a collider has moved (or none is given).
+  return finite;
+}
+
+void SelfCollision::findSurfaces(const Eigen::VectorXd& x, const Contact* contact)
+{
   const int colliders = contact ? static_cast<int>(contact->colliders().size()) : 0;
   bool same_colliders = surface_travel_.size() == particle_of_.size() && surface_poses_.size() == static_cast<size_t>(colliders) &&
                         (contact != nullptr) == surface_contact_;
@@ -734,18 +418,18 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
         }
       }
     }
-  report_.contacts = static_cast<int>(touches_.size());
-  double* const xs = x.data();
-  double* const vs = v.data();
-  const double* const starts = x_start.data();
-  auto ref = [](double* values, int slot) { return Eigen::Map<Eigen::Vector3d>(values + 3 * slot); };
-  auto cref = [](const double* values, int slot) { return Eigen::Map<const Eigen::Vector3d>(values + 3 * slot); };
-  auto relative = [&](const double* values, const Touch& t) {
-    Eigen::Vector3d r = cref(values, t.pair.p);
-    for (int k = 0; k < 3 && t.pair.c[k] >= 0; ++k)
-      r -= t.g.w[k] * cref(values, t.pair.c[k]);
-    return r;
-  };
+}
+
+Eigen::Vector3d SelfCollision::relative(const double* values, const Touch& t)
+{
+  Eigen::Vector3d r = pointAt(values, t.pair.p);
+  for (int k = 0; k < 3 && t.pair.c[k] >= 0; ++k)
+    r -= t.g.w[k] * pointAt(values, t.pair.c[k]);
+  return r;
+}
+
+void SelfCollision::weighTouches(const Eigen::VectorXd& x_start)
+{
   // A particle's inverse mass in a pair pushing along its normal, relative to a free particle's: 0 on
   // a collider when the push is along the surface's normal (more than 60 degrees from the surface).
   for (Touch& t : touches_)
@@ -757,37 +441,41 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
       t.m[k] = slots[k] >= 0 && std::abs(surface_normal_[slots[k]].dot(t.g.normal)) <= 0.5 ? 1.0 : 0.0;
       t.sum += slots[k] >= 0 ? weights[k] * weights[k] * t.m[k] : 0.0;
     }
-    t.start = relative(starts, t);
+    t.start = relative(x_start.data(), t);
     report_.closest_before = std::min(report_.closest_before, t.g.gap);
   }
-  // Moves p by delta / (1 + sum w^2) and the corners against it by their weights (each times its
-  // inverse mass): the pair's relative displacement changes by delta and, between free particles, its
-  // momentum not at all.
-  auto apply = [&](double* values, const Touch& t, const Eigen::Vector3d& delta) {
-    const Eigen::Vector3d share = delta / t.sum;
-    ref(values, t.pair.p) += t.m[0] * share;
-    for (int k = 0; k < 3 && t.pair.c[k] >= 0; ++k)
-      ref(values, t.pair.c[k]) -= t.m[k + 1] * t.g.w[k] * share;
-  };
+}
+
+void SelfCollision::apply(double* values, const Touch& t, const Eigen::Vector3d& delta)
+{
+  auto ref = [](double* v, int slot) { return Eigen::Map<Eigen::Vector3d>(v + 3 * slot); };
+  const Eigen::Vector3d share = delta / t.sum;
+  ref(values, t.pair.p) += t.m[0] * share;
+  for (int k = 0; k < 3 && t.pair.c[k] >= 0; ++k)
+    ref(values, t.pair.c[k]) -= t.m[k + 1] * t.g.w[k] * share;
+}
+
+bool SelfCollision::stirred(const Touch& t, int sweep) const
+{
+  for (int slot : {t.pair.p, t.pair.c[0], t.pair.c[1], t.pair.c[2]})
+    if (slot >= 0 && stirred_[slot] >= sweep - 1)
+      return true;
+  return false;
+}
+
+void SelfCollision::stir(const Touch& t, int sweep)
+{
+  for (int slot : {t.pair.p, t.pair.c[0], t.pair.c[1], t.pair.c[2]})
+    if (slot >= 0)
+      stirred_[slot] = sweep;
+}
+
+void SelfCollision::sweepPositions(Eigen::VectorXd& x)
+{
+  double* const xs = x.data();
   const int count = static_cast<int>(touches_.size());
   touched_.assign(count, 0);
-  // The sweeps end after one that moved nothing by more than this (m, and m over the step for
-  // velocities): what it leaves is smaller still, and the next step pushes out what is left.
-  const double settled = 1e-3 * thickness_;
-  // After the first sweep, a pair is swept again only when a push of more than that moved one of its
-  // particles in the last sweep or this one: the rule that ends the sweeps, pair by pair.
-  const double stir = settled;
-  auto stirred = [&](const Touch& t, int sweep) {
-    for (int slot : {t.pair.p, t.pair.c[0], t.pair.c[1], t.pair.c[2]})
-      if (slot >= 0 && stirred_[slot] >= sweep - 1)
-        return true;
-    return false;
-  };
-  auto stirring = [&](const Touch& t, int sweep) {
-    for (int slot : {t.pair.p, t.pair.c[0], t.pair.c[1], t.pair.c[2]})
-      if (slot >= 0)
-        stirred_[slot] = sweep;
-  };
+  const double settled = settledDistance();
   stirred_.assign(particle_of_.size(), -1);
   for (int sweep = 0; sweep < kSweeps; ++sweep)
   {
@@ -814,12 +502,19 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
       largest = std::max(largest, push);
       const Eigen::Vector3d slip = r - t.start;
       apply(xs, t, push * t.g.normal + coulomb(slip - slip.dot(t.g.normal) * t.g.normal, friction_ * push));
-      if (push > stir)
-        stirring(t, sweep);
+      if (push > settled)
+        stir(t, sweep);
     }
     if (largest <= settled)
       break;
   }
+}
+
+void SelfCollision::sweepVelocities(Eigen::VectorXd& v, double dt)
+{
+  double* const vs = v.data();
+  const int count = static_cast<int>(touches_.size());
+  const double settled = settledDistance();
   stirred_.assign(particle_of_.size(), -1);
   for (int sweep = 0; sweep < kSweeps; ++sweep)
   {
@@ -840,8 +535,8 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
       largest = std::max(largest, approach);
       const Eigen::Vector3d tangential = velocity + approach * t.g.normal;
       apply(vs, t, approach * t.g.normal + coulomb(tangential, friction_ * approach));
-      if (approach * dt > stir)
-        stirring(t, sweep);
+      if (approach * dt > settled)
+        stir(t, sweep);
     }
     if (largest * dt <= settled)
       break;

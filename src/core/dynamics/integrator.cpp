@@ -174,7 +174,7 @@ void ImplicitNewmark::kinematics(const State& s, State& next) const
   next.v = s.v + h_ * ((1.0 - gamma_) * s.a + gamma_ * next.a);
 }
 
-bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
+void ImplicitNewmark::predict(ForceModel& model, const State& s, State& next)
 {
   predicted_ = s.q + h_ * s.v + ((0.5 - beta_) * h_ * h_) * s.a;
   old_terms_.setZero(s.q.size());
@@ -188,6 +188,11 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
   next.q = s.q + h_ * s.v;
   if (start_ == NewtonStart::ConstantAcceleration)
     next.q += (0.5 * h_ * h_) * s.a;
+}
+
+bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
+{
+  predict(model, s, next);
   // R(q') is the gradient of the incremental potential
   //   G(q') = |q' - y|_M^2 / (2 beta h^2) + (1 + alpha) gamma / (2 beta h) |q' - y|_C^2
   //           + (1 + alpha) (E(q') + (C (v + h (1 - gamma) a)) . q') - alpha (C v - F(q)) . q',
@@ -232,35 +237,45 @@ bool ImplicitNewmark::solve(ForceModel& model, const State& s, State& next)
       return true;
     }
 
-    const Eigen::VectorXd start = next.q;
-    const double g0 = symmetric ? incremental(start) : 0.0;
-    const double slope = residual_.dot(delta);
-    bool accepted = false;
-    for (double fraction = 1.0; fraction > 1e-6 && !accepted; fraction *= 0.5)
-    {
-      next.q = start + fraction * delta;
-      if (!symmetric)
-      {
-        // No potential: a residual smaller in proportion to the step.
-        accepted = residual(model, s, next) <= (1.0 - 1e-4 * fraction) * residual_norm;
-        continue;
-      }
-      // Armijo on G; only where the expected decrease drowns in G's round-off, a smaller residual.
-      const double expected = fraction * slope;
-      const bool roundoff = std::abs(expected) < 1e-12 * (std::abs(g0) + 1e-300);
-      accepted = roundoff ? residual(model, s, next) < residual_norm
-                          : incremental(next.q) <= g0 + 1e-4 * expected;
-    }
-    if (!accepted)
+    if (!lineSearch(model, s, next, delta, residual_norm, symmetric, incremental))
     {
       // No further decrease: the residual has reached the round-off of the forces. Accept it when
       // it is small anyway (the square root of the tolerance), refuse the step otherwise.
-      next.q = start;
-      residual(model, s, next);
       return residual_norm <= std::sqrt(tolerance_) * (force_.norm() + inertial_norm_) + roundoff(model, next);
     }
   }
   return false;
+}
+
+bool ImplicitNewmark::lineSearch(ForceModel& model, const State& s, State& next, const Eigen::VectorXd& delta,
+                                 double residual_norm, bool symmetric,
+                                 const std::function<double(const Eigen::VectorXd&)>& incremental)
+{
+  const Eigen::VectorXd start = next.q;
+  const double g0 = symmetric ? incremental(start) : 0.0;
+  const double slope = residual_.dot(delta);
+  bool accepted = false;
+  for (double fraction = 1.0; fraction > 1e-6 && !accepted; fraction *= 0.5)
+  {
+    next.q = start + fraction * delta;
+    if (!symmetric)
+    {
+      // No potential: a residual smaller in proportion to the step.
+      accepted = residual(model, s, next) <= (1.0 - 1e-4 * fraction) * residual_norm;
+      continue;
+    }
+    // Armijo on G; only where the expected decrease drowns in G's round-off, a smaller residual.
+    const double expected = fraction * slope;
+    const bool roundoff = std::abs(expected) < 1e-12 * (std::abs(g0) + 1e-300);
+    accepted = roundoff ? residual(model, s, next) < residual_norm
+                        : incremental(next.q) <= g0 + 1e-4 * expected;
+  }
+  if (!accepted)
+  {
+    next.q = start;
+    residual(model, s, next);
+  }
+  return accepted;
 }
 
 void ImplicitNewmark::setSolver(ImplicitSolver solver, int refresh_steps)
@@ -312,23 +327,59 @@ Eigen::VectorXd ImplicitNewmark::applyFactor(const Eigen::VectorXd& rhs) const
   return factor_dense_ ? Eigen::VectorXd(dense_factor_.solve(rhs)) : Eigen::VectorXd(sparse_factor_.solve(rhs));
 }
 
+namespace
+{
+
+// Anderson mixing's history: the differences of the last `depth` iterates' f and g = q + f.
+struct AndersonHistory
+{
+  AndersonHistory(Eigen::Index n, int depth_) : delta_f(n, depth_), delta_g(n, depth_), depth(depth_) {}
+
+  void forget()
+  {
+    stored = 0;
+    oldest = 0;
+    previous_f.resize(0);
+  }
+  // Records an iterate's f and g; false while there is no difference to mix (a plain step).
+  bool add(const Eigen::VectorXd& f, const Eigen::VectorXd& g)
+  {
+    if (previous_f.size() > 0)
+    {
+      delta_f.col(oldest) = f - previous_f;
+      delta_g.col(oldest) = g - previous_g;
+      oldest = (oldest + 1) % depth;
+      stored = std::min(stored + 1, depth);
+    }
+    previous_f = f;
+    previous_g = g;
+    return stored > 0;
+  }
+  // q <- the g of the combination of the stored iterates whose f is smallest (least squares over
+  // their differences).
+  void mix(const Eigen::VectorXd& f, const Eigen::VectorXd& g, Eigen::VectorXd& q) const
+  {
+    const Eigen::VectorXd gamma = delta_f.leftCols(stored).colPivHouseholderQr().solve(f);
+    q = g - delta_g.leftCols(stored) * gamma;
+  }
+
+  Eigen::MatrixXd delta_f, delta_g;
+  int depth, stored = 0, oldest = 0;
+  Eigen::VectorXd previous_f, previous_g;
+};
+
+}  // namespace
+
 bool ImplicitNewmark::solveWithFactor(ForceModel& model, const State& s, State& next,
                                       const std::function<double(const Eigen::VectorXd&)>& incremental)
 {
   // The fixed-point map q -> g(q) = q + f(q), f = -J_c^-1 R(q). Anderson mixing takes the g of the
   // combination of the last iterates whose f is smallest (least squares over their differences).
   ++solves_since_factor_;
-  const Eigen::Index n = next.q.size();
-  Eigen::MatrixXd delta_f(n, kAndersonDepth), delta_g(n, kAndersonDepth);
-  int stored = 0, oldest = 0;
-  Eigen::VectorXd f, previous_f, previous_g, base_q, base_f;
+  AndersonHistory history(next.q.size(), kAndersonDepth);
+  Eigen::VectorXd f, base_q, base_f;
   double base_potential = 0.0, base_slope = 0.0;
   bool plain = true;  // next.q is base_q + base_f, not a mixed iterate
-  auto forgetHistory = [&] {
-    stored = 0;
-    oldest = 0;
-    previous_f.resize(0);
-  };
   for (last_iterations_ = 1; last_iterations_ <= kConstantMatrixIterations * max_iterations_; ++last_iterations_)
   {
     double residual_norm = residual(model, s, next);
@@ -349,7 +400,7 @@ bool ImplicitNewmark::solveWithFactor(ForceModel& model, const State& s, State& 
         if (potential <= base_potential + 1e-4 * t * base_slope + 1e-12 * std::abs(base_potential))
           break;
       }
-      forgetHistory();
+      history.forget();
     }
     const double target = tolerance_ * (force_.norm() + inertial_norm_) + roundoff(model, next);
     if (residual_norm <= target)
@@ -359,7 +410,7 @@ bool ImplicitNewmark::solveWithFactor(ForceModel& model, const State& s, State& 
       // Slow to converge: the lagged tangent is too far from this state's.
       if (!prepareFactor(model, next.q, true))
         return false;
-      forgetHistory();
+      history.forget();
     }
     f = -applyFactor(residual_);
     if (!f.allFinite())
@@ -375,23 +426,13 @@ bool ImplicitNewmark::solveWithFactor(ForceModel& model, const State& s, State& 
     base_f = f;
     base_potential = potential;
     base_slope = residual_.dot(f);
-    if (previous_f.size() > 0)
-    {
-      delta_f.col(oldest) = f - previous_f;
-      delta_g.col(oldest) = g - previous_g;
-      oldest = (oldest + 1) % kAndersonDepth;
-      stored = std::min(stored + 1, kAndersonDepth);
-    }
-    previous_f = f;
-    previous_g = g;
-    plain = stored == 0;
+    plain = !history.add(f, g);
     if (plain)
     {
       next.q = g;
       continue;
     }
-    const Eigen::VectorXd gamma = delta_f.leftCols(stored).colPivHouseholderQr().solve(f);
-    next.q = g - delta_g.leftCols(stored) * gamma;
+    history.mix(f, g, next.q);
     if (!next.q.allFinite())
     {
       next.q = g;

@@ -136,8 +136,15 @@ private:
   static constexpr int kMaxHalvings = 4;
   void setStepSize(double h);
   bool advance(ForceModel& model, const State& s, State& next, double h, int depth);
+  // The step's predicted q (Newmark's y, predicted_), the HHT terms of the step's start (old_terms_)
+  // and the first iterate next.q.
+  void predict(ForceModel& model, const State& s, State& next);
   // One Newton solve of a step of size h_.
   bool solve(ForceModel& model, const State& s, State& next);
+  // Backtracks next.q + fraction delta until G (`incremental`; without symmetry, the residual)
+  // decreases enough; false, with next.q and the residual as they were, when no fraction does.
+  bool lineSearch(ForceModel& model, const State& s, State& next, const Eigen::VectorXd& delta, double residual_norm,
+                  bool symmetric, const std::function<double(const Eigen::VectorXd&)>& incremental);
   // The same step by iterations with the constant matrix or the lagged tangent; `incremental` is G.
   bool solveWithFactor(ForceModel& model, const State& s, State& next,
                        const std::function<double(const Eigen::VectorXd&)>& incremental);

@@ -33,10 +33,9 @@ namespace
 // (Spectra's and ARPACK's criterion).
 constexpr double kTolerance = 1e-12;
 
-// A convergence check after j Lanczos steps (a tridiagonal eigensolve) takes about 0.35 ns j^3, a
-// step about 0.85 ns per entry of the factor (measured on a 100 x 100 grid). The next check comes
-// kCheckCost j^3 / entries steps later: those steps cost about 2.4 checks, so the checks take at most
-// about 40% of the steps' time, and stopping comes at most that late.
+// A convergence check after j Lanczos steps (a tridiagonal eigensolve, O(j^3)) is spaced from the
+// last by kCheckCost j^3 / entries of the factor steps, so that the checks cost a bounded fraction of
+// the steps and stopping comes at most that late (the costs behind it: docs/benchmarks.md, "Modal basis").
 constexpr double kCheckCost = 1.0;
 
 // Asks the kernel to back [data, data + bytes) with 2 MB pages where it can: a large buffer written
@@ -354,6 +353,67 @@ void lanczos(const SparseMatrix& a, ShiftInvert& op, int nev, double sigma, Eige
   vectors = solver.eigenvectors();
 }
 
+// A Krylov space holds one vector per eigenvalue, so a null space larger than a few vectors (a flat
+// 3D sheet at rest has one zero mode per free particle) is found only in part, and modes above zero
+// slip in. Looks again in the complement of what was found until nothing lower turns up, then keeps
+// the r lowest of everything by Rayleigh-Ritz; returns how many passes it took.
+int deflateNullSpace(const SparseMatrix& a, ShiftInvert& op, int r, double shift, double zero_tolerance,
+                     Eigen::VectorXd& values, Eigen::MatrixXd& vectors, const IterationFn& on_iteration)
+{
+  const int n = static_cast<int>(a.rows());
+  int passes = 0;
+  const int zeros = static_cast<int>((values.array().abs() < zero_tolerance).count());
+  for (int pass = 0; zeros > 0 && zeros < r && pass < 20 && vectors.cols() + r + 1 < n; ++pass)
+  {
+    const double highest = values.maxCoeff();
+    op.deflate(Eigen::HouseholderQR<Eigen::MatrixXd>(vectors).householderQ() *
+               Eigen::MatrixXd::Identity(n, vectors.cols()));
+    Eigen::VectorXd more_values;
+    Eigen::MatrixXd more_vectors;
+    lanczos(a, op, r, shift, more_values, more_vectors, on_iteration);
+    ++passes;
+    if (more_values.minCoeff() >= highest - zero_tolerance)
+      break;
+    Eigen::MatrixXd all(n, vectors.cols() + more_vectors.cols());
+    all << vectors, more_vectors;
+    vectors = all;
+    rayleighRitz(a, r, values, vectors);
+  }
+  return passes;
+}
+
+// The basis's r modes from the eigenpairs of A (u = M^-1/2 y), in ascending order, those below
+// zero_tolerance counted as zero.
+void fillBasis(const Eigen::VectorXd& values, const Eigen::MatrixXd& vectors, const Eigen::VectorXd& inv_sqrt_mass, int r,
+               double zero_tolerance, ModalBasis& basis)
+{
+  const Eigen::Index n = vectors.rows();
+  std::vector<int> order(r);
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(), [&](int i, int j) { return values[i] < values[j]; });
+  basis.eigenvalues.resize(r);
+  basis.frequencies.resize(r);
+  basis.phi.resize(n, r);
+  for (int k = 0; k < r; ++k)
+  {
+    double lambda2 = values[order[k]];
+    if (std::abs(lambda2) < zero_tolerance)
+    {
+      lambda2 = 0.0;
+      ++basis.num_zero_modes;
+    }
+    basis.eigenvalues[k] = lambda2;
+    basis.frequencies[k] = std::sqrt(std::max(lambda2, 0.0));
+    basis.phi.col(k) = inv_sqrt_mass.asDiagonal() * vectors.col(order[k]);
+    // An eigenvector's sign is the eigensolver's accident; fixed here (its largest entry positive), so
+    // the same matrices give the same basis whichever solver path ran.
+    Eigen::Index largest = 0;
+    basis.phi.col(k).cwiseAbs().maxCoeff(&largest);
+    if (basis.phi(largest, k) < 0.0)
+      basis.phi.col(k) *= -1.0;
+  }
+}
+
 }  // namespace
 
 ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorXd& mass, int r,
@@ -400,53 +460,10 @@ ModalBasis computeModalBasis(const SparseMatrix& stiffness, const Eigen::VectorX
     basis.factorization_seconds = seconds();
     stage("eigensolver");
     lanczos(a, op, r, basis.shift, values, vectors, on_iteration);
-    // A Krylov space holds one vector per eigenvalue, so a null space larger than a few vectors (a
-    // flat 3D sheet at rest has one zero mode per free particle) is found only in part, and modes
-    // above zero slip in. Look again in the complement of what was found until nothing lower turns
-    // up, then keep the r lowest of everything by Rayleigh-Ritz.
-    const int zeros = static_cast<int>((values.array().abs() < zero_tolerance).count());
-    for (int pass = 0; zeros > 0 && zeros < r && pass < 20 && vectors.cols() + r + 1 < n; ++pass)
-    {
-      const double highest = values.maxCoeff();
-      op.deflate(Eigen::HouseholderQR<Eigen::MatrixXd>(vectors).householderQ() *
-                 Eigen::MatrixXd::Identity(n, vectors.cols()));
-      Eigen::VectorXd more_values;
-      Eigen::MatrixXd more_vectors;
-      lanczos(a, op, r, basis.shift, more_values, more_vectors, on_iteration);
-      ++basis.deflation_passes;
-      if (more_values.minCoeff() >= highest - zero_tolerance)
-        break;
-      Eigen::MatrixXd all(n, vectors.cols() + more_vectors.cols());
-      all << vectors, more_vectors;
-      vectors = all;
-      rayleighRitz(a, r, values, vectors);
-    }
+    basis.deflation_passes += deflateNullSpace(a, op, r, basis.shift, zero_tolerance, values, vectors, on_iteration);
   }
 
-  std::vector<int> order(r);
-  std::iota(order.begin(), order.end(), 0);
-  std::sort(order.begin(), order.end(), [&](int i, int j) { return values[i] < values[j]; });
-  basis.eigenvalues.resize(r);
-  basis.frequencies.resize(r);
-  basis.phi.resize(n, r);
-  for (int k = 0; k < r; ++k)
-  {
-    double lambda2 = values[order[k]];
-    if (std::abs(lambda2) < zero_tolerance)
-    {
-      lambda2 = 0.0;
-      ++basis.num_zero_modes;
-    }
-    basis.eigenvalues[k] = lambda2;
-    basis.frequencies[k] = std::sqrt(std::max(lambda2, 0.0));
-    basis.phi.col(k) = inv_sqrt_mass.asDiagonal() * vectors.col(order[k]);
-    // An eigenvector's sign is the eigensolver's accident; fixed here (its largest entry positive), so
-    // the same matrices give the same basis whichever solver path ran.
-    Eigen::Index largest = 0;
-    basis.phi.col(k).cwiseAbs().maxCoeff(&largest);
-    if (basis.phi(largest, k) < 0.0)
-      basis.phi.col(k) *= -1.0;
-  }
+  fillBasis(values, vectors, inv_sqrt_mass, r, zero_tolerance, basis);
   basis.build_seconds = seconds();
   return basis;
 }

@@ -45,6 +45,49 @@ ModalDerivatives computeModalDerivatives(const Grid& grid, const Eigen::VectorXd
   return out;
 }
 
+namespace
+{
+
+// The derivatives weighted by lambda_1^2 / (lambda_i lambda_j), with their part in the span of the
+// modes removed (M-orthogonally, twice for round-off), in the coordinates M^1/2 u where the mass
+// norm is the Euclidean one.
+Eigen::MatrixXd weightedDerivatives(const ModalDerivatives& derivatives, const ModalBasis& modes,
+                                    const Eigen::VectorXd& mass, const Eigen::VectorXd& sqrt_mass)
+{
+  const Eigen::MatrixXd& phi = modes.phi;
+  const Eigen::Index n = phi.rows(), pairs = derivatives.psi.cols();
+  const double lambda1 = modes.eigenvalues[0];
+  Eigen::MatrixXd w(n, pairs);
+  for (Eigen::Index k = 0; k < pairs; ++k)
+  {
+    const auto [i, j] = derivatives.pairs[k];
+    w.col(k) = (lambda1 * lambda1 / (modes.eigenvalues[i] * modes.eigenvalues[j])) * derivatives.psi.col(k);
+  }
+  for (int pass = 0; pass < 2; ++pass)
+    w -= phi * (phi.transpose() * mass.asDiagonal() * w);
+  w = sqrt_mass.asDiagonal() * w;
+  return w;
+}
+
+// The kept directions u (in M^1/2 coordinates) orthonormalised in the Euclidean (mass) norm, again
+// against the modes phi, and taken back to u = M^-1/2 (that).
+Eigen::MatrixXd orthonormalDirections(Eigen::MatrixXd u, const Eigen::MatrixXd& phi, const Eigen::VectorXd& sqrt_mass)
+{
+  const Eigen::MatrixXd phi_scaled = sqrt_mass.asDiagonal() * phi;
+  for (Eigen::Index k = 0; k < u.cols(); ++k)
+  {
+    for (int pass = 0; pass < 2; ++pass)
+    {
+      u.col(k) -= phi_scaled * (phi_scaled.transpose() * u.col(k));
+      u.col(k) -= u.leftCols(k) * (u.leftCols(k).transpose() * u.col(k));
+    }
+    u.col(k).normalize();
+  }
+  return sqrt_mass.cwiseInverse().asDiagonal() * u;
+}
+
+}  // namespace
+
 ModalBasis buildDerivativeBasis(const Grid& grid, const Eigen::VectorXd& x_ref, const SparseMatrix& stiffness,
                                 const Eigen::VectorXd& mass, const ModalBasis& modes, int num_derivative_modes,
                                 DerivativeBasisInfo* info)
@@ -61,19 +104,8 @@ ModalBasis buildDerivativeBasis(const Grid& grid, const Eigen::VectorXd& x_ref, 
                         "]: at most the r (r + 1) / 2 pairs of the r = num_modes linear modes, and at most the free "
                         "degrees of freedom minus num_modes");
 
-  // Weighted derivatives, with their part in the span of the modes removed (M-orthogonally, twice
-  // for round-off), in the coordinates M^1/2 u where the mass norm is the Euclidean one.
   const Eigen::VectorXd sqrt_mass = mass.cwiseSqrt();
-  const double lambda1 = modes.eigenvalues[0];
-  Eigen::MatrixXd w(n, pairs);
-  for (Eigen::Index k = 0; k < pairs; ++k)
-  {
-    const auto [i, j] = derivatives.pairs[k];
-    w.col(k) = (lambda1 * lambda1 / (modes.eigenvalues[i] * modes.eigenvalues[j])) * derivatives.psi.col(k);
-  }
-  for (int pass = 0; pass < 2; ++pass)
-    w -= phi * (phi.transpose() * mass.asDiagonal() * w);
-  w = sqrt_mass.asDiagonal() * w;
+  const Eigen::MatrixXd w = weightedDerivatives(derivatives, modes, mass, sqrt_mass);
 
   // Mass-PCA: the leading left singular vectors of W from the eigenvectors of the small Gram matrix
   // W^T W (pairs x pairs), U = W V S^-1.
@@ -92,19 +124,7 @@ ModalBasis buildDerivativeBasis(const Grid& grid, const Eigen::VectorXd& x_ref, 
                     "the derivatives of the " + std::to_string(r) + " linear modes span only " +
                         std::to_string(independent) + " directions outside them on this grid; ask for at most that many");
   }
-  Eigen::MatrixXd u = w * v.leftCols(d);
-  // Orthonormalise the kept directions in the Euclidean (mass) norm, again against the modes.
-  const Eigen::MatrixXd phi_scaled = sqrt_mass.asDiagonal() * phi;
-  for (Eigen::Index k = 0; k < d; ++k)
-  {
-    for (int pass = 0; pass < 2; ++pass)
-    {
-      u.col(k) -= phi_scaled * (phi_scaled.transpose() * u.col(k));
-      u.col(k) -= u.leftCols(k) * (u.leftCols(k).transpose() * u.col(k));
-    }
-    u.col(k).normalize();
-  }
-  const Eigen::MatrixXd directions = sqrt_mass.cwiseInverse().asDiagonal() * u;
+  const Eigen::MatrixXd directions = orthonormalDirections(w * v.leftCols(d), phi, sqrt_mass);
 
   // Rotate the derivative directions so that their block of Phi^T K Phi is diagonal: its Ritz values
   // are then the directions' lambda^2 (their frequencies set the explicit step).

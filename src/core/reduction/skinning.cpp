@@ -63,20 +63,13 @@ std::vector<std::vector<int>> skinningHandleGroups(const Grid& grid)
   return groups;
 }
 
-Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int m)
+namespace
 {
-  const int particles = grid.numParticles();
-  const std::vector<std::vector<int>> groups = skinningHandleGroups(grid);
-  const int num_groups = static_cast<int>(groups.size());
-  std::vector<int> group_of(static_cast<size_t>(particles), -1);
-  for (int k = 0; k < num_groups; ++k)
-    for (int particle : groups[static_cast<size_t>(k)])
-      group_of[static_cast<size_t>(particle)] = k;
-  std::vector<int> interior;
-  for (int i = 0; i < particles; ++i)
-    if (group_of[static_cast<size_t>(i)] < 0)
-      interior.push_back(i);
-  const int num_interior = static_cast<int>(interior.size());
+
+// Refuses a number of weights m that the groups (handles and the fixed particles) and the particles
+// between them cannot give.
+void checkWeightCount(int m, int particles, int num_groups, int num_interior)
+{
   if (num_groups == 0)
   {
     if (m < 1 || m > particles)
@@ -88,28 +81,15 @@ Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int 
                     "must be in [" + std::to_string(num_groups) + ", " + std::to_string(num_groups + num_interior) +
                         "]: one weight per handle (and one for the fixed particles), plus at most one per particle "
                         "neither held nor fixed");
-  const SparseMatrix laplacian = springLaplacian(grid, x);
-  const double particle_mass = grid.particleMass();
-  if (num_groups == 0)
-  {
-    // Nothing held: the lowest eigenvectors of the Laplacian against the masses (the first constant).
-    Eigen::MatrixXd weights = computeModalBasis(laplacian, Eigen::VectorXd::Constant(particles, particle_mass), m).phi;
-    // Each of order one, so that B's columns are of the size of the cloth's coordinates.
-    for (int j = 0; j < m; ++j)
-      weights.col(j) /= weights.col(j).cwiseAbs().maxCoeff();
-    return weights;
-  }
-  // Held: one harmonic weight per group (1 on it, 0 on the other groups, L w = 0 at every other
-  // particle), so the groups' weights sum to one and a group's affine transform moves its particles
-  // alone; then the lowest eigenvectors of the Laplacian with every held particle as a Dirichlet
-  // boundary (zero there), which leave the held particles' constraints to the groups' transforms and
-  // spend their coordinates on the cloth between them.
-  Eigen::MatrixXd weights = Eigen::MatrixXd::Zero(particles, m);
-  for (int i = 0; i < particles; ++i)
-    if (group_of[static_cast<size_t>(i)] >= 0)
-      weights(i, group_of[static_cast<size_t>(i)]) = 1.0;
-  if (num_interior == 0)
-    return weights;
+}
+
+// The interior particles' rows of `weights` (particles x m, the first num_groups columns the
+// groups'): the groups' harmonic weights, then the Dirichlet Laplacian's lowest eigenvectors.
+void interiorWeights(const SparseMatrix& laplacian, const std::vector<int>& interior, const std::vector<int>& group_of,
+                     int num_groups, int m, double particle_mass, Eigen::MatrixXd& weights)
+{
+  const int particles = static_cast<int>(group_of.size());
+  const int num_interior = static_cast<int>(interior.size());
   std::vector<int> interior_index(static_cast<size_t>(particles), -1);
   for (int k = 0; k < num_interior; ++k)
     interior_index[static_cast<size_t>(interior[static_cast<size_t>(k)])] = k;
@@ -145,6 +125,48 @@ Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int 
     for (int k = 0; k < num_interior; ++k)
       weights.row(interior[static_cast<size_t>(k)]).tail(m - num_groups) = dirichlet.row(k);
   }
+}
+
+}  // namespace
+
+Eigen::MatrixXd skinningWeights(const Grid& grid, const Eigen::VectorXd& x, int m)
+{
+  const int particles = grid.numParticles();
+  const std::vector<std::vector<int>> groups = skinningHandleGroups(grid);
+  const int num_groups = static_cast<int>(groups.size());
+  std::vector<int> group_of(static_cast<size_t>(particles), -1);
+  for (int k = 0; k < num_groups; ++k)
+    for (int particle : groups[static_cast<size_t>(k)])
+      group_of[static_cast<size_t>(particle)] = k;
+  std::vector<int> interior;
+  for (int i = 0; i < particles; ++i)
+    if (group_of[static_cast<size_t>(i)] < 0)
+      interior.push_back(i);
+  const int num_interior = static_cast<int>(interior.size());
+  checkWeightCount(m, particles, num_groups, num_interior);
+  const SparseMatrix laplacian = springLaplacian(grid, x);
+  const double particle_mass = grid.particleMass();
+  if (num_groups == 0)
+  {
+    // Nothing held: the lowest eigenvectors of the Laplacian against the masses (the first constant).
+    Eigen::MatrixXd weights = computeModalBasis(laplacian, Eigen::VectorXd::Constant(particles, particle_mass), m).phi;
+    // Each of order one, so that B's columns are of the size of the cloth's coordinates.
+    for (int j = 0; j < m; ++j)
+      weights.col(j) /= weights.col(j).cwiseAbs().maxCoeff();
+    return weights;
+  }
+  // Held: one harmonic weight per group (1 on it, 0 on the other groups, L w = 0 at every other
+  // particle), so the groups' weights sum to one and a group's affine transform moves its particles
+  // alone; then the lowest eigenvectors of the Laplacian with every held particle as a Dirichlet
+  // boundary (zero there), which leave the held particles' constraints to the groups' transforms and
+  // spend their coordinates on the cloth between them.
+  Eigen::MatrixXd weights = Eigen::MatrixXd::Zero(particles, m);
+  for (int i = 0; i < particles; ++i)
+    if (group_of[static_cast<size_t>(i)] >= 0)
+      weights(i, group_of[static_cast<size_t>(i)]) = 1.0;
+  if (num_interior == 0)
+    return weights;
+  interiorWeights(laplacian, interior, group_of, num_groups, m, particle_mass, weights);
   return weights;
 }
 
@@ -318,46 +340,48 @@ Eigen::MatrixXd skinningTrainingPoses(const Grid& grid, const ModalBasis& basis,
   return poses;
 }
 
-SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref, const SparseMatrix& stiffness,
-                                 const Eigen::VectorXd& mass, int num_weights, const Eigen::MatrixXd& modes)
+namespace
 {
-  const auto start = std::chrono::steady_clock::now();
-  const Eigen::MatrixXd b = skinningMap(grid, x_ref, skinningWeights(grid, x_ref, num_weights));
-  const Eigen::Index p = b.cols();
-  const int dim = grid.dimension();
 
-  // The constraints' rows of B: the fixed particles' dofs (held at 0), then the handle dofs (at dx_b).
+// The constraints' rows of B: the fixed particles' dofs (held at 0), then the handle dofs (at dx_b).
+std::vector<int> heldDofs(const Grid& grid)
+{
+  const int dim = grid.dimension();
   std::vector<int> held;
   for (int particle : grid.fixedParticles())
     for (int a = 0; a < dim; ++a)
       held.push_back(dim * particle + a);
   held.insert(held.end(), grid.handleDofs().begin(), grid.handleDofs().end());
-  const Eigen::Index c = static_cast<Eigen::Index>(held.size()), nb = grid.numHandleDofs();
+  return held;
+}
 
-  // B_c = U S V^T: the null space N is V's columns past the rank, and the least-squares (minimum-norm)
-  // solution of B_c z = (0, dx_b) is G dx_b with G = V_k S_k^-1 U_k^T's handle columns.
-  Eigen::MatrixXd null_space = Eigen::MatrixXd::Identity(p, p);
-  Eigen::MatrixXd particular;  // p x nb
+// B_c = U S V^T: the null space N is V's columns past the rank, and the least-squares (minimum-norm)
+// solution of B_c z = (0, dx_b) is G dx_b with G = V_k S_k^-1 U_k^T's handle columns (`particular`,
+// p x nb, for nb > 0 handle dofs).
+int splitConstraints(const Eigen::MatrixXd& b, const std::vector<int>& held, Eigen::Index nb, Eigen::MatrixXd& null_space,
+                     Eigen::MatrixXd& particular)
+{
+  const Eigen::Index p = b.cols();
+  null_space = Eigen::MatrixXd::Identity(p, p);
   int rank = 0;
-  if (c > 0)
-  {
-    const Eigen::MatrixXd b_c = b(held, Eigen::all);
-    const Eigen::BDCSVD<Eigen::MatrixXd> svd(b_c, Eigen::ComputeFullV | Eigen::ComputeThinU);
-    const Eigen::VectorXd& sigma = svd.singularValues();
-    while (rank < sigma.size() && sigma[rank] > kRankTolerance * sigma[0])
-      ++rank;
-    null_space = svd.matrixV().rightCols(p - rank);
-    if (nb > 0)
-      particular = svd.matrixV().leftCols(rank) * sigma.head(rank).cwiseInverse().asDiagonal() *
-                   svd.matrixU().bottomRows(nb).leftCols(rank).transpose();
-  }
+  if (held.empty())
+    return rank;
+  const Eigen::MatrixXd b_c = b(held, Eigen::all);
+  const Eigen::BDCSVD<Eigen::MatrixXd> svd(b_c, Eigen::ComputeFullV | Eigen::ComputeThinU);
+  const Eigen::VectorXd& sigma = svd.singularValues();
+  while (rank < sigma.size() && sigma[rank] > kRankTolerance * sigma[0])
+    ++rank;
+  null_space = svd.matrixV().rightCols(p - rank);
+  if (nb > 0)
+    particular = svd.matrixV().leftCols(rank) * sigma.head(rank).cwiseInverse().asDiagonal() *
+                 svd.matrixU().bottomRows(nb).leftCols(rank).transpose();
+  return rank;
+}
 
-  // The interior subspace B_i N, made mass-orthonormal from its Gram matrix (directions that move no
-  // free dof dropped), then rotated to diagonalise K (Rayleigh-Ritz): mass is I and Rayleigh damping
-  // diagonal, as for the eigenbasis.
-  const Eigen::MatrixXd b_i = b(grid.freeDofs(), Eigen::all);
-  Eigen::MatrixXd interior(b_i.rows(), null_space.cols() + modes.cols());
-  interior << b_i * null_space, modes;
+// The span of `interior`'s columns made mass-orthonormal from its Gram matrix, directions that move
+// no free dof dropped (refused when none is left, naming num_weights).
+Eigen::MatrixXd massOrthonormal(Eigen::MatrixXd interior, const Eigen::VectorXd& mass, int num_weights)
+{
   // Unit mass norm each, so that the rank tolerance compares directions, not their scales; a column
   // of round-off only (a null-space vector of coordinates that move nothing, such as an out-of-plane
   // column of A_j on a planar sheet, carries round-off of coordinates the constraints fix) is
@@ -382,13 +406,16 @@ SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref,
     rejectParameter("num_skinning_weights", num_weights,
                     "leaves the free particles no motion: the fixed particles and handles take every direction of "
                     "the span; use more weights");
-  const Eigen::MatrixXd orthonormal =
-      interior * (gram.eigenvectors().rightCols(kept) * g.tail(kept).cwiseSqrt().cwiseInverse().asDiagonal());
+  return interior * (gram.eigenvectors().rightCols(kept) * g.tail(kept).cwiseSqrt().cwiseInverse().asDiagonal());
+}
+
+// The mass-orthonormal span rotated to diagonalise K (Rayleigh-Ritz): mass is I and Rayleigh damping
+// diagonal, as for the eigenbasis.
+void rayleighRitz(const Eigen::MatrixXd& orthonormal, const SparseMatrix& stiffness, const Eigen::VectorXd& mass,
+                  ModalBasis& basis)
+{
   const Eigen::MatrixXd k_reduced = orthonormal.transpose() * (stiffness * orthonormal);
   const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> ritz(0.5 * (k_reduced + k_reduced.transpose()));
-
-  SkinningBasis out;
-  ModalBasis& basis = out.basis;
   basis.phi = orthonormal * ritz.eigenvectors();
   basis.eigenvalues = ritz.eigenvalues();
   // Zero below 1e-8 of the largest diagonal stiffness per mass, as computeModalBasis counts them.
@@ -402,6 +429,29 @@ SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref,
   basis.eigenvalues = basis.eigenvalues.cwiseMax(0.0);
   basis.frequencies = basis.eigenvalues.cwiseSqrt();
   basis.sparse = false;
+}
+
+}  // namespace
+
+SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref, const SparseMatrix& stiffness,
+                                 const Eigen::VectorXd& mass, int num_weights, const Eigen::MatrixXd& modes)
+{
+  const auto start = std::chrono::steady_clock::now();
+  const Eigen::MatrixXd b = skinningMap(grid, x_ref, skinningWeights(grid, x_ref, num_weights));
+  const Eigen::Index p = b.cols();
+  const std::vector<int> held = heldDofs(grid);
+  const Eigen::Index c = static_cast<Eigen::Index>(held.size()), nb = grid.numHandleDofs();
+  Eigen::MatrixXd null_space, particular;
+  const int rank = splitConstraints(b, held, nb, null_space, particular);
+
+  // The interior subspace B_i N and the modes, made mass-orthonormal, then rotated to diagonalise K.
+  const Eigen::MatrixXd b_i = b(grid.freeDofs(), Eigen::all);
+  Eigen::MatrixXd interior(b_i.rows(), null_space.cols() + modes.cols());
+  interior << b_i * null_space, modes;
+  const Eigen::MatrixXd orthonormal = massOrthonormal(std::move(interior), mass, num_weights);
+  SkinningBasis out;
+  ModalBasis& basis = out.basis;
+  rayleighRitz(orthonormal, stiffness, mass, basis);
   if (nb > 0)
   {
     out.constraint_modes = b_i * particular;
@@ -412,7 +462,7 @@ SkinningBasis buildSkinningBasis(const Grid& grid, const Eigen::VectorXd& x_ref,
   out.info.coordinates = static_cast<int>(p);
   out.info.constraint_dofs = static_cast<int>(c);
   out.info.constraint_rank = rank;
-  out.info.basis_size = static_cast<int>(kept);
+  out.info.basis_size = static_cast<int>(orthonormal.cols());
   out.info.modes = static_cast<int>(modes.cols());
   out.info.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   basis.build_seconds = out.info.seconds;

@@ -123,18 +123,9 @@ void validateBasis(const GridParams& grid, const SimulationParams& p, long long 
                         " free degrees of freedom");
 }
 
-}  // namespace
-
-// Refuses a particle index outside [0, num_particles - 1] or listed twice.
-void validateParameters(const GridParams& grid, const SimulationParams& p)
+// The damping, the time step, the divergence checks and the integrators' settings.
+void validateIntegration(const SimulationParams& p)
 {
-  validateGridParams(grid);
-  validateScales(grid);
-  const long long n = countFreeDofs(grid);
-  if (p.num_modes < 1 || p.num_modes > n)
-    rejectParameter("num_modes", p.num_modes,
-                    "must be in [1, " + std::to_string(n) + "], the number of free degrees of freedom");
-  validateBasis(grid, p, n);
   requireNonNegative("alpha", p.alpha);
   requireNonNegative("beta", p.beta);
   validateTimeStep(p.time_step);
@@ -151,6 +142,11 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
     rejectParameter("equilibrium_max_iterations", p.equilibrium_max_iterations, "must be an integer >= 1");
   if (!std::isfinite(p.hht_alpha) || p.hht_alpha < -1.0 / 3.0 || p.hht_alpha > 0.0)
     rejectParameter("hht_alpha", p.hht_alpha, "must be in [-1/3, 0] (0: Newmark average acceleration)");
+}
+
+// The cubature's training settings.
+void validateCubatureSettings(const GridParams& grid, const SimulationParams& p)
+{
   if (!std::isfinite(p.cubature_tolerance) || p.cubature_tolerance <= 0.0 || p.cubature_tolerance >= 1.0)
     rejectParameter("cubature_tolerance", p.cubature_tolerance,
                     "must be in (0, 1) (the relative force error on the training and validation poses)");
@@ -171,6 +167,11 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
                     "must be a finite number of metres > 0 (the largest particle displacement of a training pose)");
   if (p.cubature_seed < 0)
     rejectParameter("cubature_seed", p.cubature_seed, "must be an integer >= 0");
+}
+
+// The moving frame needs handles moved as one body and no fixed particle.
+void validateMovingFrame(const GridParams& grid, const SimulationParams& p)
+{
   if (p.handle_formulation == HandleFormulation::MovingFrame)
   {
     const std::string value = "moving_frame";
@@ -188,6 +189,11 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
                       "needs every handle moved as one rigid body (handles_one_body; in the node: every handle on "
                       "one TF frame); handles moving apart need constraint_modes or auto");
   }
+}
+
+// The colliders, their thickness, and self-collision, with the formulations and methods they allow.
+void validateContactSettings(const GridParams& grid, const SimulationParams& p)
+{
   for (size_t i = 0; i < p.colliders.size(); ++i)
     validateCollider(p.colliders[i], "colliders[" + std::to_string(i) + "]", grid.dimension);
   validateContactThickness(p.contact_thickness, grid.spacing);
@@ -197,6 +203,11 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
   validateSelfCollision(grid, p.self_collision, p.self_collision_thickness, p.self_friction);
   if (p.self_collision && p.method != Method::Full)
     rejectParameter("method", toString(p.method), kSelfCollisionMethods);
+}
+
+// The memory estimate against memory_limit_gb.
+void validateMemory(const GridParams& grid, const SimulationParams& p)
+{
   if (!std::isfinite(p.memory_limit_gb) || p.memory_limit_gb <= 0.0)
     rejectParameter("memory_limit_gb", p.memory_limit_gb, "must be a finite number of GB > 0");
   const double needed_gb = estimateMemoryBytes(grid, p) / 1e9;
@@ -229,6 +240,25 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
     rejectParameter(training ? "cubature_training_poses, cubature_max_training_poses" : "rows, cols, num_modes",
                     value.str(), allowed.str());
   }
+}
+
+}  // namespace
+
+// Refuses a particle index outside [0, num_particles - 1] or listed twice.
+void validateParameters(const GridParams& grid, const SimulationParams& p)
+{
+  validateGridParams(grid);
+  validateScales(grid);
+  const long long n = countFreeDofs(grid);
+  if (p.num_modes < 1 || p.num_modes > n)
+    rejectParameter("num_modes", p.num_modes,
+                    "must be in [1, " + std::to_string(n) + "], the number of free degrees of freedom");
+  validateBasis(grid, p, n);
+  validateIntegration(p);
+  validateCubatureSettings(grid, p);
+  validateMovingFrame(grid, p);
+  validateContactSettings(grid, p);
+  validateMemory(grid, p);
 }
 
 // The most columns of the basis of the methods but `linear`.

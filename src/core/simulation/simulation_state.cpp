@@ -1,0 +1,275 @@
+// A simulation's state: saved and restored whole, and read in the grid's coordinates (positions,
+// velocities, energies, the error indicators) through the moving frame (simulation.h).
+#include "modal_mass_spring/cpu_time.h"
+#include "modal_mass_spring/simulation.h"
+
+#include "modal_mass_spring/spring_forces.h"
+#include "modal_mass_spring/validation.h"
+#include "dynamics/method_model.h"
+#include "reduction/error_indicator.h"
+#include "solvers/equilibrium.h"
+
+#include <chrono>
+#include <time.h>
+#include <cmath>
+#include <sstream>
+#include <stdexcept>
+
+namespace modal_mass_spring
+{
+SimulationState Simulation::saveState() const
+{
+  SimulationState s;
+  s.method = method();
+  s.time_step = params_.time_step;
+  s.step_count = step_count_;
+  s.coordinates = model_->state();
+  s.offset = model_->offset();
+  s.handles = handle_current_;
+  s.frame = frame_current_;
+  if (contact_)
+  {
+    for (int i = 0; i < static_cast<int>(contact_->colliders().size()); ++i)
+    {
+      s.collider_poses.push_back(contact_->pose(i));
+      s.colliders_active.push_back(contact_->active(i));
+    }
+    s.colliders_moved = contact_->moved();
+  }
+  s.external_force = external_force_;
+  s.anchor = anchor_;
+  s.anchor_handles = anchor_handles_;
+  s.start_energy = start_energy_;
+  s.energy_scale = energy_scale_;
+  s.handles_moved = handles_moved_;
+  s.diverged = diverged_;
+  s.divergence_message = divergence_message_;
+  return s;
+}
+
+void Simulation::restoreState(const SimulationState& s)
+{
+  // Everything is checked before anything changes.
+  SimulationParams changed = params_;
+  changed.time_step = s.time_step;
+  validateParameters(grid_.params(), changed);
+  if (self_collision_ && s.method != Method::Full)
+    rejectParameter("state.method", toString(s.method), kSelfCollisionMethods);
+  if (s.method != Method::Full)
+    buildBasis();
+  const Eigen::Index free_dofs = u_start_.size();
+  const Eigen::Index coordinates = s.method == Method::Full  ? free_dofs
+                                   : s.method == Method::Linear ? basis_.phi.cols()
+                                                                 : physical_basis_.phi.cols();
+  auto check = [](const std::string& name, const Eigen::VectorXd& values, Eigen::Index size, bool may_be_empty) {
+    if (values.size() != size && !(may_be_empty && values.size() == 0))
+      rejectParameter("state." + name, std::to_string(values.size()) + " values",
+                      "must have " + std::to_string(size) + " values" + (may_be_empty ? " (or none)" : ""));
+    if (!values.allFinite())
+      rejectParameter("state." + name, "a non-finite value", "must be finite");
+  };
+  check("coordinates", s.coordinates.q, coordinates, false);
+  check("velocities", s.coordinates.v, coordinates, false);
+  check("accelerations", s.coordinates.a, coordinates, false);
+  check("offset", s.offset, s.method == Method::Full ? 0 : free_dofs, true);
+  const Eigen::Index handle_dofs = grid_.numHandleDofs();
+  check("handles.displacement", s.handles.displacement, handle_dofs, true);
+  check("handles.velocity", s.handles.velocity, handle_dofs, true);
+  check("handles.acceleration", s.handles.acceleration, handle_dofs, true);
+  check("external_force", s.external_force, external_force_.size(), false);
+  check("anchor", s.anchor, free_dofs, false);
+  check("anchor_handles", s.anchor_handles, handle_dofs, true);
+  const size_t colliders = contact_ ? contact_->colliders().size() : 0;
+  if (s.collider_poses.size() != colliders || s.colliders_active.size() != colliders)
+    rejectParameter("state.collider_poses", std::to_string(s.collider_poses.size()) + " poses",
+                    "must have one per collider: " + std::to_string(colliders));
+  for (size_t i = 0; i < colliders; ++i)
+    if (!s.collider_poses[i].matrix().allFinite())
+      rejectParameter("state.collider_poses[" + std::to_string(i) + "]", "a non-finite value", "must be finite");
+  if (s.step_count < 0)
+    rejectParameter("state.step_count", s.step_count, "must be >= 0");
+
+  if (s.time_step != params_.time_step)
+    setTimeStep(s.time_step);
+  handle_current_ = handle_target_ = s.handles;
+  handle_pending_ = false;
+  frame_current_ = frame_target_ = s.frame;
+  frame_pending_ = false;
+  external_force_ = s.external_force;
+  if (contact_)
+    contact_->restore(s.collider_poses, s.colliders_active, s.colliders_moved);
+  if (s.method != method())
+    setMethod(s.method);
+  // The method's forces see the state's handles, frame and load before its coordinates go back:
+  // setting them recomputes the acceleration, which restore() then replaces with the saved one.
+  model_->setExternalForce(grid_.gatherFree(external_force_));
+  if (grid_.numHandleDofs() > 0)
+    model_->setHandleMotion(handle_current_);
+  if (formulation_ == HandleFormulation::MovingFrame)
+    model_->setFrameForces(frameForcesOf(frame_current_));
+  model_->restore(s.coordinates, s.offset);
+  anchor_ = s.anchor;
+  anchor_handles_ = s.anchor_handles;
+  model_->setAnchor(anchor_, anchor_handles_);
+  start_energy_ = s.start_energy;
+  energy_scale_ = s.energy_scale;
+  handles_moved_ = s.handles_moved;
+  step_count_ = s.step_count;
+  diverged_ = s.diverged;
+  divergence_message_ = s.divergence_message;
+}
+
+namespace
+{
+
+// B's translation, its velocity and the angular velocity in the grid's coordinates (x, z in 2D).
+struct PlanarFrame
+{
+  Eigen::MatrixXd rotation, spin;
+  Eigen::VectorXd translation, velocity;
+
+  // Where a point at y in B, moving at y' there, is in the world and how fast it goes:
+  // x = p + R y, x' = p' + omega x R y + R y'.
+  Eigen::VectorXd worldPosition(const Eigen::VectorXd& y) const { return translation + rotation * y; }
+  Eigen::VectorXd worldVelocity(const Eigen::VectorXd& y, const Eigen::VectorXd& y_dot) const
+  {
+    return velocity + spin * (rotation * y) + rotation * y_dot;
+  }
+};
+
+PlanarFrame restrict(const FrameMotion& m, int dim)
+{
+  const std::vector<int> rows = gridAxes(dim);
+  const Eigen::Matrix3d spin = crossMatrix(m.angular_velocity);
+  return PlanarFrame{m.rotation(rows, rows), spin(rows, rows), m.translation(rows), m.velocity(rows)};
+}
+
+}  // namespace
+
+void Simulation::toBody(Eigen::VectorXd& u, Eigen::VectorXd& v) const
+{
+  if (!frameMoved())
+    return;
+  // y = R^T (x - p), y' = R^T (x' - p' - omega x (x - p)).
+  const int dim = grid_.dimension();
+  const PlanarFrame f = restrict(frame_current_, dim);
+  const Eigen::VectorXd x_ref = grid_.gatherFree(x_ref_);
+  for (Eigen::Index p = 0; p + dim <= u.size(); p += dim)
+  {
+    const Eigen::VectorXd r = x_ref.segment(p, dim) + u.segment(p, dim) - f.translation;
+    u.segment(p, dim) = f.rotation.transpose() * r - x_ref.segment(p, dim);
+    v.segment(p, dim) = f.rotation.transpose() * (v.segment(p, dim) - f.velocity - f.spin * r);
+  }
+}
+
+Eigen::VectorXd Simulation::displacement() const
+{
+  if (!frameMoved())
+    return bodyDisplacement();
+  return grid_.gatherFree(positions() - x_ref_);
+}
+
+Eigen::VectorXd Simulation::velocity() const
+{
+  if (!frameMoved())
+    return bodyVelocity();
+  // x' = p' + omega x R y + R y'.
+  const int dim = grid_.dimension();
+  const PlanarFrame f = restrict(frame_current_, dim);
+  const Eigen::VectorXd y = grid_.gatherFree(x_ref_) + bodyDisplacement();
+  Eigen::VectorXd v = bodyVelocity();
+  for (Eigen::Index p = 0; p + dim <= v.size(); p += dim)
+    v.segment(p, dim) = f.worldVelocity(y.segment(p, dim), v.segment(p, dim));
+  return v;
+}
+
+Eigen::VectorXd Simulation::positions() const
+{
+  Eigen::VectorXd x = x_ref_;
+  if (handle_current_.displacement.size() > 0)
+    for (int k = 0; k < grid_.numHandleDofs(); ++k)
+      x[grid_.handleDofs()[k]] += handle_current_.displacement[k];
+  grid_.addFree(bodyDisplacement(), x);
+  if (frameMoved())
+  {
+    // x = p + R y, every particle (the handles' with them).
+    const int dim = grid_.dimension();
+    const PlanarFrame f = restrict(frame_current_, dim);
+    for (Eigen::Index p = 0; p + dim <= x.size(); p += dim)
+      x.segment(p, dim) = f.worldPosition(x.segment(p, dim));
+  }
+  return x;
+}
+
+double Simulation::errorIndicator()
+{
+  if (params_.method == Method::Full)
+    return 0.0;
+  if (!error_indicator_)
+    error_indicator_ = std::make_unique<ErrorIndicator>(grid_, mass_);
+  // In the body frame where one moves: the springs do not see the frame, and the basis lives there.
+  Eigen::VectorXd x = x_ref_;
+  if (handle_current_.displacement.size() > 0)
+    for (int k = 0; k < grid_.numHandleDofs(); ++k)
+      x[grid_.handleDofs()[k]] += handle_current_.displacement[k];
+  grid_.addFree(bodyDisplacement(), x);
+  const ModalBasis& basis = params_.method == Method::Linear ? basis_ : physical_basis_;
+  return error_indicator_->estimate(x, basis.phi, external_force_);
+}
+
+double Simulation::spanDistance(Method reduced) const
+{
+  if (!basis_built_ || reduced == Method::Full)
+    throw std::logic_error("spanDistance: needs a modal method whose basis is built");
+  const bool skinning = params_.basis == BasisKind::Skinning && reduced != Method::Linear;
+  const ModalBasis& basis = reduced == Method::Linear ? basis_ : physical_basis_;
+  const Eigen::MatrixXd& psi = skinning ? skinning_constraint_modes_ : constraint_modes_;
+  Eigen::VectorXd u = bodyDisplacement();
+  if (formulation_ != HandleFormulation::MovingFrame && psi.size() > 0 && handle_current_.displacement.size() > 0)
+    u -= psi * handle_current_.displacement;
+  const Eigen::VectorXd rest = u - basis.phi * (basis.phi.transpose() * mass_.cwiseProduct(u));
+  return std::sqrt(rest.dot(mass_.cwiseProduct(rest)) * grid_.dimension() / mass_.sum());
+}
+
+void Simulation::particleState(int particle, Eigen::VectorXd& position, Eigen::VectorXd& velocity) const
+{
+  const int dim = grid_.dimension();
+  if (particle < 0 || particle >= grid_.numParticles() || grid_.isFixed(particle) || grid_.isHandle(particle))
+    rejectParameter("particle", std::to_string(particle),
+                    "must be a free particle (neither fixed nor held by a handle) in [0, " +
+                        std::to_string(grid_.numParticles()) + ")");
+  position.resize(dim);
+  velocity.resize(dim);
+  for (int c = 0; c < dim; ++c)
+  {
+    const int k = grid_.freeIndex(particle * dim + c);
+    position[c] = x_ref_[particle * dim + c] + model_->displacementAt(model_->state(), k);
+    velocity[c] = model_->velocityAt(model_->state(), k);
+  }
+  if (frameMoved())
+  {
+    // As positions() and velocity(): x = p + R y, x' = p' + omega x R y + R y'.
+    const PlanarFrame f = restrict(frame_current_, dim);
+    const Eigen::VectorXd y = position;
+    position = f.worldPosition(y);
+    velocity = f.worldVelocity(y, velocity);
+  }
+}
+
+double Simulation::kineticEnergy() const
+{
+  if (!frameMoved())
+    return model_->kineticEnergy(model_->state());
+  return 0.5 * velocity().cwiseAbs2().dot(mass_);
+}
+
+double Simulation::methodEnergy() const { return model_->energy(model_->state()); }
+
+double Simulation::totalEnergy() const { return totalEnergy(positions()); }
+
+double Simulation::totalEnergy(const Eigen::VectorXd& x) const
+{
+  return kineticEnergy() + springEnergy(grid_, x) + gravityEnergy(grid_, x);
+}
+
+}  // namespace modal_mass_spring
