@@ -2,7 +2,9 @@
 """Broadcasts a gripper frame (~frame, child of ~parent) with tf2_ros at ~rate Hz: at ~start plus
 the offset and the turn about the vertical axis (z) of the motion ~motion, which holds it at ~start
 for ~hold seconds first. Every move of wave and drag starts and ends at rest (smoothstep), so the
-handles the frame holds never jerk.
+handles the frame holds never jerk. Its time is rospy's: under /use_sim_time (the launch files'
+use_sim_time:=true) it moves on the node's /clock and stamps the frame with it, so a node slower than
+real time sees the motion at its own pace.
 
 wave (the default; launch/held_cloth.launch), in a loop: a slow wave, ~waves swings of ~amplitude
     metres along x, ~wave_period seconds each; a turn of ~turn_deg degrees in ~turn_seconds, held

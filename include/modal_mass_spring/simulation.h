@@ -225,6 +225,11 @@ public:
   using CubatureTraining = std::function<Cubature(const IterationFn& on_iteration)>;
   bool loadCachedCubature();
   CubatureTraining cubatureTraining() const;
+  // Builds the constraint modes `method` needs with handles (none for full, the moving frame, or a
+  // method other than `linear` on the skinning span). Throws std::runtime_error where they do not
+  // exist (cloth hanging slack from small grips): called before a cubature's training, so that a
+  // method that cannot follow the handles is refused before any.
+  void prepareConstraintModes(Method method);
   void setCubature(Cubature cubature);
   // What the cache did: whether the basis and the cubature were loaded or stored, and where.
   const CacheReport& cacheReport() const { return cache_report_; }

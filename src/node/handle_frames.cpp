@@ -215,10 +215,32 @@ void HandleFrames::place(size_t h, const FramePose& pose)
     handles_[h].current = handles_[h].target = pose;
 }
 
+void HandleFrames::grip(size_t h, const FramePose& pose, const Eigen::Matrix3Xd& points, bool snap)
+{
+  Handle& handle = handles_[h];
+  handle.offsets = pose.rotation.conjugate().toRotationMatrix() * (points.colwise() - pose.translation);
+  handle.start_pose = handle.current = pose;
+  if (snap)
+  {
+    // The frame is taken to be where their centre is now; the tick moves it to the frame's pose.
+    const Eigen::Vector3d centre = handle.offsets.rowwise().mean();
+    handle.offsets.colwise() -= centre;
+    handle.current.translation += pose.rotation * centre;
+  }
+  handle.target = handle.current;
+  handle.found = handle.gripped_live = true;
+  handle.missing = handle.refused = false;
+  handle.refused_pose.reset();
+}
+
 void HandleFrames::reset()
 {
   for (auto& handle : handles_)
+  {
     handle.current = handle.target = handle.start_pose;
+    if (handle.gripped_live)
+      handle.found = handle.gripped_live = false;  // its particles are back at x_ref: gripped there anew
+  }
 }
 
 std::string HandleFrames::status() const

@@ -76,6 +76,13 @@ public:
   // Puts handle h's frame at `pose` now, with no motion over the next tick (a state restored with
   // its frames' poses); offsets are kept. A frame never looked up is left as it is.
   void place(size_t h, const FramePose& pose);
+  // Handle h grips its particles where they are now (`points`, the fixed frame, a column each) with
+  // its frame at `pose` (a grasp while the simulation runs). With `snap` their centre moves onto the
+  // frame's origin over the next tick, their arrangement kept; else they keep their offsets. A reset
+  // puts them back at x_ref, gripped anew at the frame's next lookup.
+  void grip(size_t h, const FramePose& pose, const Eigen::Matrix3Xd& points, bool snap);
+  // Handle h takes over handle k of `from` as it is (the other grips when the held set changes).
+  void adopt(size_t h, const HandleFrames& from, size_t k) { handles_[h] = from.handles_[k]; }
 
 private:
   struct Handle
@@ -88,6 +95,7 @@ private:
     std::string problem;       // why, when missing
     bool refused = false;      // its pose this tick was refused (problem says why)
     std::optional<FramePose> refused_pose;  // a large turn refused at the last tick
+    bool gripped_live = false;  // by grip(): its offsets are not the first lookup's
     FramePose start_pose, current, target;
   };
   // Why the cloth cannot follow `pose` from the handle's current one, or empty.

@@ -24,6 +24,7 @@ LiveField field(NodeConfiguration& c, const std::string& name)
   static const std::map<std::string, Where> where{
       {"real_time_factor", [](NodeConfiguration& c) -> LiveField { return &c.node.real_time_factor; }},
       {"publish_rate", [](NodeConfiguration& c) -> LiveField { return &c.node.publish_rate; }},
+      {"markers_rate", [](NodeConfiguration& c) -> LiveField { return &c.node.markers_rate; }},
       {"strain_scale", [](NodeConfiguration& c) -> LiveField { return &c.node.strain_scale; }},
       {"show_surface", [](NodeConfiguration& c) -> LiveField { return &c.node.show_surface; }},
       {"show_particles", [](NodeConfiguration& c) -> LiveField { return &c.node.show_particles; }},

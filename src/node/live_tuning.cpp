@@ -82,13 +82,34 @@ void SimulationNode::reconfigure(SimulationConfig& config, uint32_t)
   rebuild_thread_ = std::thread(&SimulationNode::rebuildLoop, this);
 }
 
+std::vector<SimulationNode::TrackKind> SimulationNode::trackKinds() const
+{
+  std::vector<TrackKind> kinds;
+  for (const Track& track : tracks_)
+    kinds.push_back({track.simulation->method(), track.simulation->basisBuilt()});
+  return kinds;
+}
+
+std::vector<std::unique_ptr<Simulation>> SimulationNode::buildTracksFor(const NodeConfiguration& config,
+                                                                       const std::vector<TrackKind>& kinds,
+                                                                       const std::string& activity) const
+{
+  std::vector<std::unique_ptr<Simulation>> built;
+  for (const TrackKind& kind : kinds)
+  {
+    SimulationParams params = config.simulation;
+    params.method = kind.method;
+    built.push_back(buildSimulation(config.grid, params, false, activity, kind.with_basis));
+  }
+  return built;
+}
+
 void SimulationNode::rebuildLoop()
 {
   for (;;)
   {
     NodeConfiguration target;
-    std::vector<Method> methods;
-    std::vector<bool> with_basis;  // a full track that has switched to a modal method needs it again
+    std::vector<TrackKind> kinds;
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!pending_rebuild_ || stopping_)
@@ -98,22 +119,13 @@ void SimulationNode::rebuildLoop()
       }
       target = *pending_rebuild_;
       pending_rebuild_.reset();
-      for (const Track& track : tracks_)
-      {
-        methods.push_back(track.simulation->method());
-        with_basis.push_back(track.simulation->basisBuilt());
-      }
+      kinds = trackKinds();
     }
     std::vector<std::unique_ptr<Simulation>> built;
     const ros::WallTime start = ros::WallTime::now();
     try
     {
-      for (size_t k = 0; k < methods.size(); ++k)
-      {
-        SimulationParams params = target.simulation;
-        params.method = methods[k];
-        built.push_back(buildSimulation(target.grid, params, false, "rebuilding", with_basis[k]));
-      }
+      built = buildTracksFor(target, kinds, "rebuilding");
     }
     catch (const std::exception& error)
     {

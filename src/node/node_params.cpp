@@ -170,6 +170,9 @@ void loadDrawing(const NodeParameterSource& s, const GridParams& grid, NodeParam
   p.surface_max_cells = intInRange(s, "surface_max_cells", p.surface_max_cells, 1, kMaxSurfaceCells);
   p.show_labels = s.getBool("show_labels").value_or(p.show_labels);
   p.show_shadow = s.getBool("show_shadow").value_or(p.show_shadow);
+  // Markers are most of a recording's bytes: a lower rate keeps a bag small, the points stay per tick.
+  p.markers_rate = nonNegative(s, "markers_rate", p.markers_rate, p.publish_rate,
+                               " Hz (publish_rate: markers go out with a tick; 0: every tick)");
 }
 
 // The methods compared in lockstep and their spacing, or the shadow full beside a single one.

@@ -38,6 +38,7 @@ struct NodeParams
 {
   double real_time_factor = 1.0;  // simulated seconds per wall second
   double publish_rate = 30.0;     // Hz: timer ticks, markers, TF and status
+  double markers_rate = 0.0;      // Hz of ~markers, at most publish_rate; 0: every tick
   std::string fixed_frame = "world";
   std::string grid_frame = "grid";       // static child of fixed_frame, translated by offset
   std::vector<int> tf_particles;         // broadcast as <grid_frame>/particle_<index>

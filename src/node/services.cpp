@@ -60,7 +60,10 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   try
   {
     if (method != Method::Full)
+    {
       buildBasis(simulation, "building the modal basis");  // once, with its progress logged
+      simulation.prepareConstraintModes(method);           // before any training
+    }
     if (method == Method::Cubature && !simulation.loadCachedCubature())
     {
       // Training takes up to minutes on the skinning span: the current method steps on meanwhile.

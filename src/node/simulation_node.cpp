@@ -81,6 +81,7 @@ SimulationNode::SimulationNode(ros::NodeHandle& nh, ros::NodeHandle& private_nh)
   use_sim_time_ = ros::Time::isSimTime();
 
   buildTracks();
+
   advertiseTracks();
   if (use_sim_time_)
     clock_pub_ = nh_.advertise<rosgraph_msgs::Clock>("/clock", 10);
@@ -128,9 +129,7 @@ void SimulationNode::advertiseTracks()
     track.markers_pub = track_nh.advertise<visualization_msgs::MarkerArray>("markers", 1);
     track.status_pub = track_nh.advertise<Status>("status", 10);
     track.points_pub = track_nh.advertise<sensor_msgs::PointCloud2>("points", 1);
-    for (size_t h = 0; h < config_.node.handles.size(); ++h)
-      track.handle_force_pubs.push_back(
-          track_nh.advertise<geometry_msgs::WrenchStamped>("handle_force/handle_" + std::to_string(h), 10));
+    advertiseHandleForces(track, config_.node.handles.size());
     for (size_t i = 0; i < config_.simulation.colliders.size(); ++i)
       track.contact_force_pubs.push_back(
           track_nh.advertise<geometry_msgs::WrenchStamped>("contact_force/collider_" + std::to_string(i), 10));
@@ -147,6 +146,8 @@ void SimulationNode::startServices()
   pause_srv_ = service_nh.advertiseService("pause", &SimulationNode::pause, this);
   step_srv_ = service_nh.advertiseService("step", &SimulationNode::step, this);
   clear_forces_srv_ = service_nh.advertiseService("clear_forces", &SimulationNode::clearForces, this);
+  attach_srv_ = service_nh.advertiseService("attach", &SimulationNode::attach, this);
+  detach_srv_ = service_nh.advertiseService("detach", &SimulationNode::detach, this);
   startForcesAndFrames();
   get_state_srv_ = service_nh.advertiseService("get_state", &SimulationNode::getState, this);
   set_state_srv_ = service_nh.advertiseService("set_state", &SimulationNode::setState, this);
@@ -328,6 +329,17 @@ const SimulationNode::Track* SimulationNode::reference() const
   return nullptr;
 }
 
+bool SimulationNode::followsFrames() const
+{
+  for (size_t h = 0; h < handle_frames_->size(); ++h)
+    if (handle_frames_->following(h))
+      return true;
+  for (size_t k = 0; k < collider_frames_->size(); ++k)
+    if (collider_frames_->following(k))
+      return true;
+  return false;
+}
+
 std::optional<FramePose> SimulationNode::lookupFrame(const std::string& frame, bool ever_found, std::string& problem)
 {
   problem.clear();
@@ -341,7 +353,13 @@ std::optional<FramePose> SimulationNode::lookupFrame(const std::string& frame, b
     return std::nullopt;
   try
   {
-    const auto stamped = tf_buffer_.lookupTransform(config_.node.fixed_frame, frame, ros::Time(0));
+    // Under simulated time a broadcaster (scripts/gripper.py) answers the clock this node published
+    // last: the frame is taken at that stamp, interpolated between its samples, so that the motion
+    // keeps its pace in simulated time however slowly the node steps. A stamp not yet answered, or
+    // wall time, takes the latest sample.
+    const ros::Time at_clock(clock_seconds_);
+    const bool at_stamp = use_sim_time_ && tf_buffer_.canTransform(config_.node.fixed_frame, frame, at_clock);
+    const auto stamped = tf_buffer_.lookupTransform(config_.node.fixed_frame, frame, at_stamp ? at_clock : ros::Time(0));
     const auto& t = stamped.transform;
     FramePose pose;
     pose.translation = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);
@@ -548,7 +566,10 @@ void SimulationNode::onTick()
                                                   [](const Track& t) { return !t.simulation->diverged(); })
                                     : !primary().simulation->diverged();
     if (!paused_ && running)
+    {
       stepTick(lock, period);
+      releaseSlippingGrasps();
+    }
     for (Track& track : tracks_)
     {
       tick_steps_ = std::max(tick_steps_, track.tick_steps);

@@ -11,6 +11,8 @@
 #include "modal_mass_spring/GetState.h"
 #include "modal_mass_spring/RolloutAction.h"
 #include "modal_mass_spring/SetState.h"
+#include "modal_mass_spring/Attach.h"
+#include "modal_mass_spring/Detach.h"
 #include "modal_mass_spring/SetMethod.h"
 #include "modal_mass_spring/SimulationConfig.h"
 #include "modal_mass_spring/Status.h"
@@ -166,6 +168,18 @@ private:
   void startLiveTuning();
   void reconfigure(SimulationConfig& config, uint32_t level);
   void rebuildLoop();
+  // What each track runs (its method; whether its basis is built: a full track that switched to a
+  // modal method needs it again), to build it anew; with mutex_ held.
+  struct TrackKind
+  {
+    Method method;
+    bool with_basis;
+  };
+  std::vector<TrackKind> trackKinds() const;
+  // A simulation for each of `kinds` on `config` (no lock needed); throws what buildSimulation throws.
+  std::vector<std::unique_ptr<Simulation>> buildTracksFor(const NodeConfiguration& config,
+                                                          const std::vector<TrackKind>& kinds,
+                                                          const std::string& activity) const;
   void swapRebuilt();  // with mutex_ held, at a tick boundary
   bool rebuilding() const { return rebuilding_ || !rebuilt_.empty() || training_; }
 
@@ -183,6 +197,35 @@ private:
   bool reset(std_srvs::Trigger::Request& request, std_srvs::Trigger::Response& response);
   bool pause(std_srvs::SetBool::Request& request, std_srvs::SetBool::Response& response);
   bool step(Step::Request& request, Step::Response& response);
+
+  // Grasps while running (grasps.cpp): ~attach makes particles a new handle on a TF frame, ~detach
+  // lets a handle's particles go, and a grasp given a max_force lets go beyond it. Each change builds
+  // every track anew for the new held set with the service lock open (the old model steps on), then
+  // swaps it in between two steps with the motion carried over.
+  bool attach(Attach::Request& request, Attach::Response& response);
+  bool detach(Detach::Request& request, Detach::Response& response);
+  // Builds the tracks for `next` (its handles the new held set), then, with the lock taken again,
+  // swaps them in; `keep[h]` is the handle of the running set that new handle h continues, or -1 for
+  // the one `grip` grips. Empty, or why it could not.
+  struct Grip
+  {
+    FramePose pose;
+    bool snap = false;
+  };
+  std::string changeHandles(ServiceLock* lock, NodeConfiguration next, const std::vector<int>& keep,
+                            const std::optional<Grip>& grip);
+  // With the lock held: the built tracks in, the motion carried over, the grips, the configuration.
+  void swapInHeldSet(const NodeConfiguration& next, std::vector<std::unique_ptr<Simulation>>& built,
+                     const std::vector<int>& keep, const std::optional<Grip>& grip);
+  // Why the held set cannot change now (a rebuild, a divergence, moving_frame), or empty.
+  std::string graspChangeRefusal() const;
+  // `frame`'s latest pose in fixed_frame into `pose`, or why not.
+  std::string lookupGraspFrame(const std::string& frame, FramePose& pose);
+  // Lets handle h go (its particles free); `lock` as changeHandles (null: held throughout).
+  std::string releaseHandle(ServiceLock* lock, size_t h);
+  void advertiseHandleForces(Track& track, size_t handles);  // ~handle_force/handle_<h>
+  void releaseSlippingGrasps();  // with mutex_ held, after a tick's stepping
+  std::vector<double> grasp_limits_;  // N per handle: beyond it the grasp lets go; 0: never
 
   // Saving and restoring the state, and rollouts of candidate handle motions on simulations of their
   // own (rollout_server.cpp): the goal is checked and the start copied under the lock, the rollouts
@@ -214,6 +257,8 @@ private:
   WarningThrottle dropped_warnings_;
   // Handles: looks every handle frame up (the latest pose in tf_buffer_), warns for the missing ones.
   void updateHandleTargets();   // with mutex_ held
+  // Whether a handle or a collider follows a TF frame now.
+  bool followsFrames() const;
   // The latest pose of `frame` in fixed_frame (tf_buffer_), or nothing and why (`problem`): not
   // available (tf2's reason in brackets), stale, non-finite; a frame never seen yet is waited for
   // quietly (nothing, `problem` empty) during its first seconds. Handles and colliders alike.
@@ -263,6 +308,7 @@ private:
   int diag_ticks_ = 0, diag_late_ticks_ = 0;
   double diag_step_seconds_ = 0.0;
   ros::Time last_tf_stamp_;
+  int ticks_since_markers_ = 0;  // markers_rate: the ticks since ~markers last went out
   ros::WallTime last_status_log_;
 
   ros::Publisher clock_pub_;
@@ -271,7 +317,7 @@ private:
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
   ros::CallbackQueue service_queue_;
   std::unique_ptr<ros::AsyncSpinner> service_spinner_;
-  ros::ServiceServer set_method_srv_, reset_srv_, pause_srv_, step_srv_, clear_forces_srv_;
+  ros::ServiceServer set_method_srv_, reset_srv_, pause_srv_, step_srv_, clear_forces_srv_, attach_srv_, detach_srv_;
   ros::Subscriber apply_force_sub_;
   std::unique_ptr<AppliedForces> applied_forces_;  // with mutex_
   Eigen::VectorXd external_force_;                  // their sum, on every dof
@@ -334,6 +380,14 @@ public:
     lock_ = std::unique_lock<std::mutex>(node_.mutex_);
     --node_.services_waiting_;
   }
+  // Opens the lock for work that needs no state (a build), and takes it again between two steps.
+  void unlock() { lock_.unlock(); }
+  void relock()
+  {
+    ++node_.services_waiting_;
+    lock_.lock();
+    --node_.services_waiting_;
+  }
 
 private:
   SimulationNode& node_;
@@ -353,6 +407,7 @@ struct SimulationNode::Output
   std::vector<Grid> grids;
   std::vector<geometry_msgs::TransformStamped> frames;  // empty: no TF this time
   ros::Time stamp;
+  bool markers = true;  // ~markers go out this tick (markers_rate)
 };
 
 }  // namespace modal_mass_spring

@@ -79,6 +79,12 @@ SimulationNode::Output SimulationNode::snapshot(const ros::Time& stamp)
   const bool send_tf = stamp > last_tf_stamp_ && !config_.node.tf_particles.empty();
   if (send_tf)
     last_tf_stamp_ = stamp;
+  const NodeParams& params = config_.node;
+  // Every k-th tick, k the nearest whole number to publish_rate / markers_rate.
+  const int every = params.markers_rate > 0.0 ? std::max(1, static_cast<int>(std::lround(params.publish_rate / params.markers_rate))) : 1;
+  output.markers = ++ticks_since_markers_ >= every;
+  if (output.markers)
+    ticks_since_markers_ = 0;
   for (const Track& track : tracks_)
   {
     if (track.shadow)
@@ -134,17 +140,21 @@ void SimulationNode::addGrid(const Track& track, const Track* ref, const ros::Ti
     options.label = trackLabel(track, measured);
   // One pass over the springs for both the surface's colours and the cloud.
   const Eigen::VectorXd strains = particleStrains(simulation.grid(), track.last_points);
-  grid.markers = makeMarkers(simulation.grid(), options, track.last_points, stamp, strains);
+  if (output.markers)
+    grid.markers = makeMarkers(simulation.grid(), options, track.last_points, stamp, strains);
   if (const Contact* contact = simulation.contact())
   {
-    const auto colliders = colliderMarkers(*contact, options.frame_id, track.offset, track.ns_prefix + "colliders", stamp);
-    grid.markers.markers.insert(grid.markers.markers.end(), colliders.markers.begin(), colliders.markers.end());
+    if (output.markers)
+    {
+      const auto colliders = colliderMarkers(*contact, options.frame_id, track.offset, track.ns_prefix + "colliders", stamp);
+      grid.markers.markers.insert(grid.markers.markers.end(), colliders.markers.begin(), colliders.markers.end());
+    }
     for (size_t i = 0; i < track.contact_force_pubs.size() && i < contact->report().force.size(); ++i)
       grid.wrenches.emplace_back(track.contact_force_pubs[i],
                                  forceWrench(contact->report().force[i], options.frame_id, stamp));
   }
   addHandleWrenches(track, options.frame_id, stamp, grid.wrenches);
-  if (measured && ref->shadow)
+  if (measured && ref->shadow && output.markers)
   {
     // The reference drawn faintly where the method is: the gap between them is the error.
     MarkerOptions ghost = options;
@@ -298,7 +308,8 @@ void SimulationNode::send(const Output& output)
   }
   for (const auto& grid : output.grids)
   {
-    grid.markers_pub.publish(grid.markers);
+    if (output.markers)
+      grid.markers_pub.publish(grid.markers);
     grid.points_pub.publish(grid.points);
   }
   if (!output.frames.empty())
@@ -357,13 +368,19 @@ void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& statu
                   1e3 * mean_cost, 1e3 * period, diag_late_ticks_, diag_ticks_);
     status.summary(diagnostic_msgs::DiagnosticStatus::WARN, behind);
     // On the console too, with what costs: the steps a tick asks for and what one takes.
+    // Frames moved in wall time then move faster in simulated time than their broadcaster meant.
+    const bool compressed = !use_sim_time_ && followsFrames();
     ROS_WARN_THROTTLE(kBehindWarningPeriod,
                       "%s: %s takes %.3g ms a step and a tick asks for %.1f steps (real_time_factor / "
                       "(publish_rate time_step)); a smaller real_time_factor, a larger time_step or a cheaper "
-                      "method keeps up",
+                      "method keeps up%s",
                       behind, lockstep() ? "the slowest method in lockstep" : ("method " + toString(simulation.method())).c_str(),
                       1e3 * step_seconds,
-                      params.real_time_factor / (params.publish_rate * config_.simulation.time_step));
+                      params.real_time_factor / (params.publish_rate * config_.simulation.time_step),
+                      compressed ? ". The TF frames the cloth follows move in wall time, so their motion is compressed "
+                                   "into less simulated time: with use_sim_time:=true the node publishes /clock and "
+                                   "their broadcasters keep its pace"
+                                 : "");
   }
   else
     status.summary(diagnostic_msgs::DiagnosticStatus::OK, paused_ ? "paused" : "stepping");

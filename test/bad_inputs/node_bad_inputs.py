@@ -98,6 +98,8 @@ CASES = [
     ({"publish_rate": -5.0}, [], ["publish_rate"]),
     ({"publish_rate": 0}, [], ["publish_rate"]),
     ({}, ["_publish_rate:=fast"], ["publish_rate"]),
+    ({"markers_rate": -1.0}, [], ["markers_rate"]),
+    ({"publish_rate": 10.0, "markers_rate": 20.0}, [], ["markers_rate", "publish_rate"]),
     ({"fixed_frame": ""}, [], ["fixed_frame"]),
     ({"fixed_frame": "/world"}, [], ["fixed_frame"]),
     ({"grid_frame": "world"}, [], ["grid_frame"]),

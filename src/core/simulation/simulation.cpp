@@ -64,6 +64,7 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
   base_energy_scale_ = total_mass_ * g.gravity.norm() * g.spacing * std::max(g.rows, g.cols) + stretched;
   if (params_.method == Method::Cubature)
   {
+    prepareConstraintModes(params_.method);  // a held set it cannot follow: refused before any training
     if (on_stage)
       on_stage("cubature");
     prepareCubature(on_iteration);
@@ -302,6 +303,35 @@ IntegratorSettings Simulation::integratorSettings() const
                             params_.implicit_solver, params_.tangent_refresh_steps};
 }
 
+void Simulation::prepareConstraintModes(Method method)
+{
+  // The modal methods carry the handles' static influence with the constraint modes; in the moving
+  // frame the handles never leave x_ref and the fixed-interface modes are the whole basis.
+  // With basis: skinning the methods but `linear` carry them in the skinning span instead.
+  const bool handles = grid_.numHandleDofs() > 0;
+  const bool moving_frame = formulation_ == HandleFormulation::MovingFrame;
+  const bool skinning = params_.basis == BasisKind::Skinning && method != Method::Linear;
+  if (!handles || moving_frame || method == Method::Full || skinning || constraint_modes_.size() > 0)
+    return;
+  try
+  {
+    constraint_modes_ = modal_mass_spring::constraintModes(stiffness_, handle_coupling_);
+  }
+  catch (const std::runtime_error& error)
+  {
+    if (params_.linearization != Linearization::Equilibrium)
+      throw;
+    // Already at the equilibrium: the advice to linearize there does not apply. What is left is
+    // cloth that hangs slack from these handles, with no stiffness across it.
+    throw std::runtime_error(
+        "handles: the stiffness of the interior dofs with the handles held is singular at the hanging equilibrium "
+        "(linearization: equilibrium), so the constraint modes Psi = -K_ii^-1 K_ib do not exist: cloth hanging "
+        "slack from these handles (small grips far apart) has no stiffness across it there; use basis: skinning "
+        "(physical or cubature), hold it by larger grips (e.g. a whole row, or the top row's outer particles), fix "
+        "some particles, or hold it by one handle with handle_formulation: moving_frame");
+  }
+}
+
 void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder)
 {
   // `linear` needs the eigenbasis (F = -Lambda X); every other modal method uses the physical basis,
@@ -309,34 +339,13 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
   if (method != Method::Full)
     buildBasis();
   const ModalBasis& basis = method == Method::Linear ? basis_ : physical_basis_;
+  // Before a cubature's training: a held set the method cannot follow is refused at once.
+  prepareConstraintModes(method);
   if (method == Method::Cubature)
     prepareCubature();
-  // The modal methods carry the handles' static influence with the constraint modes; in the moving
-  // frame the handles never leave x_ref and the fixed-interface modes are the whole basis.
-  // With basis: skinning the methods but `linear` carry them in the skinning span instead.
   const bool handles = grid_.numHandleDofs() > 0;
   const bool moving_frame = formulation_ == HandleFormulation::MovingFrame;
   const bool skinning = params_.basis == BasisKind::Skinning && method != Method::Linear;
-  if (handles && !moving_frame && method != Method::Full && !skinning && constraint_modes_.size() == 0)
-  {
-    try
-    {
-      constraint_modes_ = modal_mass_spring::constraintModes(stiffness_, handle_coupling_);
-    }
-    catch (const std::runtime_error& error)
-    {
-      if (params_.linearization != Linearization::Equilibrium)
-        throw;
-      // Already at the equilibrium: the advice to linearize there does not apply. What is left is
-      // cloth that hangs slack from these handles, with no stiffness across it.
-      throw std::runtime_error(
-          "handles: the stiffness of the interior dofs with the handles held is singular at the hanging equilibrium "
-          "(linearization: equilibrium), so the constraint modes Psi = -K_ii^-1 K_ib do not exist: cloth hanging "
-          "slack from these handles (small grips far apart) has no stiffness across it there; use basis: skinning "
-          "(physical or cubature), hold it by larger grips (e.g. a whole row, or the top row's outer particles), fix "
-          "some particles, or hold it by one handle with handle_formulation: moving_frame");
-    }
-  }
   const Eigen::MatrixXd& psi = skinning ? skinning_constraint_modes_ : constraint_modes_;
   LinearizedGrid linearized{grid_,
                             basis,

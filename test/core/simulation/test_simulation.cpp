@@ -255,3 +255,30 @@ TEST(Simulation, SetTimeStepKeepsTheStateAndTheNewStepIsUsed)
   EXPECT_TRUE(contains(refusal([&] { sim.setTimeStep(0.0); }), "'time_step' = 0"));
   EXPECT_EQ(sim.params().time_step, 2e-3);
 }
+
+// A cubature on the linear modes of a sheet held by two single-particle grips, linearized at rest,
+// has no constraint modes (K_ii is singular: no out-of-plane stiffness): it is refused before its
+// training starts, not after it. Held by the whole top row, the same cubature trains.
+TEST(Simulation, ACubatureThatCannotFollowItsHandlesIsRefusedBeforeItsTraining)
+{
+  SimulationParams params = methodParams(Method::Cubature, 6, 1e-3);
+  params.linearization = Linearization::Rest;
+  params.initial_state = InitialState::Initial;
+  int iterations = 0;
+  const IterationFn count = [&](const std::string& stage, int, double, double) { iterations += stage == "cubature"; };
+  try
+  {
+    Simulation(heldCloth({{0}, {5}}, 6), params, {}, {}, count);
+    ADD_FAILURE() << "two point grips on the linear modes were accepted";
+  }
+  catch (const std::runtime_error& error)
+  {
+    EXPECT_NE(std::string(error.what()).find("constraint modes"), std::string::npos) << error.what();
+  }
+  EXPECT_EQ(iterations, 0) << "the training ran before the refusal";
+
+  params.linearization = Linearization::Equilibrium;
+  params.initial_state = InitialState::Equilibrium;
+  Simulation held(heldCloth({{0, 1, 2, 3, 4, 5}}, 6), params, {}, {}, count);
+  EXPECT_GT(iterations, 0) << "a training reports its iterations";
+}
