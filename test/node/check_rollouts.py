@@ -4,6 +4,7 @@ steps 300 steps from a saved state; restored, it steps the same positions again;
 state with the frame held where it is gives them too, on the node's own worker simulations; bad goals
 are refused by name."""
 import math
+import time
 import unittest
 
 import actionlib
@@ -42,6 +43,12 @@ class Rollouts(unittest.TestCase):
         feedback = []
         self.client.send_goal(goal, feedback_cb=feedback.append)
         self.assertTrue(self.client.wait_for_result(rospy.Duration(60.0)))
+        # The result and the feedback come on topics of their own: the last feedback, published just
+        # before the result, may still be on its way when the result is in.
+        deadline = time.time() + 5.0
+        while (self.client.get_state() == GoalStatus.SUCCEEDED and len(feedback) < len(goal.candidates)
+               and time.time() < deadline):
+            time.sleep(0.05)
         return self.client.get_state(), self.client.get_result(), feedback
 
     def test_state_restored_and_rolled_out_replays_the_steps(self):
