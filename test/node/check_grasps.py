@@ -24,8 +24,8 @@ CORNER = 30  # the bottom-left particle: row 5, column 0
 class Recorder:
     def __init__(self):
         self.lock = threading.Lock()
-        self.corner = []   # (wall time, position of particle 30)
-        self.frame = []    # (wall time, origin of `corner`)
+        self.corner = []   # (stamp, position of particle 30)
+        self.frame = []    # (stamp, origin of `corner`)
         self.wrenches = []  # (wall time, force vector) on handle_force/handle_0
         self.statuses = []
         self.warnings = []
@@ -35,14 +35,16 @@ class Recorder:
                      rospy.Subscriber("/rosout", Log, self.on_log, queue_size=1000)]
 
     def on_tf(self, msg):
-        now = time.time()
+        # By the transforms' stamps (wall time here): the times the gripper and the node meant, not the
+        # times a loaded machine delivered them.
         for t in msg.transforms:
             p = t.transform.translation
+            stamp = t.header.stamp.to_sec()
             with self.lock:
                 if t.child_frame_id == "physical/grid/particle_%d" % CORNER:
-                    self.corner.append((now, np.array([p.x, p.y, p.z])))
+                    self.corner.append((stamp, np.array([p.x, p.y, p.z])))
                 elif t.child_frame_id == "corner":
-                    self.frame.append((now, np.array([p.x, p.y, p.z])))
+                    self.frame.append((stamp, np.array([p.x, p.y, p.z])))
 
     def on_wrench(self, msg):
         f = msg.wrench.force
@@ -106,9 +108,11 @@ class Grasps(unittest.TestCase):
         self.assertFalse(reply.success)
         self.assertIn("frame 'corner' already holds handle 0", reply.message)
         time.sleep(3.0)
-        corner = self.rec_offsets(rec, attached + 0.5)
-        # Within the frame's motion over two ticks (0.16 m/s on its circle): it follows, one tick late.
-        self.assertLess(np.ptp(corner, axis=0).max(), 0.02, "the grasped corner keeps its offset from the frame")
+        # It keeps its offset from the frame: each tick's corner is within 1 cm of the frame's pose a
+        # moment earlier plus the offset (the node reads the latest frame it has, which a loaded machine
+        # delivers late). A corner that stayed put would be up to 10 cm off most of the circle.
+        misses = self.offset_misses(rec, attached + 0.5)
+        self.assertLess(np.percentile(misses, 90), 0.01, "the grasped corner keeps its offset from the frame")
         path = np.array([p for _, p in rec.since("corner", attached + 0.5)])
         self.assertGreater(np.ptp(path[:, 0]), 0.05, "the corner follows the frame's circle")
         wrenches = rec.since("wrenches", attached + 0.5)
@@ -138,24 +142,29 @@ class Grasps(unittest.TestCase):
         # A grasp with a tiny max_force slips at once: the node lets it go and says so.
         reply = attach(frame="corner", particles=[CORNER], max_force=1e-6)
         self.assertTrue(reply.success, reply.message)
-        time.sleep(1.0)
-        with rec.lock:
-            slipped = [w for w in rec.warnings if "the grasp of frame 'corner' slipped" in w]
+        deadline = time.time() + 10.0
+        while time.time() < deadline:
+            with rec.lock:
+                slipped = [w for w in rec.warnings if "the grasp of frame 'corner' slipped" in w]
+            if slipped:
+                break
+            time.sleep(0.1)
         self.assertTrue(slipped, rec.warnings[-5:])
         self.assertIn("no handle follows frame 'corner'", detach("corner").message)
 
-    def rec_offsets(self, rec, start):
-        """The corner particle's offset from the frame's origin at each tick since `start`."""
+    def offset_misses(self, rec, start):
+        """For each tick since `start`: how far the corner is from the frame's pose plus the grasp's
+        offset (the median one), at the best of the frame's samples in the 0.3 s before the tick."""
         corner = rec.since("corner", start)
-        frame = rec.since("frame", start)
-        offsets = []
+        frame = rec.since("frame", start - 0.3)
+        pairs = []
         for t, p in corner:
-            # the frame's latest pose at or before this tick
-            earlier = [f for s, f in frame if s <= t]
-            if earlier:
-                offsets.append(p - earlier[-1])
-        self.assertGreater(len(offsets), 10)
-        return np.array(offsets)
+            window = [f for s, f in frame if t - 0.3 <= s <= t]
+            if window:
+                pairs.append((p, np.array(window)))
+        self.assertGreater(len(pairs), 10)
+        offset = np.median([p - w[-1] for p, w in pairs], axis=0)
+        return np.array([np.linalg.norm(p - offset - w, axis=1).min() for p, w in pairs])
 
 
 if __name__ == "__main__":
