@@ -455,7 +455,9 @@ TEST(Contact, EachParticleSaysWhichColliderItTouched)
     for (int p = 0; p < points.cols(); ++p)
     {
       if (p < g.cols)
+      {
         EXPECT_EQ(contacts[p], -1) << "the fixed top row touches nothing";
+      }
       if (contacts[p] != 0)
         continue;
       ++touched;
