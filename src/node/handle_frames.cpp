@@ -36,6 +36,18 @@ FramePose compose(const FramePose& a, const FramePose& b)
   return c;
 }
 
+// What the interpolation over a tick of `duration` seconds from `from` to `to` moves at
+// (interpolateRigidMotion: straight, and a slerp's constant turn).
+TickVelocity tickVelocity(const FramePose& from, const FramePose& to, double duration)
+{
+  const Eigen::Quaterniond q0 = from.rotation.normalized();
+  Eigen::Quaterniond q1 = to.rotation.normalized();
+  if (q0.dot(q1) < 0.0)
+    q1.coeffs() = -q1.coeffs();
+  const Eigen::AngleAxisd turn(q1 * q0.conjugate());
+  return {(to.translation - from.translation) / duration, turn.angle() * turn.axis() / duration};
+}
+
 FramePose inverse(const FramePose& a)
 {
   FramePose i;
@@ -95,6 +107,7 @@ void HandleFrames::regrip(Handle& handle, const FramePose& pose)
   handle.offsets = pose.rotation.conjugate().toRotationMatrix() * (now.colwise() - pose.translation);
   handle.start_pose = compose(compose(handle.start_pose, inverse(handle.current)), pose);
   handle.current = pose;
+  handle.last = TickVelocity{};
 }
 
 void HandleFrames::setTargets(const std::vector<std::optional<FramePose>>& poses, const std::vector<std::string>& problems)
@@ -117,6 +130,7 @@ void HandleFrames::setTargets(const std::vector<std::optional<FramePose>>& poses
       // The particles' start positions in the frame's first pose.
       handle.offsets = pose.rotation.conjugate().toRotationMatrix() * (handle.start.colwise() - pose.translation);
       handle.start_pose = handle.current = pose;
+      handle.last = TickVelocity{};
       handle.found = true;
     }
     std::string why = refusal(handle, pose);
@@ -156,6 +170,13 @@ void HandleFrames::motion(double duration, double s, Eigen::VectorXd& x, Eigen::
     if (handle.found)
     {
       m = interpolateRigidMotion(handle.offsets, handle.current, handle.target, duration, s);
+      // The velocity's change since the last tick, spread over this one.
+      const TickVelocity now = tickVelocity(handle.current, handle.target, duration);
+      const Eigen::Vector3d a = (now.linear - handle.last.linear) / duration;
+      const Eigen::Vector3d alpha = (now.angular - handle.last.angular) / duration;
+      const Eigen::Vector3d origin = handle.current.translation + s * (handle.target.translation - handle.current.translation);
+      for (Eigen::Index p = 0; p < m.position.cols(); ++p)
+        m.acceleration.col(p) += a + alpha.cross(m.position.col(p) - origin);
     }
     else
     {
@@ -183,7 +204,16 @@ FrameMotion HandleFrames::frameMotion(double duration, double s) const
     pose.translation -= grid_offset_;
     return pose;
   };
-  return interpolateFrameMotion(inGrid(handle.start_pose), inGrid(handle.current), inGrid(handle.target), duration, s);
+  const FramePose start = inGrid(handle.start_pose);
+  FrameMotion m = interpolateFrameMotion(start, inGrid(handle.current), inGrid(handle.target), duration, s);
+  // The velocity's change since the last tick, spread over this one: the frame's origin accelerates
+  // at a, and the frame turns with alpha about it.
+  const TickVelocity now = tickVelocity(handle.current, handle.target, duration);
+  const Eigen::Vector3d a = (now.linear - handle.last.linear) / duration;
+  const Eigen::Vector3d alpha = (now.angular - handle.last.angular) / duration;
+  m.angular_acceleration = alpha;
+  m.acceleration += a - alpha.cross(m.rotation * start.translation);
+  return m;
 }
 
 void HandleFrames::drive(Simulation& simulation, double duration, double s) const
@@ -200,10 +230,11 @@ void HandleFrames::drive(Simulation& simulation, double duration, double s) cons
   simulation.setHandleMotion(x, v, a);
 }
 
-void HandleFrames::finishTick(double s)
+void HandleFrames::finishTick(double duration, double s)
 {
   for (auto& handle : handles_)
   {
+    handle.last = tickVelocity(handle.current, handle.target, duration);
     handle.current.translation = (1.0 - s) * handle.current.translation + s * handle.target.translation;
     handle.current.rotation = handle.current.rotation.slerp(s, handle.target.rotation);
   }
@@ -212,7 +243,10 @@ void HandleFrames::finishTick(double s)
 void HandleFrames::place(size_t h, const FramePose& pose)
 {
   if (handles_[h].found)
+  {
     handles_[h].current = handles_[h].target = pose;
+    handles_[h].last = TickVelocity{};
+  }
 }
 
 void HandleFrames::grip(size_t h, const FramePose& pose, const Eigen::Matrix3Xd& points, bool snap)
@@ -220,6 +254,7 @@ void HandleFrames::grip(size_t h, const FramePose& pose, const Eigen::Matrix3Xd&
   Handle& handle = handles_[h];
   handle.offsets = pose.rotation.conjugate().toRotationMatrix() * (points.colwise() - pose.translation);
   handle.start_pose = handle.current = pose;
+  handle.last = TickVelocity{};
   if (snap)
   {
     // The frame is taken to be where their centre is now; the tick moves it to the frame's pose.
@@ -238,6 +273,7 @@ void HandleFrames::reset()
   for (auto& handle : handles_)
   {
     handle.current = handle.target = handle.start_pose;
+    handle.last = TickVelocity{};
     if (handle.gripped_live)
       handle.found = handle.gripped_live = false;  // its particles are back at x_ref: gripped there anew
   }

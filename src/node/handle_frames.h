@@ -20,6 +20,13 @@ namespace modal_mass_spring
 // broadcaster has stopped, and its particles (its collider) hold where they are until it comes back.
 constexpr double kStaleHandleFrameSeconds = 1.0;
 
+// A frame's velocity (m/s) and angular velocity (rad/s), world, over a tick.
+struct TickVelocity
+{
+  Eigen::Vector3d linear = Eigen::Vector3d::Zero();
+  Eigen::Vector3d angular = Eigen::Vector3d::Zero();
+};
+
 class HandleFrames
 {
 public:
@@ -55,8 +62,9 @@ public:
   // its handle formulation takes it: the frame's motion (frameMotion) in the moving frame, every
   // handle particle's (motion) with constraint modes. Throws what the simulation refuses.
   void drive(Simulation& simulation, double duration, double s) const;
-  // The tick's stepping ended at the fraction s: the handles are there now.
-  void finishTick(double s);
+  // The tick of `duration` seconds ended at the fraction s: the handles are there now, and moved at
+  // this tick's velocities, which the next tick's accelerations start from.
+  void finishTick(double duration, double s);
   // Back to the start (Simulation::reset puts the handles at rest at x_ref); offsets are kept.
   void reset();
   // Empty, or which frames are held and why (not available, stale, refused).
@@ -97,6 +105,10 @@ private:
     std::optional<FramePose> refused_pose;  // a large turn refused at the last tick
     bool gripped_live = false;  // by grip(): its offsets are not the first lookup's
     FramePose start_pose, current, target;
+    // The frame's velocity and angular velocity (world) over the last tick: a tick moves the frame at
+    // a constant velocity, so its change from tick to tick is an acceleration over the next tick, the
+    // inertial load a cloth carried by the gripper feels (zero after a jump to a new pose).
+    TickVelocity last;
   };
   // Why the cloth cannot follow `pose` from the handle's current one, or empty.
   std::string refusal(const Handle& handle, const FramePose& pose) const;

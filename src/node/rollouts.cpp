@@ -257,7 +257,7 @@ CandidateOutcome runCandidate(Simulation& simulation, const SimulationState& sta
           return outcome;
         }
       }
-      frames.finishTick(1.0);
+      frames.finishTick(steps * dt, 1.0);
       step += steps;
     }
     // Every sample due by now (a sample within half a step of the last one lands on its step).

@@ -644,7 +644,7 @@ void SimulationNode::stepTick(std::unique_lock<std::mutex>& lock, double period)
   tick_step_seconds_ += secondsSince(start);
   if (steps > 0)
   {
-    handle_frames_->finishTick(static_cast<double>(stepped) / steps);
+    handle_frames_->finishTick(steps * dt, static_cast<double>(stepped) / steps);
     collider_frames_->finishTick(static_cast<double>(stepped) / steps);
   }
 }

@@ -78,9 +78,9 @@ TEST(Rollouts, RolloutFromLiveStateIsTheLiveTrajectory)
   const Eigen::Matrix3Xd points = live.points();
   start[0].translation = points.col(0) + cloth.offset;
   start[1].translation = points.col(5) + cloth.offset;
-  frames.setTargets({start[0], start[1]});
-  frames.finishTick(1.0);
   const double dt = cloth.params.time_step;
+  frames.setTargets({start[0], start[1]});
+  frames.finishTick(dt, 1.0);
   auto tick = [&](Simulation& sim, HandleFrames& f, int steps, double t) {
     f.setTargets(framePoses(f, start, t));
     for (int k = 1; k <= steps; ++k)
@@ -88,7 +88,7 @@ TEST(Rollouts, RolloutFromLiveStateIsTheLiveTrajectory)
       f.drive(sim, steps * dt, static_cast<double>(k) / steps);
       ASSERT_FALSE(sim.step().diverged);
     }
-    f.finishTick(1.0);
+    f.finishTick(steps * dt, 1.0);
   };
   double t = 0.0;
   for (int steps : {33, 34, 33})
@@ -235,7 +235,7 @@ TEST(Rollouts, CancelStopsTheWorkersAndKeepsWhatFinished)
   r.request.state = live.saveState();
   r.request.frames = HandleFrames(r.cloth.handles, live.grid(), live.linearizationPositions(), r.cloth.offset);
   r.request.frames.setTargets({FramePose{}, FramePose{}});
-  r.request.frames.finishTick(1.0);
+  r.request.frames.finishTick(r.cloth.params.time_step, 1.0);
   r.request.candidates.assign(40, r.request.candidates[0]);
   Simulation worker_a(r.cloth.grid, r.cloth.params), worker_b(r.cloth.grid, r.cloth.params);
   std::atomic<bool> cancel{false};
