@@ -130,9 +130,7 @@ void SimulationNode::advertiseTracks()
     track.status_pub = track_nh.advertise<Status>("status", 10);
     track.points_pub = track_nh.advertise<sensor_msgs::PointCloud2>("points", 1);
     advertiseHandleForces(track, config_.node.handles.size());
-    for (size_t i = 0; i < config_.simulation.colliders.size(); ++i)
-      track.contact_force_pubs.push_back(
-          track_nh.advertise<geometry_msgs::WrenchStamped>("contact_force/collider_" + std::to_string(i), 10));
+    advertiseContactForces(track, config_.simulation.colliders.size());
   }
 }
 
@@ -148,6 +146,7 @@ void SimulationNode::startServices()
   clear_forces_srv_ = service_nh.advertiseService("clear_forces", &SimulationNode::clearForces, this);
   attach_srv_ = service_nh.advertiseService("attach", &SimulationNode::attach, this);
   detach_srv_ = service_nh.advertiseService("detach", &SimulationNode::detach, this);
+  set_colliders_srv_ = service_nh.advertiseService("set_colliders", &SimulationNode::setColliders, this);
   startForcesAndFrames();
   get_state_srv_ = service_nh.advertiseService("get_state", &SimulationNode::getState, this);
   set_state_srv_ = service_nh.advertiseService("set_state", &SimulationNode::setState, this);
