@@ -30,14 +30,14 @@ void SimulationNode::reconfigure(SimulationConfig& config, uint32_t)
   {
     candidate = loadNodeConfiguration(XmlRpcParameterSource(params), {});
   }
-  // The colliders are ~set_colliders's since the start: the set in force, not the parameter's.
-  candidate.simulation.colliders = config_.simulation.colliders;
   catch (const std::invalid_argument& error)
   {
     ROS_ERROR("dynamic_reconfigure: %s; refused, nothing changed", error.what());
     config = liveValues(accepted_);  // what the client gets back, and what the server keeps
     return;
   }
+  // The colliders are ~set_colliders's since the start: the set in force, not the parameter's.
+  candidate.simulation.colliders = config_.simulation.colliders;
   // Self-collision acts from the next step on every track; a track that runs a modal method now (a
   // switch since the start) refuses it, and then nothing changes.
   const SimulationParams& self = candidate.simulation;
