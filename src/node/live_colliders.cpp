@@ -34,6 +34,7 @@ bool SimulationNode::setColliders(SetColliders::Request& request, SetColliders::
     response.message = std::string("set_colliders refused, nothing changed: ") + error.what();
     return true;
   }
+  colliders_set_live_ = true;
   config_.simulation.colliders = change.colliders;
   accepted_.simulation.colliders = change.colliders;
   collider_frames_ = std::make_unique<ColliderFrames>(config_.simulation.colliders, config_.node.offset);

@@ -232,12 +232,25 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
 {
   const auto start = Clock::now();
   std::unique_ptr<Simulation> simulation;
+  // Colliders set by ~set_colliders may stand where the grid started: a simulation that takes over
+  // the run (a rebuild, a rollout's worker) gets them once built, without the start's check (the
+  // state it takes over is outside them), and the formulation colliders need.
+  SimulationParams params = sim_params;
+  const bool live_colliders = colliders_set_live_ && !params.colliders.empty();
+  if (live_colliders)
+  {
+    params.colliders.clear();
+    if (params.handle_formulation == HandleFormulation::Auto)
+      params.handle_formulation = HandleFormulation::ConstraintModes;
+  }
   withProgress(activity, [&](const StageFn& on_stage, const IterationFn& on_iteration) {
     CacheOptions cache{config_.node.cache_dir, [](const std::string& warning) { ROS_WARN("%s", warning.c_str()); }};
-    simulation = std::make_unique<Simulation>(grid_params, sim_params, on_stage, cache, on_iteration);
+    simulation = std::make_unique<Simulation>(grid_params, params, on_stage, cache, on_iteration);
     if (with_basis)
       simulation->buildBasis(on_stage, on_iteration);
   });
+  if (live_colliders)
+    simulation->setColliders(sim_params.colliders, std::vector<int>(sim_params.colliders.size(), -1));
   if (!report)
     return simulation;
   const double total_seconds = secondsSince(start);

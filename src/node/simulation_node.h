@@ -237,6 +237,7 @@ private:
   // track between two steps; a collider that appears on the cloth pushes it out from the next step.
   bool setColliders(SetColliders::Request& request, SetColliders::Response& response);
   void advertiseContactForces(Track& track, size_t colliders);  // ~contact_force/collider_<i>
+  std::atomic<bool> colliders_set_live_{false};  // since the first: see buildSimulation
 
   // Saving and restoring the state, and rollouts of candidate handle motions on simulations of their
   // own (rollout_server.cpp): the goal is checked and the start copied under the lock, the rollouts

@@ -13,9 +13,11 @@ import numpy as np
 import rospy
 import rostest
 import sensor_msgs.point_cloud2 as point_cloud2
+from dynamic_reconfigure.client import Client
 from geometry_msgs.msg import Pose
 from modal_mass_spring.msg import PlacedCollider
 from modal_mass_spring.srv import SetColliders, SetCollidersRequest
+from rosgraph_msgs.msg import Log
 from sensor_msgs.msg import PointCloud2
 from shape_msgs.msg import SolidPrimitive
 
@@ -68,6 +70,8 @@ class SetsCollidersLive(unittest.TestCase):
         rospy.wait_for_service(NODE + "/set_colliders", timeout=60.0)
         self.call = rospy.ServiceProxy(NODE + "/set_colliders", SetColliders)
         self.points = Points()
+        self.log = []
+        self.log_sub = rospy.Subscriber("/rosout", Log, lambda m: self.log.append(m.msg), queue_size=1000)
         deadline = time.time() + 30.0
         while not self.points.since(0.0) and time.time() < deadline:
             time.sleep(0.1)
@@ -143,6 +147,21 @@ class SetsCollidersLive(unittest.TestCase):
         deepest = self.deepest_after(lambda c: box_depth(c, *higher))
         self.assertLess(deepest, 1e-3)
         self.assertGreater(np.median(self.points.latest()[:, 2]), 0.015, "the cloth lies on the higher table")
+
+        # contact_thickness live: 1 cm from the next step, the cloth lifted to it on the table.
+        client = Client(NODE, timeout=30)
+        client.update_configuration({"contact_thickness": 0.01})
+        time.sleep(1.5)
+        on_top = self.points.latest()[2 * COLS:, 2]  # the rows over the table
+        self.assertAlmostEqual(np.median(on_top), 0.03, delta=0.002)
+        # A rebuild builds with the colliders set live, though the grid's start is inside the table now.
+        client.update_configuration({"structural_stiffness": 60.0})
+        deadline = time.time() + 90.0
+        while time.time() < deadline and not any("swapped in" in m or "rebuild failed" in m for m in self.log):
+            time.sleep(0.2)
+        self.assertTrue(any("rebuilt model swapped in" in m for m in self.log), [m for m in self.log if "rebuil" in m])
+        client.update_configuration({"contact_thickness": 0.0})
+        self.assertLess(self.deepest_after(lambda c: box_depth(c, *higher)), 1e-3)
 
         # The table replaced by a ball under the cloth's middle, its top 2.5 cm above the cloth.
         ball = (0.225, 0.3, -0.1), 0.15
