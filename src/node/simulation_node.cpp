@@ -235,17 +235,17 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
   // Colliders set by ~set_colliders may stand where the grid started: a simulation that takes over
   // the run (a rebuild, a rollout's worker) gets them once built, without the start's check (the
   // state it takes over is outside them), and the formulation colliders need.
-  SimulationParams params = sim_params;
-  const bool live_colliders = colliders_set_live_ && !params.colliders.empty();
+  SimulationParams built = sim_params;
+  const bool live_colliders = colliders_set_live_ && !built.colliders.empty();
   if (live_colliders)
   {
-    params.colliders.clear();
-    if (params.handle_formulation == HandleFormulation::Auto)
-      params.handle_formulation = HandleFormulation::ConstraintModes;
+    built.colliders.clear();
+    if (built.handle_formulation == HandleFormulation::Auto)
+      built.handle_formulation = HandleFormulation::ConstraintModes;
   }
   withProgress(activity, [&](const StageFn& on_stage, const IterationFn& on_iteration) {
     CacheOptions cache{config_.node.cache_dir, [](const std::string& warning) { ROS_WARN("%s", warning.c_str()); }};
-    simulation = std::make_unique<Simulation>(grid_params, params, on_stage, cache, on_iteration);
+    simulation = std::make_unique<Simulation>(grid_params, built, on_stage, cache, on_iteration);
     if (with_basis)
       simulation->buildBasis(on_stage, on_iteration);
   });
