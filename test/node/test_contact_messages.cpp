@@ -2,6 +2,8 @@
 // into the grid's coordinates), the refusals by field name, the start-up colliders' ids, and what SET
 // and UPDATE make of a set.
 #include "contact_messages.h"
+#include "node_params.h"
+#include "xmlrpc_parameter_source.h"
 
 #include <gtest/gtest.h>
 
@@ -148,6 +150,34 @@ TEST(ColliderMessages, StartUpCollidersAreNamedByIndexUnlessGivenAnIdAndEachIdOn
   const std::string why = refusal([&] { nameColliders(colliders); });
   EXPECT_NE(why.find("colliders[2].id"), std::string::npos) << why;
   EXPECT_NE(why.find("colliders[1]"), std::string::npos) << why;
+}
+
+TEST(ColliderMessages, TheParametersCollidersAreReadWithTheirIds)
+{
+  const auto collider = [](const std::string& id) {
+    XmlRpc::XmlRpcValue c;
+    c["type"] = "plane";
+    for (int k = 0; k < 3; ++k)
+    {
+      c["point"][k] = 0.0;
+      c["normal"][k] = k == 2 ? 1.0 : 0.0;
+    }
+    c["point"][2] = -1.0;
+    if (!id.empty())
+      c["id"] = id;
+    return c;
+  };
+  XmlRpc::XmlRpcValue params;
+  params["dimension"] = 3;
+  params["colliders"][0] = collider("floor");
+  params["colliders"][1] = collider("");
+  NodeConfiguration c = loadNodeConfiguration(XmlRpcParameterSource(params), {});
+  ASSERT_EQ(c.simulation.colliders.size(), 2u);
+  EXPECT_EQ(c.simulation.colliders[0].id, "floor");
+  EXPECT_EQ(c.simulation.colliders[1].id, "collider_1");
+  params["colliders"][1] = collider("floor");
+  const std::string why = refusal([&] { loadNodeConfiguration(XmlRpcParameterSource(params), {}); });
+  EXPECT_NE(why.find("'colliders[1].id' = 'floor'"), std::string::npos) << why;
 }
 
 TEST(ColliderMessages, SetReplacesTheWholeSetAndUpdateReplacesAddsAndRemovesById)
