@@ -16,7 +16,7 @@ import sensor_msgs.point_cloud2 as point_cloud2
 from dynamic_reconfigure.client import Client
 from geometry_msgs.msg import Pose
 from modal_mass_spring.msg import PlacedCollider
-from modal_mass_spring.srv import SetColliders, SetCollidersRequest
+from modal_mass_spring.srv import GetState, SetColliders, SetCollidersRequest, SetState
 from rosgraph_msgs.msg import Log
 from sensor_msgs.msg import PointCloud2
 from shape_msgs.msg import SolidPrimitive
@@ -92,6 +92,7 @@ class SetsCollidersLive(unittest.TestCase):
     def test_replaced_live_while_the_cloth_lies_on_them(self):
         time.sleep(1.0)  # lying on the table
         lying = np.median(self.points.latest()[:, 2])
+        saved = rospy.ServiceProxy(NODE + "/get_state", GetState)().state
         good = placed("table", SolidPrimitive.BOX, [0.8, 0.55, 0.2], (0.25, 0.36, -0.08))
         ids = ["table", "collider_1"]
 
@@ -148,6 +149,13 @@ class SetsCollidersLive(unittest.TestCase):
         self.assertLess(deepest, 1e-3)
         self.assertGreater(np.median(self.points.latest()[:, 2]), 0.015, "the cloth lies on the higher table")
 
+        # A state saved before the change, put back: the cloth inside the table again, which stays where
+        # it was set (not where the state's colliders stood), and is pushed out once more.
+        reply = rospy.ServiceProxy(NODE + "/set_state", SetState)(saved)
+        self.assertTrue(reply.success, reply.message)
+        self.assertLess(self.deepest_after(lambda c: box_depth(c, *higher)), 1e-3)
+        self.assertAlmostEqual(np.median(self.points.latest()[2 * COLS:, 2]), 0.025, delta=0.003)
+
         # contact_thickness live: 1 cm from the next step, the cloth lifted to it on the table.
         client = Client(NODE, timeout=30)
         client.update_configuration({"contact_thickness": 0.01})
@@ -157,7 +165,7 @@ class SetsCollidersLive(unittest.TestCase):
         # A rebuild builds with the colliders set live, though the grid's start is inside the table now.
         client.update_configuration({"structural_stiffness": 60.0})
         deadline = time.time() + 90.0
-        while time.time() < deadline and not any("swapped in" in m or "rebuild failed" in m for m in self.log):
+        while time.time() < deadline and not any("rebuilt model swapped in" in m or "rebuild failed" in m for m in self.log):
             time.sleep(0.2)
         self.assertTrue(any("rebuilt model swapped in" in m for m in self.log), [m for m in self.log if "rebuil" in m])
         client.update_configuration({"contact_thickness": 0.0})
