@@ -330,15 +330,8 @@ public:
       llt.solveInPlace(x);
       return x.allFinite();
     }
-    if (kind_ == LinearSolver::JacobiCg)
-    {
-      inverse_diagonal_ = j.diagonal().cwiseInverse();
-      if (inverse_diagonal_.minCoeff() > 0.0 &&
-          conjugateGradients(product, b, x, tolerance, kMaxJacobiIterations,
-                             [&](Eigen::VectorXd& v) { v.array() *= inverse_diagonal_.array(); }) &&
-          x.allFinite())
-        return true;
-    }
+    if (kind_ == LinearSolver::JacobiCg && diagonalJacobi(j, b, x, tolerance))
+      return true;
     // Within a few iterations while J changes little; past this many, factorising the new J costs less.
     constexpr int kMaxReusedFactorIterations = 8;
     if (kind_ == LinearSolver::CholmodCg && hasFactor())
@@ -357,7 +350,7 @@ public:
 
 private:
   LinearSolver kind_;
-  Eigen::VectorXd inverse_diagonal_, preconditioned_;
+  Eigen::VectorXd preconditioned_;
 };
 
 TangentSolverKind coreKind(LinearSolver solver)

@@ -31,6 +31,7 @@ def main():
     parser.add_argument("--seconds", type=float, default=60.0, help="simulated seconds measured")
     parser.add_argument("--skip", type=float, default=2.0, help="simulated seconds left out at the start")
     parser.add_argument("--timeout", type=float, default=1800.0, help="wall seconds before giving up")
+    parser.add_argument("--csv", help="also write each status's simulated time and rms_distance to this file")
     parser.add_argument("launch", nargs="+", help="the launch file, then its arguments")
     args = parser.parse_args()
     if args.seconds <= 0.0 or args.skip < 0.0:
@@ -49,7 +50,7 @@ def main():
         time.sleep(0.5)
     if launch.poll() is not None:
         sys.exit("roslaunch ended at once (exit code %d): run it by hand to see why" % launch.returncode)
-    samples, factors = [], []
+    samples, factors, times = [], [], []
     done = threading.Event()
     lock = threading.Lock()
 
@@ -58,6 +59,7 @@ def main():
             return
         with lock:
             samples.append(msg.rms_distance)
+            times.append(msg.sim_time)
             factors.append(msg.real_time_factor)
         if msg.sim_time >= args.skip + args.seconds:
             done.set()
@@ -84,6 +86,12 @@ def main():
     print("rms_distance to the shadow full: median %.4f m, 95th percentile %.4f m, largest %.4f m" %
           (np.median(distances), np.percentile(distances, 95), distances.max()))
     print("achieved real-time factor: mean %.3f" % rtf.mean())
+    if args.csv:
+        with open(args.csv, "w") as out:
+            out.write("sim_time,rms_distance\n")
+            with lock:
+                for t, d in zip(times, samples):
+                    out.write("%.4f,%.6g\n" % (t, d))
 
 
 if __name__ == "__main__":

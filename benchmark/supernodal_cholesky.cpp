@@ -1,11 +1,10 @@
 // Left-looking supernodal Cholesky: the symbolic analysis walks the row subtrees of the elimination
 // tree (Liu), the numeric one updates each supernode from the earlier ones whose rows reach it.
 #include "supernodal_cholesky.h"
+#include "solvers/huge_pages.h"
 
 #include <Eigen/Cholesky>
 #include <Eigen/OrderingMethods>
-
-#include <sys/mman.h>
 
 #include <algorithm>
 #include <cmath>
@@ -292,15 +291,6 @@ void SupernodalCholesky::solveInPlace(Eigen::Ref<Eigen::VectorXd> x) const
       }
   }
   x = p_inverse_ * work_;
-}
-
-void adviseHugePages(void* data, std::size_t bytes)
-{
-  constexpr std::uintptr_t huge = std::uintptr_t{2} << 20;
-  const std::uintptr_t begin = (reinterpret_cast<std::uintptr_t>(data) + huge - 1) & ~(huge - 1);
-  const std::uintptr_t end = (reinterpret_cast<std::uintptr_t>(data) + bytes) & ~(huge - 1);
-  if (end > begin)
-    madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
 }
 
 }  // namespace modal_mass_spring

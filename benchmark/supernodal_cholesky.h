@@ -57,9 +57,4 @@ private:
   mutable Eigen::VectorXd work_, gathered_;
 };
 
-// Asks the kernel to back [data, data + bytes) with 2 MB pages where it can: a large buffer written
-// once (the factor, the Lanczos vectors) otherwise takes a page fault every 4 kB (3-4% of a fresh
-// process's modal basis on a 100 x 100 grid). A hint only; nothing changes where it is refused.
-void adviseHugePages(void* data, std::size_t bytes);
-
 }  // namespace modal_mass_spring

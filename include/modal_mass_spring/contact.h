@@ -124,6 +124,8 @@ struct ContactReport
   // impulses divided by the time step), and the particles touching it.
   std::vector<Eigen::Vector3d> force;
   std::vector<int> touching;
+  // Per free particle (in free-dof order): the first collider it touched over the step, -1 none.
+  std::vector<int> touched_by;
   // The deepest a free particle was below a surface before and after the correction (m, >= 0).
   double penetration_before = 0.0;
   double penetration_after = 0.0;

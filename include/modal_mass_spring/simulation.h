@@ -332,6 +332,9 @@ public:
 
   // The colliders' contact (null without colliders): their poses, and what the last step did.
   const Contact* contact() const { return contact_.get(); }
+  // Per particle of the grid: the collider it touched in the last step (the first, where several), or
+  // -1 (none, a fixed or held particle, no colliders).
+  std::vector<int> particleContacts() const;
   // Places collider i (its frame in the grid's coordinates) for the end of the next step; a moved
   // collider can do work on the grid, so the energy check is then off until the next reset(). A
   // collider with a `frame` touches nothing until its first pose, which places it (Contact::setPose).

@@ -1,6 +1,7 @@
 // Grasps while the simulation runs: ~attach, ~detach, and the grasp that lets go beyond its force.
 #include "simulation_node.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <numeric>
@@ -182,18 +183,11 @@ std::string SimulationNode::graspChangeRefusal() const
 
 std::string SimulationNode::lookupGraspFrame(const std::string& frame, FramePose& pose)
 {
-  try
-  {
-    const auto t = tf_buffer_.lookupTransform(config_.node.fixed_frame, frame, ros::Time(0)).transform;
-    pose.translation = Eigen::Vector3d(t.translation.x, t.translation.y, t.translation.z);
-    pose.rotation = Eigen::Quaterniond(t.rotation.w, t.rotation.x, t.rotation.y, t.rotation.z).normalized();
-  }
-  catch (const tf2::TransformException& error)
-  {
-    return "frame '" + frame + "' is not available in '" + config_.node.fixed_frame + "' (" + error.what() + ")";
-  }
-  if (!pose.translation.allFinite() || !pose.rotation.coeffs().allFinite())
-    return "frame '" + frame + "' has a non-finite pose";
+  std::string problem;
+  const std::optional<FramePose> found = lookupFrame(frame, true, problem);  // no grace: the frame must be there
+  if (!found)
+    return "frame '" + frame + "' is " + problem;
+  pose = *found;
   return "";
 }
 
@@ -387,7 +381,8 @@ void SimulationNode::advertiseHandleForces(Track& track, size_t handles)
 void SimulationNode::releaseSlippingGrasps()
 {
   const Simulation& simulation = *primary().simulation;
-  if (grasp_limits_.empty() || simulation.diverged())
+  const bool limited = std::any_of(grasp_limits_.begin(), grasp_limits_.end(), [](double limit) { return limit > 0.0; });
+  if (!limited || simulation.diverged())
     return;
   const std::vector<Simulation::Wrench> wrenches =
       simulation.handleWrenches(std::vector<Eigen::Vector3d>(simulation.grid().handles().size(), Eigen::Vector3d::Zero()));

@@ -241,23 +241,25 @@ visualization_msgs::MarkerArray makeMarkers(const Grid& grid, const MarkerOption
 }
 
 sensor_msgs::PointCloud2 makePointCloud(const Eigen::Matrix3Xd& points, const Eigen::VectorXd& strains,
-                                        const Eigen::Vector3d& offset, const std::string& frame_id,
-                                        const ros::Time& stamp)
+                                        const std::vector<int>& contacts, const Eigen::Vector3d& offset,
+                                        const std::string& frame_id, const ros::Time& stamp)
 {
   sensor_msgs::PointCloud2 cloud;
   cloud.header.frame_id = frame_id;
   cloud.header.stamp = stamp;
   sensor_msgs::PointCloud2Modifier modifier(cloud);
-  modifier.setPointCloud2Fields(4, "x", 1, sensor_msgs::PointField::FLOAT32, "y", 1, sensor_msgs::PointField::FLOAT32,
-                                "z", 1, sensor_msgs::PointField::FLOAT32, "strain", 1,
-                                sensor_msgs::PointField::FLOAT32);
+  modifier.setPointCloud2Fields(5, "x", 1, sensor_msgs::PointField::FLOAT32, "y", 1, sensor_msgs::PointField::FLOAT32,
+                                "z", 1, sensor_msgs::PointField::FLOAT32, "strain", 1, sensor_msgs::PointField::FLOAT32,
+                                "contact", 1, sensor_msgs::PointField::INT32);
   modifier.resize(points.cols());
   cloud.height = 1;
   cloud.width = static_cast<uint32_t>(points.cols());
   cloud.is_dense = true;
   sensor_msgs::PointCloud2Iterator<float> x(cloud, "x"), y(cloud, "y"), z(cloud, "z"), strain(cloud, "strain");
-  for (int k = 0; k < points.cols(); ++k, ++x, ++y, ++z, ++strain)
+  sensor_msgs::PointCloud2Iterator<int32_t> contact(cloud, "contact");
+  for (int k = 0; k < points.cols(); ++k, ++x, ++y, ++z, ++strain, ++contact)
   {
+    *contact = static_cast<size_t>(k) < contacts.size() ? contacts[k] : -1;
     const Eigen::Vector3d p = points.col(k) + offset;
     *x = static_cast<float>(p.x());
     *y = static_cast<float>(p.y());

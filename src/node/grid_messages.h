@@ -51,9 +51,10 @@ visualization_msgs::MarkerArray makeMarkers(const Grid& grid, const MarkerOption
                                             const Eigen::Matrix3Xd& points, const ros::Time& stamp,
                                             const Eigen::VectorXd& particle_strains = Eigen::VectorXd());
 
-// One point per particle at points + offset: x, y, z and strain, all float32.
+// One point per particle at points + offset: x, y, z and strain (float32), and contact (int32): the
+// collider the particle touched in the last step, -1 none (`contacts` empty: none anywhere).
 sensor_msgs::PointCloud2 makePointCloud(const Eigen::Matrix3Xd& points, const Eigen::VectorXd& strains,
-                                        const Eigen::Vector3d& offset, const std::string& frame_id,
-                                        const ros::Time& stamp);
+                                        const std::vector<int>& contacts, const Eigen::Vector3d& offset,
+                                        const std::string& frame_id, const ros::Time& stamp);
 
 }  // namespace modal_mass_spring

@@ -186,7 +186,7 @@ void SimulationNode::addGrid(const Track& track, const Track* ref, const ros::Ti
     const auto shadow = makeMarkers(simulation.grid(), ghost, ref->last_points, stamp);
     grid.markers.markers.insert(grid.markers.markers.end(), shadow.markers.begin(), shadow.markers.end());
   }
-  grid.points = makePointCloud(track.last_points, strains,
+  grid.points = makePointCloud(track.last_points, strains, simulation.particleContacts(),
                                track.offset, params.fixed_frame, stamp);
   grid.status = trackStatus(track, measured, stamp);
   output.grids.push_back(std::move(grid));

@@ -18,10 +18,11 @@ namespace modal_mass_spring
 {
 
 const std::set<std::string> kNodeParameters{
-    "real_time_factor", "publish_rate",    "fixed_frame",  "grid_frame",        "tf_particles",      "offset",
-    "color_by_strain",  "strain_scale",    "particle_diameter", "spring_width", "status_log_period", "diagnostic_period",
-    "cache_dir",        "rollout_threads", "rollout_max_horizon", "rollout_max_candidates", "show_particles",
-    "show_springs",
+    "real_time_factor", "publish_rate", "markers_rate", "fixed_frame", "grid_frame", "tf_particles", "offset",
+    "color_by_strain", "strain_scale", "particle_diameter", "spring_width", "detail_max_particles",
+    "surface_max_cells", "show_surface", "show_particles", "show_springs", "show_labels", "show_shadow",
+    "methods", "method_spacing", "shadow_full", "status_log_period", "diagnostic_period", "drag_stiffness",
+    "poke_impulse", "cache_dir", "rollout_threads", "rollout_max_horizon", "rollout_max_candidates",
     "handles"};  // the node moves their particles with TF frames; the tool does not read them
 
 const std::set<std::string> kToolParameters{"handle_scenarios", "colliders"};

@@ -44,6 +44,7 @@ class Recorder:
         self.lock = threading.Lock()
         self.markers = {}    # stamp -> {id: Marker} of ns colliders
         self.clouds = {}     # stamp -> N x 3 array
+        self.contacts = {}   # stamp -> N: the collider each particle touched, -1 none
         self.wrenches = []   # (wall time, WrenchStamped)
         self.warnings = []
         self.states = []
@@ -62,8 +63,10 @@ class Recorder:
 
     def on_points(self, msg):
         points = np.array(list(point_cloud2.read_points(msg, field_names=("x", "y", "z"))))
+        contacts = np.array([c for (c,) in point_cloud2.read_points(msg, field_names=("contact",))])
         with self.lock:
             self.clouds[msg.header.stamp.to_sec()] = points
+            self.contacts[msg.header.stamp.to_sec()] = contacts
 
     def on_wrench(self, msg):
         with self.lock:
@@ -118,6 +121,7 @@ class CollidersFollowTheirFrames(unittest.TestCase):
         with recorder.lock:
             markers = dict(recorder.markers)
             clouds = dict(recorder.clouds)
+            contacts = dict(recorder.contacts)
             wrenches = list(recorder.wrenches)
             warnings = list(recorder.warnings)
             states = list(recorder.states)
@@ -153,6 +157,19 @@ class CollidersFollowTheirFrames(unittest.TestCase):
               "smallest y at the end %.4f m, %d markers along the motion" % (checked, 1e3 * deepest, end[:, 1].min(),
                                                                                len(between)))
         self.assertLess(end[:, 1].min(), Y_END - 0.02, "the cloth was not pushed along -y")
+
+        # ~points' contact field: the particles the sphere (collider 0) touched lie at its surface; no
+        # particle names the box on `never`, which is inactive.
+        touching_ticks = 0
+        for stamp, touched in contacts.items():
+            if stamp not in markers or 0 not in markers[stamp] or stamp not in clouds:
+                continue
+            p = markers[stamp][0].pose.position
+            reach = np.linalg.norm(clouds[stamp] - np.array([p.x, p.y, p.z]), axis=1)
+            self.assertTrue(np.all(reach[touched == 0] < RADIUS + 0.02), "a touching particle away from the sphere")
+            self.assertFalse(np.any(touched == 1), "a particle touched the inactive box")
+            touching_ticks += np.any(touched == 0)
+        self.assertGreater(touching_ticks, 5, "no tick said which particles the sphere touched")
 
         # The missing frame: warned, the node running on.
         self.assertTrue(any("collider 1 frame 'never'" in w and "inactive" in w for w in warnings), warnings)

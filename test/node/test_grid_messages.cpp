@@ -196,19 +196,31 @@ TEST(GridMessages, PointCloudHasOnePointPerParticleWithStrain)
   Eigen::Matrix3Xd points = grid.toPoints(grid.initialPositions());
   points.row(2) *= 1.1;
   const Eigen::VectorXd strains = particleStrains(grid, points);
-  const auto cloud = makePointCloud(points, strains, Eigen::Vector3d(0.5, 0.0, 0.0), "world", ros::Time(3.0));
+  std::vector<int> contacts(12, -1);
+  contacts[4] = 0;
+  contacts[7] = 2;
+  const auto cloud = makePointCloud(points, strains, contacts, Eigen::Vector3d(0.5, 0.0, 0.0), "world", ros::Time(3.0));
   EXPECT_EQ(cloud.header.frame_id, "world");
   EXPECT_EQ(cloud.header.stamp, ros::Time(3.0));
   EXPECT_EQ(cloud.width * cloud.height, 12u);
-  ASSERT_EQ(cloud.fields.size(), 4u);
+  ASSERT_EQ(cloud.fields.size(), 5u);
   EXPECT_EQ(cloud.fields[3].name, "strain");
+  EXPECT_EQ(cloud.fields[4].name, "contact");
+  EXPECT_EQ(cloud.fields[4].datatype, sensor_msgs::PointField::INT32);
   sensor_msgs::PointCloud2ConstIterator<float> x(cloud, "x"), z(cloud, "z"), strain(cloud, "strain");
-  for (int k = 0; k < 12; ++k, ++x, ++z, ++strain)
+  sensor_msgs::PointCloud2ConstIterator<int32_t> contact(cloud, "contact");
+  for (int k = 0; k < 12; ++k, ++x, ++z, ++strain, ++contact)
   {
     EXPECT_FLOAT_EQ(*x, static_cast<float>(points(0, k) + 0.5));
     EXPECT_FLOAT_EQ(*z, static_cast<float>(points(2, k)));
     EXPECT_FLOAT_EQ(*strain, static_cast<float>(strains[k]));
+    EXPECT_EQ(*contact, contacts[k]);
   }
+  // Without contacts (no colliders), every particle says -1.
+  const auto bare = makePointCloud(points, strains, {}, Eigen::Vector3d::Zero(), "world", ros::Time(3.0));
+  sensor_msgs::PointCloud2ConstIterator<int32_t> none(bare, "contact");
+  for (int k = 0; k < 12; ++k, ++none)
+    EXPECT_EQ(*none, -1);
 }
 
 }  // namespace

@@ -6,6 +6,7 @@
 #include "node_params.h"
 #include "parameter_values.h"
 #include "xmlrpc_parameter_source.h"
+#include "yaml_parameter_source.h"
 
 #include <gtest/gtest.h>
 #include <yaml-cpp/yaml.h>
@@ -17,6 +18,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <set>
 #include <stdexcept>
 #include <cstdlib>
 #include <string>
@@ -40,6 +42,7 @@ public:
   std::optional<int> getInt(const std::string& key) const override { return get<int>(key, "an integer"); }
   std::optional<double> getDouble(const std::string& key) const override
   {
+    asked_.insert(key);
     const auto it = values_.find(key);
     if (it != values_.end() && std::holds_alternative<int>(it->second))
       return std::get<int>(it->second);
@@ -72,11 +75,14 @@ public:
       names.push_back(entry.first);
     return names;
   }
+  // Every key a getter was asked for.
+  const std::set<std::string>& asked() const { return asked_; }
 
 private:
   template <typename T>
   std::optional<T> get(const std::string& key, const std::string& expected) const
   {
+    asked_.insert(key);
     const auto it = values_.find(key);
     if (it == values_.end())
       return std::nullopt;
@@ -85,6 +91,7 @@ private:
     return std::get<T>(it->second);
   }
   std::map<std::string, Value> values_;
+  mutable std::set<std::string> asked_;
 };
 
 // The message of the std::invalid_argument that loading `values` throws, or "" when it loads.
@@ -994,4 +1001,23 @@ int main(int argc, char** argv)
 {
   testing::InitGoogleTest(&argc, argv);
   return RUN_ALL_TESTS();
+}
+
+// Every key the node reads beyond the core's is one the tools know as the node's (kNodeParameters),
+// so that modal_compare reads a config shared with the node without an unknown-key warning.
+TEST(NodeParams, EveryKeyOnlyTheNodeReadsIsKnownToTheTools)
+{
+  const FakeSource node;
+  loadNodeConfiguration(node, {});  // every key asked, each at its default
+  const YamlParameterSource core = YamlParameterSource::fromString("{}");
+  loadGridParams(core);
+  loadSimulationParams(core);
+  int node_only = 0;
+  for (const std::string& key : node.asked())
+    if (!core.queried().count(key))
+    {
+      ++node_only;
+      EXPECT_TRUE(kNodeParameters.count(key) || kToolParameters.count(key)) << key << " is missing from kNodeParameters";
+    }
+  EXPECT_GT(node_only, 20) << "the node's own keys were asked";
 }

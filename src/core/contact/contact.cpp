@@ -154,7 +154,8 @@ inline void measureDepth(const Placed* placed, const Touched& touched, int touch
 // a local copy of it, which the stores to x and v cannot alias.
 template <int Dim, int Count>
 PassSums<Count> contactPass(const Placed* placed_all, int count, double thickness, const Eigen::VectorXd& x_start,
-                            Eigen::VectorXd& x, Eigen::VectorXd& v, const Eigen::VectorXd& mass, double dt)
+                            Eigen::VectorXd& x, Eigen::VectorXd& v, const Eigen::VectorXd& mass, double dt,
+                            int* first_touched)
 {
   PassSums<Count> sums(count);
   const Placed* placed = placed_all;
@@ -187,7 +188,10 @@ PassSums<Count> contactPass(const Placed* placed_all, int count, double thicknes
       ++sums.touching[k];
       sums.touched[touching++] = k;
       if (touching == 1)
+      {
         first_distance = d;
+        first_touched[p] = k;
+      }
       // The surface point under the particle at the step's start went to `at` (rigid motion).
       const Eigen::Vector3d surface_step =
           placed_k.still ? Eigen::Vector3d::Zero() : Eigen::Vector3d(at - placed_k.step_back * at);
@@ -230,6 +234,9 @@ void recordPass(const PassSums<Count>& sums, const std::vector<int>& index, doub
     out.touching[index[k]] = sums.touching[k];
     out.force[index[k]] = -sums.impulse[k] / dt;
   }
+  for (int& c : out.touched_by)
+    if (c >= 0)
+      c = index[c];  // the placed collider's index among all
   out.penetration_before = sums.before;
   out.penetration_after = sums.after;
 }
@@ -249,6 +256,7 @@ std::vector<Contact::Touch> Contact::detect(const Eigen::VectorXd& x_start, cons
   report_.force.assign(colliders_.size(), Eigen::Vector3d::Zero());
   report_.touching.assign(colliders_.size(), 0);
   const int particles = static_cast<int>(x.size()) / grid_.dimension();
+  report_.touched_by.assign(particles, -1);
   for (int c = 0; c < static_cast<int>(colliders_.size()); ++c)
   {
     if (!active_[c])
@@ -263,6 +271,8 @@ std::vector<Contact::Touch> Contact::detect(const Eigen::VectorXd& x_start, cons
         continue;
       report_.penetration_before = std::max(report_.penetration_before, -d);
       ++report_.touching[c];
+      if (report_.touched_by[p] < 0)
+        report_.touched_by[p] = c;
       // The surface point under the particle at the step's start went to `at` (rigid motion).
       const Eigen::Vector3d moved = placed.still ? Eigen::Vector3d::Zero() : Eigen::Vector3d(at - placed.step_back * at);
       touches.push_back(Touch{p, c, d, placed.normal(local_n), moved});
@@ -286,12 +296,15 @@ void Contact::correctParticles(const Eigen::VectorXd& x_start, Eigen::VectorXd& 
       index.push_back(c);
     }
   const int count = static_cast<int>(placed.size());
-  if (grid_.dimension() == 2)
-    recordPass(contactPass<2, 0>(placed.data(), count, thickness_, x_start, x, v, mass, dt), index, dt, report_);
+  const int dim = grid_.dimension();
+  report_.touched_by.assign(x.size() / dim, -1);
+  int* first = report_.touched_by.data();
+  if (dim == 2)
+    recordPass(contactPass<2, 0>(placed.data(), count, thickness_, x_start, x, v, mass, dt, first), index, dt, report_);
   else if (count == 1)
-    recordPass(contactPass<3, 1>(placed.data(), count, thickness_, x_start, x, v, mass, dt), index, dt, report_);
+    recordPass(contactPass<3, 1>(placed.data(), count, thickness_, x_start, x, v, mass, dt, first), index, dt, report_);
   else
-    recordPass(contactPass<3, 0>(placed.data(), count, thickness_, x_start, x, v, mass, dt), index, dt, report_);
+    recordPass(contactPass<3, 0>(placed.data(), count, thickness_, x_start, x, v, mass, dt, first), index, dt, report_);
 }
 
 

@@ -1,14 +1,13 @@
 // Shift-invert Lanczos with partial reorthogonalisation (Spectra as a fallback) over CHOLMOD's
 // supernodal Cholesky factorisation.
 #include "modal_mass_spring/modal_basis.h"
+#include "solvers/huge_pages.h"
 #include "solvers/sparse_cholesky.h"
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/QR>
 #include <Spectra/SymEigsShiftSolver.h>
-
-#include <sys/mman.h>
 
 #include <algorithm>
 #include <chrono>
@@ -37,18 +36,6 @@ constexpr double kTolerance = 1e-12;
 // last by kCheckCost j^3 / entries of the factor steps, so that the checks cost a bounded fraction of
 // the steps and stopping comes at most that late (the costs behind it: docs/benchmarks.md, "Modal basis").
 constexpr double kCheckCost = 1.0;
-
-// Asks the kernel to back [data, data + bytes) with 2 MB pages where it can: a large buffer written
-// once (the Lanczos vectors) otherwise takes a page fault every 4 kB. A hint only; nothing changes
-// where it is refused.
-void adviseHugePages(void* data, std::size_t bytes)
-{
-  constexpr std::uintptr_t huge = std::uintptr_t{2} << 20;
-  const std::uintptr_t begin = (reinterpret_cast<std::uintptr_t>(data) + huge - 1) & ~(huge - 1);
-  const std::uintptr_t end = (reinterpret_cast<std::uintptr_t>(data) + bytes) & ~(huge - 1);
-  if (end > begin)
-    madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);
-}
 
 // y = P (A - sigma I)^-1 P x, P = I - Q Q^T the projector onto the complement of the
 // modes found so far (none at first). Spectra's own SparseSymShiftSolve uses SparseLU; A - sigma I is

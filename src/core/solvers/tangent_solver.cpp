@@ -161,6 +161,17 @@ bool TangentSolver::solveWithFactor(const Eigen::VectorXd& b, Eigen::VectorXd& x
   return x.allFinite();
 }
 
+bool TangentSolver::diagonalJacobi(const SparseMatrix& j, const Eigen::VectorXd& b, Eigen::VectorXd& x,
+                                   double tolerance)
+{
+  auto product = [&](const Eigen::VectorXd& p, Eigen::VectorXd& jp) { jp.noalias() = j * p; };
+  inverse_diagonal_ = j.diagonal().cwiseInverse();
+  return inverse_diagonal_.minCoeff() > 0.0 &&
+         conjugateGradients(product, b, x, tolerance, kMaxJacobiIterations,
+                            [&](Eigen::VectorXd& v) { v.array() *= inverse_diagonal_.array(); }) &&
+         x.allFinite();
+}
+
 bool TangentSolver::solve(const SparseMatrix& j, const Eigen::VectorXd& b, Eigen::VectorXd& x, double tolerance)
 {
   auto product = [&](const Eigen::VectorXd& p, Eigen::VectorXd& jp) { jp.noalias() = j * p; };
@@ -174,15 +185,8 @@ bool TangentSolver::solve(const SparseMatrix& j, const Eigen::VectorXd& b, Eigen
     if (blockJacobi(product, block_size, b, x, tolerance))
       return true;
   }
-  else if (kind_ == TangentSolverKind::BlockJacobiCg)  // blocks of one dof: J's diagonal
-  {
-    inverse_diagonal_ = j.diagonal().cwiseInverse();
-    if (inverse_diagonal_.minCoeff() > 0.0 &&
-        conjugateGradients(product, b, x, tolerance, kMaxJacobiIterations,
-                           [&](Eigen::VectorXd& v) { v.array() *= inverse_diagonal_.array(); }) &&
-        x.allFinite())
-      return true;
-  }
+  else if (kind_ == TangentSolverKind::BlockJacobiCg && diagonalJacobi(j, b, x, tolerance))  // blocks of one dof
+    return true;
   ++factorisations_;
   factor_current_ = factor_->factorise(j);
   if (!factor_current_)

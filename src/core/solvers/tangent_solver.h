@@ -68,10 +68,13 @@ protected:
   template <typename Multiply, typename Precondition>
   bool conjugateGradients(Multiply multiply, const Eigen::VectorXd& b, Eigen::VectorXd& x, double tolerance,
                           int max_iterations, Precondition precondition);
+  // Conjugate gradients preconditioned by J's diagonal; false where they do not reach `tolerance`
+  // within kMaxJacobiIterations (then the factor).
+  bool diagonalJacobi(const SparseMatrix& j, const Eigen::VectorXd& b, Eigen::VectorXd& x, double tolerance);
   // Whether solve() holds the factor of a J still usable (solveWithFactor).
   bool hasFactor() const { return factor_current_; }
   // A diagonal preconditioner leaves J's condition number to the square of the grid's size: cap the
-  // iterations there (then the factor).
+  // iterations there.
   static constexpr int kMaxJacobiIterations = 2000;
   long factorisations_ = 0, cg_iterations_ = 0;
 

@@ -425,6 +425,51 @@ ContactRun pushHangingSheet(Method method)
 }
 }  // namespace
 
+// Each particle says which collider it touched in the last step: as many as the report counts, each
+// within reach of the finger's surface, the held top row none; for `full` (corrected particle by
+// particle) and `physical` (through its basis).
+TEST(Contact, EachParticleSaysWhichColliderItTouched)
+{
+  for (Method method : {Method::Full, Method::Physical})
+  {
+    GridParams g = flatSheet();
+    g.rotation_deg = 0.0;
+    SimulationParams s = withColliders(method, IntegratorKind::Implicit, 5e-3, {});
+    s.initial_state = InitialState::Equilibrium;
+    Collider finger;
+    finger.type = ColliderType::Sphere;
+    finger.center = Eigen::Vector3d(0.225, 0.1, -0.3);
+    finger.radius = 0.05;
+    s.colliders = {finger};
+    Simulation sim(g, s);
+    for (int k = 1; k <= 100; ++k)  // halfway: the finger presses into the sheet
+    {
+      sim.setColliderPose(0, Eigen::Isometry3d(Eigen::Translation3d(0.0, -0.2 * k / 200, 0.0)));
+      ASSERT_FALSE(sim.step().diverged);
+    }
+    const std::vector<int> contacts = sim.particleContacts();
+    ASSERT_EQ(contacts.size(), static_cast<size_t>(g.rows * g.cols));
+    const double thickness = kDefaultThicknessFraction * g.spacing;
+    const Eigen::Matrix3Xd points = sim.points();
+    int touched = 0;
+    for (int p = 0; p < points.cols(); ++p)
+    {
+      if (p < g.cols)
+      {
+        EXPECT_EQ(contacts[p], -1) << "the fixed top row touches nothing";
+      }
+      if (contacts[p] != 0)
+        continue;
+      ++touched;
+      Eigen::Vector3d n;
+      EXPECT_LT(signedDistance(finger, sim.contact()->pose(0), points.col(p), n), 3.0 * thickness)
+          << toString(method) << " particle " << p;
+    }
+    EXPECT_GT(touched, 0) << toString(method);
+    EXPECT_EQ(touched, sim.contact()->report().touching[0]) << toString(method);
+  }
+}
+
 TEST(Contact, FingerPushesAHangingSheetInEveryMethod)
 {
   const ContactRun full = pushHangingSheet(Method::Full);
