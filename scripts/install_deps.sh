@@ -9,6 +9,7 @@ packages=(
   ros-core-dev libroscpp-dev librosbag-dev
   libtf2-ros-dev libtf2-dev libtf2-msgs-dev libgeometry-msgs-dev
   libvisualization-msgs-dev libsensor-msgs-dev python3-sensor-msgs libros-rosgraph-msgs-dev
+  libshape-msgs-dev python3-shape-msgs
   libdynamic-reconfigure-config-init-mutex-dev python3-dynamic-reconfigure libstd-srvs-dev libstd-msgs-dev libdiagnostic-updater-dev
   libdiagnostic-msgs-dev libinteractive-markers-dev librostest-dev python3-rostest python3-roslaunch
   libactionlib-dev libactionlib-msgs-dev ros-actionlib-msgs python3-actionlib python3-actionlib-msgs

@@ -55,6 +55,10 @@ struct Collider
   Eigen::Vector3d a = Eigen::Vector3d::Zero(), b = Eigen::Vector3d::UnitX();  // capsule's segment
   double friction = 0.5;                             // Coulomb coefficient mu >= 0
   std::string frame;  // a TF frame it follows (the node; its geometry is given in that frame); empty: fixed
+  // Where a collider without a frame stands: its frame in the grid's coordinates (the node's
+  // ~set_colliders places a shape at a pose; the parameter's colliders are given in place).
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  std::string id;  // the name the node's ~set_colliders knows it by (empty: the node names it)
 };
 
 // The default contact thickness, as a fraction of the grid's spacing.
@@ -72,7 +76,8 @@ constexpr double kMaxColliderCoordinate = 1e6;
 // particles in the x-z plane y = 0) also a collider that is not symmetric about that plane (a plane
 // whose normal has a y part, a sphere or capsule off it, a box off it or thinner along y than its
 // smaller half extent in the plane): its surface would push the particles along y, which a 2D grid
-// does not have.
+// does not have. A pose must be finite and rigid, and on a 2D grid turn about y only with its
+// origin's y 0 (what the geometry's checks then say holds of the placed collider too).
 void validateCollider(const Collider& collider, const std::string& name, int dimension = 3);
 // What the key `key` of a collider map takes ("a number (...)", "a list of three numbers ..."), for
 // the sources' messages; for a key no collider has, the keys there are.
@@ -81,7 +86,7 @@ std::string colliderFieldExpected(const std::string& key);
 // numeric ones (a scalar is a list of one), so that the node's and the tools' sources share one
 // reading. Keys: type (required); plane: point, normal; box: center, half_extents; sphere: center,
 // radius; capsule: a, b, radius; friction (default 0.5), frame (the node; a non-empty TF frame id
-// without a leading '/' or spaces). Throws
+// without a leading '/' or spaces), id (the node's name of it). Throws
 // std::invalid_argument naming `name.key` for an unknown key, a key of another shape, a missing one,
 // and then whatever validateCollider refuses.
 struct ColliderFields
@@ -101,7 +106,7 @@ inline double resolveContactThickness(double thickness, double spacing)
 }
 // Refuses (std::invalid_argument naming the collider, the particle and its depth) a start where a
 // free particle (neither fixed nor held) at `positions` (all dofs) lies inside a collider (at its
-// first pose, the identity; a collider with a `frame` is not placed yet and is skipped) by more than
+// pose; a collider with a `frame` is not placed yet and is skipped) by more than
 // a hundredth of `thickness`: the first step would throw it out, which is no motion of the cloth.
 // `start` says where the positions come from, for the message (e.g. "initial_state equilibrium").
 void checkStartOutsideColliders(const Grid& grid, const Eigen::VectorXd& positions,
@@ -135,6 +140,8 @@ public:
 
   const std::vector<Collider>& colliders() const { return colliders_; }
   double thickness() const { return thickness_; }
+  // From the next step on (thickness > 0, resolved).
+  void setThickness(double thickness) { thickness_ = thickness; }
   // The pose of collider i at the end of the next step (the collider frame in the grid's
   // coordinates); its motion over the step moves the surface the particles touch, and carries the
   // particles touching it (their slip and velocity are measured relative to the moving surface).

@@ -343,6 +343,16 @@ public:
   // Places collider i at `pose` without a motion over the next step (Contact::place): the node's
   // answer to a collider frame that jumped and stayed. The same refusals as setColliderPose.
   void placeCollider(int i, const Eigen::Isometry3d& pose);
+  // Replaces the colliders from the next step on (live: the node's ~set_colliders). keep[i]: the
+  // collider of the current set that new collider i continues (its pose, and whether it is active,
+  // carried over), or -1: a new one, placed at its pose (a frame's inactive until its first pose); the
+  // cloth inside a new one is pushed out by the next step's contact, as when a frame's collider
+  // appears. Throws std::invalid_argument, changing nothing, for what validateCollider refuses (naming
+  // colliders[i]), a keep out of range or of the wrong size, and colliders under the moving frame.
+  void setColliders(const std::vector<Collider>& colliders, const std::vector<int>& keep);
+  // contact_thickness from the next step on (live tuning); throws what validateContactThickness
+  // refuses, changing nothing.
+  void setContactThickness(double thickness);
   // The CPU time the last step's contact correction took (s, the process's; 0 without colliders).
   double lastContactSeconds() const { return contact_seconds_; }
   // Self-collision (null when off): its thickness, friction and what the last step did.

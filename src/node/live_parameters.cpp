@@ -37,6 +37,7 @@ LiveField field(NodeConfiguration& c, const std::string& name)
       {"self_collision_thickness",
        [](NodeConfiguration& c) -> LiveField { return &c.simulation.self_collision_thickness; }},
       {"self_friction", [](NodeConfiguration& c) -> LiveField { return &c.simulation.self_friction; }},
+      {"contact_thickness", [](NodeConfiguration& c) -> LiveField { return &c.simulation.contact_thickness; }},
       {"alpha", [](NodeConfiguration& c) -> LiveField { return &c.simulation.alpha; }},
       {"beta", [](NodeConfiguration& c) -> LiveField { return &c.simulation.beta; }},
       {"structural_stiffness", [](NodeConfiguration& c) -> LiveField { return &c.grid.structural_stiffness; }},

@@ -36,6 +36,8 @@ void SimulationNode::reconfigure(SimulationConfig& config, uint32_t)
     config = liveValues(accepted_);  // what the client gets back, and what the server keeps
     return;
   }
+  // The colliders are ~set_colliders's since the start: the set in force, not the parameter's.
+  candidate.simulation.colliders = config_.simulation.colliders;
   // Self-collision acts from the next step on every track; a track that runs a modal method now (a
   // switch since the start) refuses it, and then nothing changes.
   const SimulationParams& self = candidate.simulation;
@@ -50,7 +52,10 @@ void SimulationNode::reconfigure(SimulationConfig& config, uint32_t)
         return;
       }
   for (Track& track : tracks_)
+  {
     track.simulation->setSelfCollision(self.self_collision, self.self_collision_thickness, self.self_friction);
+    track.simulation->setContactThickness(self.contact_thickness);  // checked with the parameters above
+  }
   const NodeConfiguration previous = accepted_;
   private_params_ = params;
   accepted_ = candidate;
@@ -183,12 +188,14 @@ void SimulationNode::swapRebuilt()
   rebuilt_.clear();
   config_.grid = rebuilt_config_.grid;
   config_.simulation = rebuilt_config_.simulation;
-  // Self-collision may have been changed live while the model was built: the values in force now.
+  // Self-collision and the contact thickness may have been changed live while the model was built:
+  // the values in force now.
   const SimulationParams& self = accepted_.simulation;
   for (Track& track : tracks_)
     try
     {
       track.simulation->setSelfCollision(self.self_collision, self.self_collision_thickness, self.self_friction);
+      track.simulation->setContactThickness(self.contact_thickness);
     }
     catch (const std::invalid_argument& error)
     {
@@ -197,6 +204,7 @@ void SimulationNode::swapRebuilt()
   config_.simulation.self_collision = self.self_collision;
   config_.simulation.self_collision_thickness = self.self_collision_thickness;
   config_.simulation.self_friction = self.self_friction;
+  config_.simulation.contact_thickness = self.contact_thickness;
   hand_forces_->configure(config_.node.drag_stiffness, config_.grid.mass, config_.simulation.time_step);
   ROS_INFO("dynamic_reconfigure: rebuilt model swapped in at step %ld, motion carried over", steps(primary()));
 }

@@ -1,6 +1,8 @@
 // Every node parameter, its default and its range, in one place.
 #include "node_params.h"
 
+#include "contact_messages.h"
+
 #include "drag_and_poke.h"
 
 #include "modal_mass_spring/cache.h"
@@ -274,6 +276,7 @@ NodeConfiguration loadNodeConfiguration(const NodeParameterSource& source, const
   c.grid = loadGridParams(recording);
   c.simulation = loadSimulationParams(recording);
   c.simulation.colliders = recording.getColliderList("colliders").value_or(std::vector<Collider>{});
+  nameColliders(c.simulation.colliders);  // ~set_colliders knows them by id
   // A collider's `frame` (checked by colliderFromFields) is followed by the node (collider_frames.h).
   // The handles' particle groups are the core's to check (range, one handle each, not fixed).
   const std::vector<HandleParam> handles = loadHandles(recording);

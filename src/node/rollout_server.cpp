@@ -46,6 +46,14 @@ bool SimulationNode::setState(SetState::Request& request, SetState::Response& re
     ROS_WARN("~set_state %s", response.message.c_str());
     return true;
   }
+  // A fixed collider stands where it is defined (~set_colliders may have moved it since the state was saved).
+  if (const Contact* contact = simulation.contact())
+    for (int i = 0; i < static_cast<int>(contact->colliders().size()); ++i)
+    {
+      const Collider& c = contact->colliders()[i];
+      if (c.frame.empty() && !contact->pose(i).isApprox(c.pose, 0.0))
+        simulation.placeCollider(i, c.pose);
+    }
   primary().name = toString(simulation.method());
   primary().step_offset = 0;
   primary().divergence_message = simulation.diverged() ? request.state.divergence_message : "";
@@ -201,11 +209,12 @@ double SimulationNode::prepareRolloutWorkers(const RolloutSetup& setup)
   const auto start = std::chrono::steady_clock::now();
   double built = 0.0;
   const SimulationParams& params = setup.params;
-  // Self-collision is tuned live without a rebuild: workers built with other settings are built anew.
+  // Self-collision and the contact thickness are tuned live without a rebuild: workers built with other
+  // settings are built anew.
   const auto tunedSince = [&params](const Simulation& worker) {
     const SimulationParams& p = worker.params();
     return p.self_collision != params.self_collision || p.self_collision_thickness != params.self_collision_thickness ||
-           p.self_friction != params.self_friction;
+           p.self_friction != params.self_friction || p.contact_thickness != params.contact_thickness;
   };
   if (rollout_workers_build_ != setup.build ||
       rollout_workers_.size() != static_cast<size_t>(setup.limits.threads) || tunedSince(*rollout_workers_.front()))

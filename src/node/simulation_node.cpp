@@ -130,9 +130,7 @@ void SimulationNode::advertiseTracks()
     track.status_pub = track_nh.advertise<Status>("status", 10);
     track.points_pub = track_nh.advertise<sensor_msgs::PointCloud2>("points", 1);
     advertiseHandleForces(track, config_.node.handles.size());
-    for (size_t i = 0; i < config_.simulation.colliders.size(); ++i)
-      track.contact_force_pubs.push_back(
-          track_nh.advertise<geometry_msgs::WrenchStamped>("contact_force/collider_" + std::to_string(i), 10));
+    advertiseContactForces(track, config_.simulation.colliders.size());
   }
 }
 
@@ -148,6 +146,7 @@ void SimulationNode::startServices()
   clear_forces_srv_ = service_nh.advertiseService("clear_forces", &SimulationNode::clearForces, this);
   attach_srv_ = service_nh.advertiseService("attach", &SimulationNode::attach, this);
   detach_srv_ = service_nh.advertiseService("detach", &SimulationNode::detach, this);
+  set_colliders_srv_ = service_nh.advertiseService("set_colliders", &SimulationNode::setColliders, this);
   startForcesAndFrames();
   get_state_srv_ = service_nh.advertiseService("get_state", &SimulationNode::getState, this);
   set_state_srv_ = service_nh.advertiseService("set_state", &SimulationNode::setState, this);
@@ -233,12 +232,25 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
 {
   const auto start = Clock::now();
   std::unique_ptr<Simulation> simulation;
+  // Colliders set by ~set_colliders may stand where the grid started: a simulation that takes over
+  // the run (a rebuild, a rollout's worker) gets them once built, without the start's check (the
+  // state it takes over is outside them), and the formulation colliders need.
+  SimulationParams built = sim_params;
+  const bool live_colliders = colliders_set_live_ && !built.colliders.empty();
+  if (live_colliders)
+  {
+    built.colliders.clear();
+    if (built.handle_formulation == HandleFormulation::Auto)
+      built.handle_formulation = HandleFormulation::ConstraintModes;
+  }
   withProgress(activity, [&](const StageFn& on_stage, const IterationFn& on_iteration) {
     CacheOptions cache{config_.node.cache_dir, [](const std::string& warning) { ROS_WARN("%s", warning.c_str()); }};
-    simulation = std::make_unique<Simulation>(grid_params, sim_params, on_stage, cache, on_iteration);
+    simulation = std::make_unique<Simulation>(grid_params, built, on_stage, cache, on_iteration);
     if (with_basis)
       simulation->buildBasis(on_stage, on_iteration);
   });
+  if (live_colliders)
+    simulation->setColliders(sim_params.colliders, std::vector<int>(sim_params.colliders.size(), -1));
   if (!report)
     return simulation;
   const double total_seconds = secondsSince(start);

@@ -13,6 +13,7 @@
 #include "modal_mass_spring/SetState.h"
 #include "modal_mass_spring/Attach.h"
 #include "modal_mass_spring/Detach.h"
+#include "modal_mass_spring/SetColliders.h"
 #include "modal_mass_spring/SetMethod.h"
 #include "modal_mass_spring/SimulationConfig.h"
 #include "modal_mass_spring/Status.h"
@@ -107,6 +108,9 @@ private:
     }
     double rms_distance = 0.0, max_distance = 0.0;  // to the reference, m
     long step_offset = 0;  // steps of the models a rebuild replaced: the count goes on across a swap
+    // The collider markers the last ~markers drew (the output's bookkeeping, kept while it is built
+    // from a const track): fewer colliders then delete the rest.
+    mutable size_t collider_markers = 0;
   };
 
   // What one tick publishes, built under the lock and sent after it.
@@ -143,6 +147,8 @@ private:
   // frames of its tf_particles.
   void keepLastStates();
   void addGrid(const Track& track, const Track* ref, const ros::Time& stamp, Output& output);
+  void deleteColliderMarkers(const Track& track, size_t drawn, const std::string& frame_id, const ros::Time& stamp,
+                             visualization_msgs::MarkerArray& markers) const;
   std::string trackLabel(const Track& track, bool measured) const;
   void addHandleWrenches(const Track& track, const std::string& frame_id, const ros::Time& stamp,
                          std::vector<std::pair<ros::Publisher, geometry_msgs::WrenchStamped>>& wrenches);
@@ -226,6 +232,12 @@ private:
   void advertiseHandleForces(Track& track, size_t handles);  // ~handle_force/handle_<h>
   void releaseSlippingGrasps();  // with mutex_ held, after a tick's stepping
   std::vector<double> grasp_limits_;  // N per handle: beyond it the grasp lets go; 0: never
+
+  // ~set_colliders (live_colliders.cpp): the colliders set, added, replaced or removed by id on every
+  // track between two steps; a collider that appears on the cloth pushes it out from the next step.
+  bool setColliders(SetColliders::Request& request, SetColliders::Response& response);
+  void advertiseContactForces(Track& track, size_t colliders);  // ~contact_force/collider_<i>
+  std::atomic<bool> colliders_set_live_{false};  // since the first: see buildSimulation
 
   // Saving and restoring the state, and rollouts of candidate handle motions on simulations of their
   // own (rollout_server.cpp): the goal is checked and the start copied under the lock, the rollouts
@@ -317,7 +329,8 @@ private:
   std::unique_ptr<diagnostic_updater::Updater> diagnostics_;
   ros::CallbackQueue service_queue_;
   std::unique_ptr<ros::AsyncSpinner> service_spinner_;
-  ros::ServiceServer set_method_srv_, reset_srv_, pause_srv_, step_srv_, clear_forces_srv_, attach_srv_, detach_srv_;
+  ros::ServiceServer set_method_srv_, reset_srv_, pause_srv_, step_srv_, clear_forces_srv_, attach_srv_, detach_srv_,
+      set_colliders_srv_;
   ros::Subscriber apply_force_sub_;
   std::unique_ptr<AppliedForces> applied_forces_;  // with mutex_
   Eigen::VectorXd external_force_;                  // their sum, on every dof

@@ -123,6 +123,23 @@ void SimulationNode::keepLastStates()
   }
 }
 
+void SimulationNode::deleteColliderMarkers(const Track& track, size_t drawn, const std::string& frame_id,
+                                           const ros::Time& stamp, visualization_msgs::MarkerArray& markers) const
+{
+  // Fewer colliders than before (~set_colliders): their markers beyond the drawn ones go.
+  for (size_t id = drawn; id < track.collider_markers; ++id)
+  {
+    visualization_msgs::Marker m;
+    m.header.frame_id = frame_id;
+    m.header.stamp = stamp;
+    m.ns = track.ns_prefix + "colliders";
+    m.id = static_cast<int>(id);
+    m.action = visualization_msgs::Marker::DELETE;
+    markers.markers.push_back(m);
+  }
+  track.collider_markers = drawn;
+}
+
 void SimulationNode::addGrid(const Track& track, const Track* ref, const ros::Time& stamp, Output& output)
 {
   const NodeParams& params = config_.node;
@@ -148,11 +165,14 @@ void SimulationNode::addGrid(const Track& track, const Track* ref, const ros::Ti
     {
       const auto colliders = colliderMarkers(*contact, options.frame_id, track.offset, track.ns_prefix + "colliders", stamp);
       grid.markers.markers.insert(grid.markers.markers.end(), colliders.markers.begin(), colliders.markers.end());
+      deleteColliderMarkers(track, colliders.markers.size(), options.frame_id, stamp, grid.markers);
     }
     for (size_t i = 0; i < track.contact_force_pubs.size() && i < contact->report().force.size(); ++i)
       grid.wrenches.emplace_back(track.contact_force_pubs[i],
                                  forceWrench(contact->report().force[i], options.frame_id, stamp));
   }
+  else if (output.markers)
+    deleteColliderMarkers(track, 0, options.frame_id, stamp, grid.markers);
   addHandleWrenches(track, options.frame_id, stamp, grid.wrenches);
   if (measured && ref->shadow && output.markers)
   {

@@ -122,7 +122,7 @@ Collider readCollider(const std::string& name, const YAML::Node& item)
   {
     const std::string key = entry.first.Scalar();
     const YAML::Node field = entry.second;
-    const bool named = key == "type" || key == "frame";
+    const bool named = key == "type" || key == "frame" || key == "id";
     if (const auto number = named ? std::nullopt : scalarNumber(field))
     {
       fields.numbers[key] = {*number};

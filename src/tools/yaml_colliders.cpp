@@ -48,7 +48,7 @@ std::vector<Collider> parseColliders(const YAML::Node& node, const std::string& 
       if (value.IsScalar())
       {
         double number = 0.0;
-        if (YAML::convert<double>::decode(value, number))
+        if (field != "id" && YAML::convert<double>::decode(value, number))
           fields.numbers[field] = {number};
         else
           fields.text[field] = value.as<std::string>();

@@ -75,6 +75,14 @@ void validateCollider(const Collider& c, const std::string& name, int dimension)
   if (!std::isfinite(c.friction) || c.friction < 0.0)
     rejectParameter(name + ".friction", c.friction, "must be a finite Coulomb coefficient >= 0");
   const bool planar = dimension == 2;
+  const Eigen::Matrix3d turn = c.pose.linear();
+  if (!c.pose.matrix().allFinite() || c.pose.translation().cwiseAbs().maxCoeff() > kMaxColliderCoordinate ||
+      !(turn.transpose() * turn).isApprox(Eigen::Matrix3d::Identity(), 1e-9) || !(turn.determinant() > 0.0))
+    rejectParameter(name + ".pose", text(c.pose.translation()),
+                    "must be a finite rigid pose (a rotation and a translation in [-" + bound() + ", " + bound() + "] m)");
+  if (planar && (c.pose.translation().y() != 0.0 || !(turn.col(1) - Eigen::Vector3d::UnitY()).isZero(1e-12)))
+    rejectParameter(name + ".pose", text(c.pose.translation()),
+                    "must keep the x-z plane on a 2D grid: its origin's y 0 and a turn about y only");
   switch (c.type)
   {
     case ColliderType::Plane:
@@ -128,13 +136,15 @@ std::string colliderFieldExpected(const std::string& key)
     return "a string: plane, box, sphere or capsule";
   if (key == "frame")
     return "a string (a TF frame id)";
+  if (key == "id")
+    return "a string (the collider's name for ~set_colliders)";
   if (key == "friction")
     return "a number (the Coulomb coefficient, >= 0)";
   if (key == "radius")
     return "a number (m, > 0)";
   if (key == "point" || key == "normal" || key == "center" || key == "half_extents" || key == "a" || key == "b")
     return "a list of three numbers [x, y, z] (m)";
-  return "not a key of a collider (the keys: type, frame, friction; point, normal (plane); center, half_extents "
+  return "not a key of a collider (the keys: type, frame, id, friction; point, normal (plane); center, half_extents "
          "(box); center, radius (sphere); a, b, radius (capsule))";
 }
 
@@ -172,14 +182,14 @@ void checkColliderFields(const ColliderFields& f, const std::string& name, Colli
                          const std::string& allowed)
 {
   for (const auto& [key, value] : f.text)
-    if (key != "type" && key != "frame")
+    if (key != "type" && key != "frame" && key != "id")
       rejectParameter(name + "." + key, "'" + value + "'",
                       known(vectors, key) || known(scalars, key) ? "must be " + colliderFieldExpected(key)
                                                                  : "is not a key of a " + toString(type) + " (its keys: " + allowed + ")");
   for (const auto& [key, value] : f.numbers)
   {
     const std::string field = name + "." + key;
-    if (key == "type" || key == "frame")
+    if (key == "type" || key == "frame" || key == "id")
       rejectParameter(field, value.empty() ? 0.0 : value[0], "must be " + colliderFieldExpected(key));
     if (known(vectors, key))
     {
@@ -213,7 +223,7 @@ Collider colliderFromFields(const ColliderFields& f, const std::string& name)
     case ColliderType::Sphere: vectors = {"center"}; scalars.push_back("radius"); break;
     case ColliderType::Capsule: vectors = {"a", "b"}; scalars.push_back("radius"); break;
   }
-  std::string allowed = "type, frame, friction";
+  std::string allowed = "type, frame, id, friction";
   for (const std::string& key : vectors)
     allowed += ", " + key;
   for (size_t k = 1; k < scalars.size(); ++k)
@@ -240,6 +250,12 @@ Collider colliderFromFields(const ColliderFields& f, const std::string& name)
     if (c.frame.empty() || c.frame.front() == '/' || c.frame.find_first_of(" \t\n\r") != std::string::npos)
       rejectParameter(name + ".frame", "'" + c.frame + "'",
                       "must be a non-empty TF frame id without a leading '/' or spaces (the frame the collider follows)");
+  }
+  if (f.text.count("id"))
+  {
+    c.id = f.text.at("id");
+    if (c.id.empty())
+      rejectParameter(name + ".id", "''", "must be a non-empty string (the collider's name for ~set_colliders)");
   }
   validateCollider(c, name);
   return c;
@@ -274,7 +290,7 @@ void checkStartOutsideColliders(const Grid& grid, const Eigen::VectorXd& positio
       if (grid.isFixed(p) || grid.isHandle(p))
         continue;
       Eigen::Vector3d unused;
-      const double depth = -signedDistance(collider, Eigen::Isometry3d::Identity(), points.col(p), unused);
+      const double depth = -signedDistance(collider, collider.pose, points.col(p), unused);
       if (depth > deepest)
       {
         deepest = depth;

@@ -38,7 +38,11 @@ Contact::Contact(const Grid& grid, std::vector<Collider> colliders, double thick
     poses_(colliders_.size(), Eigen::Isometry3d::Identity()), start_poses_(poses_), active_(colliders_.size(), true)
 {
   for (size_t i = 0; i < colliders_.size(); ++i)
+  {
     active_[i] = colliders_[i].frame.empty();
+    if (active_[i])
+      poses_[i] = start_poses_[i] = colliders_[i].pose;
+  }
   report_.force.assign(colliders_.size(), Eigen::Vector3d::Zero());
   report_.touching.assign(colliders_.size(), 0);
 }

@@ -200,6 +200,54 @@ void Simulation::setSelfCollision(bool enabled, double thickness, double frictio
   }
 }
 
+void Simulation::setColliders(const std::vector<Collider>& colliders, const std::vector<int>& keep)
+{
+  for (size_t i = 0; i < colliders.size(); ++i)
+    validateCollider(colliders[i], "colliders[" + std::to_string(i) + "]", grid_.dimension());
+  const int count = contact_ ? static_cast<int>(contact_->colliders().size()) : 0;
+  if (keep.size() != colliders.size())
+    throw std::invalid_argument("setColliders: " + std::to_string(keep.size()) + " entries of keep for " +
+                                std::to_string(colliders.size()) + " colliders");
+  for (int k : keep)
+    if (k < -1 || k >= count)
+      throw std::invalid_argument("setColliders: keep " + std::to_string(k) + " is not -1 or one of the " +
+                                  std::to_string(count) + " colliders");
+  if (!colliders.empty() && formulation_ == HandleFormulation::MovingFrame)
+    rejectParameter("colliders", std::to_string(colliders.size()) + " colliders",
+                    "need handle_formulation constraint_modes: under the moving frame (which this run resolved to) "
+                    "contact cannot be corrected in world coordinates");
+  params_.colliders = colliders;
+  if (colliders.empty())
+  {
+    contact_.reset();
+    contact_seconds_ = 0.0;
+    return;
+  }
+  auto next = std::make_unique<Contact>(grid_, colliders,
+                                        resolveContactThickness(params_.contact_thickness, grid_.params().spacing));
+  std::vector<Eigen::Isometry3d> poses;
+  std::vector<bool> active;
+  bool moved = contact_ && contact_->moved();
+  for (size_t i = 0; i < colliders.size(); ++i)
+  {
+    const bool kept = keep[i] >= 0;
+    poses.push_back(kept ? contact_->pose(keep[i]) : next->pose(static_cast<int>(i)));
+    active.push_back(kept ? contact_->active(keep[i]) : next->active(static_cast<int>(i)));
+    // A collider that appears on the cloth pushes it out: work done on the grid (Contact::place).
+    moved = moved || (!kept && active.back());
+  }
+  next->restore(poses, active, moved);
+  contact_ = std::move(next);
+}
+
+void Simulation::setContactThickness(double thickness)
+{
+  validateContactThickness(thickness, grid_.params().spacing);
+  params_.contact_thickness = thickness;
+  if (contact_)
+    contact_->setThickness(resolveContactThickness(thickness, grid_.params().spacing));
+}
+
 void Simulation::checkColliderPose(int i, const Eigen::Isometry3d& pose) const
 {
   const int count = contact_ ? static_cast<int>(contact_->colliders().size()) : 0;

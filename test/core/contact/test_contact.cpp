@@ -92,7 +92,7 @@ double penetration(const Simulation& sim, const std::vector<Collider>& colliders
     for (const Collider& c : colliders)
     {
       Eigen::Vector3d n;
-      deepest = std::max(deepest, -signedDistance(c, Eigen::Isometry3d::Identity(), points.col(p), n));
+      deepest = std::max(deepest, -signedDistance(c, c.pose, points.col(p), n));
     }
   }
   return deepest;
@@ -940,4 +940,60 @@ TEST(Contact, AStartInsideAColliderIsRefusedNamingTheColliderAndTheDepth)
   EXPECT_TRUE(contains(why, "m inside it (initial_state equilibrium")) << why;
   s.colliders[1].frame = "table";  // placed at its frame's first pose, later
   EXPECT_EQ(refusal([&] { Simulation sim(g, s); }), "");
+}
+
+// Colliders replaced while the sheet lies on them (the node's ~set_colliders): a higher, turned box
+// and a sphere under the sheet's middle appear with the cloth inside them; from the next step the
+// contact pushes it out, and half a second on no particle is a millimetre inside. A kept collider
+// keeps its pose; bad colliders are refused, changing nothing.
+TEST(Contact, CollidersReplacedUnderALyingSheetPushItOutWithinAMillimetre)
+{
+  const GridParams g = flatSheet();
+  const double thickness = kDefaultThicknessFraction * g.spacing;
+  Collider table;
+  table.type = ColliderType::Box;
+  table.center = Eigen::Vector3d(0.225, 0.3, -thickness - 0.05);
+  table.half_extents = Eigen::Vector3d(0.4, 0.4, 0.05);
+  Collider higher = table;  // 2 cm higher, turned 10 degrees about z, its near edge clear of the fixed row
+  higher.center = Eigen::Vector3d::Zero();
+  higher.half_extents = Eigen::Vector3d(0.4, 0.22, 0.05);
+  higher.pose = Eigen::Translation3d(0.225, 0.33, 0.02 - 0.05) * Eigen::AngleAxisd(0.17, Eigen::Vector3d::UnitZ());
+  Collider ball;
+  ball.type = ColliderType::Sphere;
+  ball.center = Eigen::Vector3d::Zero();
+  ball.radius = 0.08;
+  ball.pose = Eigen::Isometry3d(Eigen::Translation3d(0.225, 0.3, 0.03 - 0.08));
+  for (auto [integrator, dt] : {std::pair{IntegratorKind::Explicit, 1e-3}, std::pair{IntegratorKind::Implicit, 5e-3}})
+    for (const Collider& next : {higher, ball})
+    {
+      Simulation sim(g, withColliders(Method::Full, integrator, dt, {table, plane(-1.0)}));
+      deepestOverRun(sim, 0.5);
+      // Inside the new collider before the change: the test would pass without it otherwise.
+      const std::vector<Collider> probe{next};
+      ASSERT_GT(penetration(sim, probe), 0.015);
+      sim.setColliders({next, sim.contact()->colliders()[1]}, {-1, 1});
+      EXPECT_TRUE(sim.contact()->pose(1).isApprox(Eigen::Isometry3d::Identity()));
+      deepestOverRun(sim, 0.5);  // pushed out, settling
+      EXPECT_LT(deepestOverRun(sim, 0.5), 1e-3) << toString(next.type) << " dt " << dt;
+      EXPECT_GT(sim.contact()->report().touching[0], 0) << "the sheet lies on the new " << toString(next.type);
+    }
+  Simulation sim(g, withColliders(Method::Full, IntegratorKind::Implicit, 5e-3, {table}));
+  Collider bad = ball;
+  bad.radius = -0.1;
+  EXPECT_THROW(sim.setColliders({bad}, {-1}), std::invalid_argument);
+  bad = ball;
+  bad.pose.translation().x() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_THROW(sim.setColliders({bad}, {-1}), std::invalid_argument);
+  bad = ball;
+  bad.pose.linear() *= 2.0;  // not rigid
+  EXPECT_THROW(sim.setColliders({bad}, {-1}), std::invalid_argument);
+  EXPECT_THROW(sim.setColliders({ball}, {3}), std::invalid_argument);
+  ASSERT_EQ(sim.contact()->colliders().size(), 1u);
+  EXPECT_EQ(sim.contact()->colliders()[0].type, ColliderType::Box) << "a refusal changes nothing";
+  sim.setColliders({}, {});
+  EXPECT_EQ(sim.contact(), nullptr);
+  sim.setContactThickness(0.01);
+  EXPECT_THROW(sim.setContactThickness(-1.0), std::invalid_argument);
+  sim.setColliders({ball}, {-1});
+  EXPECT_EQ(sim.contact()->thickness(), 0.01) << "the live thickness holds for colliders set later";
 }

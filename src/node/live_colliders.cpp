@@ -1,0 +1,69 @@
+// ~set_colliders: the colliders set, added, replaced or removed by id while the simulation runs. The
+// change is made on every track between two steps; from the next step on, the contact pushes the cloth
+// out of a collider that appeared on it, as it does for a frame's collider that appears.
+#include "contact_messages.h"
+#include "simulation_node.h"
+
+namespace modal_mass_spring
+{
+
+bool SimulationNode::setColliders(SetColliders::Request& request, SetColliders::Response& response)
+{
+  boost::recursive_mutex::scoped_lock tuning(tuning_mutex_);  // reconfigure reads the colliders
+  ServiceLock lock(*this);
+  response.success = false;
+  for (const Collider& c : config_.simulation.colliders)
+    response.ids.push_back(c.id);
+  if (rebuilding())
+  {
+    response.message = "set_colliders refused: a rebuild or a cubature training is under way (~status REBUILDING), "
+                       "built with the colliders it started with; call again after it";
+    return true;
+  }
+  ColliderChange change;
+  try
+  {
+    change = changeColliders(config_.simulation.colliders, request, config_.node.offset,
+                             primary().simulation->grid().dimension());
+    // Every track runs the same grid and formulation: what the first accepts, the others accept.
+    for (Track& track : tracks_)
+      track.simulation->setColliders(change.colliders, change.keep);
+  }
+  catch (const std::invalid_argument& error)
+  {
+    response.message = std::string("set_colliders refused, nothing changed: ") + error.what();
+    return true;
+  }
+  colliders_set_live_ = true;
+  config_.simulation.colliders = change.colliders;
+  accepted_.simulation.colliders = change.colliders;
+  collider_frames_ = std::make_unique<ColliderFrames>(config_.simulation.colliders, config_.node.offset);
+  for (Track& track : tracks_)
+    advertiseContactForces(track, change.colliders.size());
+  ++live_builds_;  // the rollouts' workers are built anew with the new colliders
+  response.ids.clear();
+  std::string ids;
+  for (const Collider& c : change.colliders)
+  {
+    response.ids.push_back(c.id);
+    ids += (ids.empty() ? "'" : ", '") + c.id + "'";
+  }
+  response.success = true;
+  response.message = "colliders set at step " + std::to_string(steps(primary())) + ": " +
+                     (ids.empty() ? std::string("none") : ids) + " (the new ones act from the next step)";
+  ROS_INFO("%s", response.message.c_str());
+  return true;
+}
+
+void SimulationNode::advertiseContactForces(Track& track, size_t colliders)
+{
+  if (track.shadow || track.contact_force_pubs.size() == colliders)
+    return;
+  track.contact_force_pubs.resize(std::min(track.contact_force_pubs.size(), colliders));
+  ros::NodeHandle track_nh = lockstep() ? ros::NodeHandle(private_nh_, track.name) : private_nh_;
+  for (size_t i = track.contact_force_pubs.size(); i < colliders; ++i)
+    track.contact_force_pubs.push_back(
+        track_nh.advertise<geometry_msgs::WrenchStamped>("contact_force/collider_" + std::to_string(i), 10));
+}
+
+}  // namespace modal_mass_spring
