@@ -132,8 +132,8 @@ std::string listText(const std::vector<double>& values)
 }
 
 constexpr char kShapes[] =
-    "BOX (1, dimensions [x, y, z]), SPHERE (2, [radius]), or 0 with `plane` (a x + b y + c z + d = 0); CYLINDER "
-    "and CONE are refused: no collider here has their flat ends (a capsule's round ends reach a radius beyond them)";
+    "BOX (1, dimensions [x, y, z]), SPHERE (2, [radius]), CYLINDER (3, [height, radius]: the capsule around it), "
+    "or 0 with `plane` (a x + b y + c z + d = 0); CONE is refused";
 
 }  // namespace
 
@@ -171,6 +171,18 @@ Collider colliderFromMessage(const PlacedCollider& message, const std::string& n
       c.center = Eigen::Vector3d::Zero();
       c.radius = dims[0];
       break;
+    case shape_msgs::SolidPrimitive::CYLINDER:
+    {
+      // No collider here has flat ends: the capsule on the same axis and radius encloses it, its
+      // round ends reaching `radius` beyond the flat ones (a robot's obstacle grown, never shrunk).
+      requireSizes(2, "CYLINDER ([height, radius], its axis along the pose's z)");
+      const double height = dims[shape_msgs::SolidPrimitive::CYLINDER_HEIGHT];
+      c.type = ColliderType::Capsule;
+      c.a = Eigen::Vector3d(0.0, 0.0, -0.5 * height);
+      c.b = Eigen::Vector3d(0.0, 0.0, 0.5 * height);
+      c.radius = dims[shape_msgs::SolidPrimitive::CYLINDER_RADIUS];
+      break;
+    }
     case 0:
     {
       if (!dims.empty())

@@ -89,6 +89,18 @@ TEST(ColliderMessages, EachShapeStandsAtItsPoseInTheGridsCoordinates)
   EXPECT_EQ(floor.type, ColliderType::Plane);
   EXPECT_NEAR(distanceAt(floor, Eigen::Vector3d(3.0, -2.0, 0.5)), 0.4, 1e-12);
   EXPECT_NEAR(distanceAt(floor, Eigen::Vector3d(0.0, 0.0, 0.0)), -0.1, 1e-12);
+
+  // A cylinder 0.4 m high of radius 0.05 at (1.0, 0.3, 0.5), its axis turned from z onto x: the
+  // capsule around it, its side 0.05 m from the axis, its round ends 0.05 m beyond the flat ones.
+  PlacedCollider y = box("post", 1.0, 0.3, 0.5, 0.0, 0.0, 0.0);
+  y.shape.type = shape_msgs::SolidPrimitive::CYLINDER;
+  y.shape.dimensions = {0.4, 0.05};
+  y.pose.orientation.w = y.pose.orientation.y = std::sqrt(0.5);
+  const Collider post = colliderFromMessage(y, "colliders[3]", kOffset, 3);
+  EXPECT_EQ(post.type, ColliderType::Capsule);
+  EXPECT_NEAR(distanceAt(post, Eigen::Vector3d(0.1, 0.3, 0.15)), 0.1, 1e-12);  // beside its side
+  EXPECT_NEAR(distanceAt(post, Eigen::Vector3d(0.3, 0.3, 0.0)), 0.05, 1e-12);  // beyond a flat end
+  EXPECT_NEAR(distanceAt(post, Eigen::Vector3d(0.0, 0.3, 0.0)), -0.05, 1e-12);  // on its axis
 }
 
 TEST(ColliderMessages, EveryBadColliderIsRefusedByFieldNameWithWhatIsAllowed)
@@ -110,7 +122,7 @@ TEST(ColliderMessages, EveryBadColliderIsRefusedByFieldNameWithWhatIsAllowed)
       {"NaN size", [&](PlacedCollider& m) { m.shape.dimensions[0] = nan; }, ".shape.dimensions"},
       {"two sizes", [](PlacedCollider& m) { m.shape.dimensions.pop_back(); }, "needs 3 numbers"},
       {"sphere of three", [](PlacedCollider& m) { m.shape.type = shape_msgs::SolidPrimitive::SPHERE; }, "needs 1 number"},
-      {"cylinder", [](PlacedCollider& m) { m.shape.type = shape_msgs::SolidPrimitive::CYLINDER; }, "CYLINDER and CONE are refused"},
+      {"cylinder of three", [](PlacedCollider& m) { m.shape.type = shape_msgs::SolidPrimitive::CYLINDER; }, "needs 2 numbers"},
       {"cone", [](PlacedCollider& m) { m.shape.type = shape_msgs::SolidPrimitive::CONE; }, ".shape.type = 4"},
       {"unknown type", [](PlacedCollider& m) { m.shape.type = 9; }, "must be BOX (1"},
       {"plane with sizes", [](PlacedCollider& m) { m.shape.type = 0; }, "takes none"},
