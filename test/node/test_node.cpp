@@ -688,12 +688,15 @@ TEST(PointCloud, OnePointPerParticleFiniteWhereTheMarkersAre)
     EXPECT_EQ(cloud->header.frame_id, fixed_frame);
     EXPECT_GT(cloud->header.stamp, ros::Time(0));
     ASSERT_EQ(cloud->width * cloud->height, drawn.size());
-    ASSERT_EQ(cloud->fields.size(), 4u);
+    ASSERT_EQ(cloud->fields.size(), 5u);
     EXPECT_EQ(cloud->fields[3].name, "strain");
+    EXPECT_EQ(cloud->fields[4].name, "contact");
     sensor_msgs::PointCloud2ConstIterator<float> x(*cloud, "x"), y(*cloud, "y"), z(*cloud, "z"), strain(*cloud, "strain");
-    for (size_t k = 0; k < drawn.size(); ++k, ++x, ++y, ++z, ++strain)
+    sensor_msgs::PointCloud2ConstIterator<int32_t> contact(*cloud, "contact");
+    for (size_t k = 0; k < drawn.size(); ++k, ++x, ++y, ++z, ++strain, ++contact)
     {
       ASSERT_TRUE(std::isfinite(*x) && std::isfinite(*y) && std::isfinite(*z) && std::isfinite(*strain)) << k;
+      EXPECT_EQ(*contact, -1) << k << ": no collider here";
       // float32 of the same positions
       EXPECT_NEAR(*x, drawn[k].x, 1e-6 * (1.0 + std::abs(drawn[k].x))) << k;
       EXPECT_NEAR(*y, drawn[k].y, 1e-6 * (1.0 + std::abs(drawn[k].y))) << k;
