@@ -27,10 +27,11 @@ geometry_msgs::WrenchStamped forceWrench(const Eigen::Vector3d& force, const std
                                          const ros::Time& stamp, const Eigen::Vector3d& torque = Eigen::Vector3d::Zero());
 
 // A collider of ~set_colliders as the core's: a BOX (dimensions [x, y, z], full sizes) as a box, a
-// SPHERE ([radius]) as a sphere, shape.type 0 as the plane `plane` of the pose's frame; the pose in the
-// fixed frame, turned into the grid's coordinates (the grid's origin at `grid_offset` there). Throws
-// std::invalid_argument naming `name`'s field (e.g. "colliders[1] ('table').shape.dimensions") and
-// what is allowed: an empty id, an unknown type or CYLINDER or CONE, a wrong number of dimensions, a
+// SPHERE ([radius]) as a sphere, a CYLINDER ([height, radius], along the pose's z) as the capsule around
+// it, shape.type 0 as the plane `plane` of the pose's frame; the pose in the fixed frame, turned into
+// the grid's coordinates (the grid's origin at `grid_offset` there). Throws std::invalid_argument
+// naming `name`'s field (e.g. "colliders[1] ('table').shape.dimensions") and what is allowed: an
+// empty id, an unknown type or CONE, a wrong number of dimensions, a
 // dimension not in (0, 1e6] m, a plane whose normal (a, b, c) is zero, a non-finite number, a position
 // beyond 1e6 m, an orientation not a unit quaternion, a friction < 0, and what validateCollider
 // refuses on a grid of `dimension`.

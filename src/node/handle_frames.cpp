@@ -234,9 +234,19 @@ void HandleFrames::finishTick(double duration, double s)
 {
   for (auto& handle : handles_)
   {
-    handle.last = tickVelocity(handle.current, handle.target, duration);
+    if (s > 0.0)  // a tick with no step moved nothing
+      handle.last = tickVelocity(handle.current, handle.target, duration);
     handle.current.translation = (1.0 - s) * handle.current.translation + s * handle.target.translation;
     handle.current.rotation = handle.current.rotation.slerp(s, handle.target.rotation);
+  }
+}
+
+void HandleFrames::hold()
+{
+  for (auto& handle : handles_)
+  {
+    handle.target = handle.current;
+    handle.last = TickVelocity{};
   }
 }
 

@@ -65,6 +65,8 @@ public:
   // The tick of `duration` seconds ended at the fraction s: the handles are there now, and moved at
   // this tick's velocities, which the next tick's accelerations start from.
   void finishTick(double duration, double s);
+  // Every frame holds where it is now, at rest (stepping with no lookup: ~step while paused).
+  void hold();
   // Back to the start (Simulation::reset puts the handles at rest at x_ref); offsets are kept.
   void reset();
   // Empty, or which frames are held and why (not available, stale, refused).

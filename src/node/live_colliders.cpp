@@ -35,6 +35,10 @@ bool SimulationNode::setColliders(SetColliders::Request& request, SetColliders::
     return true;
   }
   colliders_set_live_ = true;
+  // A rebuild keeps the formulation that runs: with no collider left, `auto` could resolve to the
+  // moving frame, which would start the gripper's frame at rest at its first pose.
+  config_.simulation.handle_formulation = primary().simulation->handleFormulation();
+  accepted_.simulation.handle_formulation = config_.simulation.handle_formulation;
   config_.simulation.colliders = change.colliders;
   accepted_.simulation.colliders = change.colliders;
   collider_frames_ = std::make_unique<ColliderFrames>(config_.simulation.colliders, config_.node.offset);

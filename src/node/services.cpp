@@ -267,6 +267,10 @@ bool SimulationNode::step(Step::Request& request, Step::Response& response)
     }
     for (Track& track : tracks_)
       track.startTick();
+    // No frame is looked up while paused: the handles hold where they are, at rest, rather than go
+    // on at the last tick's velocity and acceleration.
+    handle_frames_->hold();
+    setHandleMotion(config_.simulation.time_step, 1.0);
     uint32_t taken = 0;
     while (taken < request.steps && stepAll())
       ++taken;

@@ -983,6 +983,14 @@ TEST(HandleFrames, ATickToTickChangeOfVelocityIsAnAcceleration)
     }
     frames.finishTick(tick, 1.0);
   }
+  // Held (~step while paused): where they are, at rest, with no acceleration left over.
+  Eigen::VectorXd before, x, v, a, unused;
+  frames.motion(tick, 1.0, before, unused, unused);
+  frames.hold();
+  frames.motion(tick, 0.5, x, v, a);
+  EXPECT_LT((x - before).norm(), 1e-12);
+  EXPECT_LT(v.norm() + a.norm(), 1e-12);
+  EXPECT_TRUE(frames.frameMotion(tick, 0.5).angular_acceleration.isZero(0.0));
 }
 
 // The same gripper motion, reaching the simulation as ticks of frame poses, gives the same cloth in

@@ -18,6 +18,31 @@
 namespace modal_mass_spring
 {
 
+namespace
+{
+
+// Whether a free particle at `positions` (all dofs) lies inside an active collider of `contact` at its
+// pose (deeper than a hundredth of the thickness, as checkStartOutsideColliders counts it).
+bool insideCollider(const Grid& grid, const Contact& contact, const Eigen::VectorXd& positions)
+{
+  const Eigen::Matrix3Xd points = grid.toPoints(positions);
+  for (int i = 0; i < static_cast<int>(contact.colliders().size()); ++i)
+  {
+    if (!contact.active(i))
+      continue;
+    for (int p = 0; p < grid.numParticles(); ++p)
+    {
+      Eigen::Vector3d normal;
+      if (!grid.isFixed(p) && !grid.isHandle(p) &&
+          signedDistance(contact.colliders()[i], contact.pose(i), points.col(p), normal) < -0.01 * contact.thickness())
+        return true;
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
 HandleFormulation resolveHandleFormulation(const GridParams& grid, const SimulationParams& params)
 {
   // The skinning span holds the handles' rigid motion itself: auto needs no moving frame there.
@@ -414,7 +439,12 @@ void Simulation::reset()
   frame_pending_ = false;
   setPhysicalState(u_start_, Eigen::VectorXd::Zero(u_start_.size()));
   if (contact_)
+  {
     contact_->reset();
+    // A collider set or moved since may stand where the grid started: the first step pushes the grid
+    // out, work done on it that the energy check must not take for a divergence.
+    handles_moved_ = handles_moved_ || insideCollider(grid_, *contact_, positions());
+  }
   step_count_ = 0;
 }
 
