@@ -134,6 +134,7 @@ class SetsCollidersLive(unittest.TestCase):
         self.assertFalse(reply.success)
         self.assertIn("must be empty with SET", reply.message)
         reply = self.request(9)
+        self.assertFalse(reply.success)
         self.assertIn("operation = 9", reply.message)
         time.sleep(0.5)
         # Nothing changed: the cloth still lies at the old table's height.
