@@ -71,6 +71,17 @@ struct RigidPointMotion
   Eigen::Matrix3Xd position, velocity, acceleration;
 };
 
+// A frame's velocity (m/s) and angular velocity (rad/s), world.
+struct FrameVelocity
+{
+  Eigen::Vector3d linear = Eigen::Vector3d::Zero();
+  Eigen::Vector3d angular = Eigen::Vector3d::Zero();
+};
+
+// What interpolateRigidMotion moves a frame at from pose `from` to pose `to` over `duration` seconds:
+// straight at a constant velocity, and a slerp's constant turn (the shorter way).
+FrameVelocity interpolationVelocity(const FramePose& from, const FramePose& to, double duration);
+
 // `offsets`: the particles in the frame (3 x N). The rotation takes the shorter way (slerp).
 RigidPointMotion interpolateRigidMotion(const Eigen::Matrix3Xd& offsets, const FramePose& from, const FramePose& to,
                                         double duration, double s);

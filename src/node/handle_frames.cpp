@@ -36,18 +36,6 @@ FramePose compose(const FramePose& a, const FramePose& b)
   return c;
 }
 
-// What the interpolation over a tick of `duration` seconds from `from` to `to` moves at
-// (interpolateRigidMotion: straight, and a slerp's constant turn).
-TickVelocity tickVelocity(const FramePose& from, const FramePose& to, double duration)
-{
-  const Eigen::Quaterniond q0 = from.rotation.normalized();
-  Eigen::Quaterniond q1 = to.rotation.normalized();
-  if (q0.dot(q1) < 0.0)
-    q1.coeffs() = -q1.coeffs();
-  const Eigen::AngleAxisd turn(q1 * q0.conjugate());
-  return {(to.translation - from.translation) / duration, turn.angle() * turn.axis() / duration};
-}
-
 FramePose inverse(const FramePose& a)
 {
   FramePose i;
@@ -107,7 +95,7 @@ void HandleFrames::regrip(Handle& handle, const FramePose& pose)
   handle.offsets = pose.rotation.conjugate().toRotationMatrix() * (now.colwise() - pose.translation);
   handle.start_pose = compose(compose(handle.start_pose, inverse(handle.current)), pose);
   handle.current = pose;
-  handle.last = TickVelocity{};
+  handle.last = FrameVelocity{};
 }
 
 void HandleFrames::setTargets(const std::vector<std::optional<FramePose>>& poses, const std::vector<std::string>& problems)
@@ -130,7 +118,7 @@ void HandleFrames::setTargets(const std::vector<std::optional<FramePose>>& poses
       // The particles' start positions in the frame's first pose.
       handle.offsets = pose.rotation.conjugate().toRotationMatrix() * (handle.start.colwise() - pose.translation);
       handle.start_pose = handle.current = pose;
-      handle.last = TickVelocity{};
+      handle.last = FrameVelocity{};
       handle.found = true;
     }
     std::string why = refusal(handle, pose);
@@ -170,13 +158,10 @@ void HandleFrames::motion(double duration, double s, Eigen::VectorXd& x, Eigen::
     if (handle.found)
     {
       m = interpolateRigidMotion(handle.offsets, handle.current, handle.target, duration, s);
-      // The velocity's change since the last tick, spread over this one.
-      const TickVelocity now = tickVelocity(handle.current, handle.target, duration);
-      const Eigen::Vector3d a = (now.linear - handle.last.linear) / duration;
-      const Eigen::Vector3d alpha = (now.angular - handle.last.angular) / duration;
+      const FrameVelocity change = tickAcceleration(handle, duration);
       const Eigen::Vector3d origin = handle.current.translation + s * (handle.target.translation - handle.current.translation);
       for (Eigen::Index p = 0; p < m.position.cols(); ++p)
-        m.acceleration.col(p) += a + alpha.cross(m.position.col(p) - origin);
+        m.acceleration.col(p) += change.linear + change.angular.cross(m.position.col(p) - origin);
     }
     else
     {
@@ -206,14 +191,18 @@ FrameMotion HandleFrames::frameMotion(double duration, double s) const
   };
   const FramePose start = inGrid(handle.start_pose);
   FrameMotion m = interpolateFrameMotion(start, inGrid(handle.current), inGrid(handle.target), duration, s);
-  // The velocity's change since the last tick, spread over this one: the frame's origin accelerates
-  // at a, and the frame turns with alpha about it.
-  const TickVelocity now = tickVelocity(handle.current, handle.target, duration);
-  const Eigen::Vector3d a = (now.linear - handle.last.linear) / duration;
-  const Eigen::Vector3d alpha = (now.angular - handle.last.angular) / duration;
-  m.angular_acceleration = alpha;
-  m.acceleration += a - alpha.cross(m.rotation * start.translation);
+  // The frame's origin accelerates at the tick's change of velocity, and the frame turns about it.
+  const FrameVelocity change = tickAcceleration(handle, duration);
+  m.angular_acceleration = change.angular;
+  m.acceleration += change.linear - change.angular.cross(m.rotation * start.translation);
   return m;
+}
+
+FrameVelocity HandleFrames::tickAcceleration(const Handle& handle, double duration)
+{
+  // A tick moves the frame at a constant velocity: the change from the last tick's, spread over this one.
+  const FrameVelocity now = interpolationVelocity(handle.current, handle.target, duration);
+  return {(now.linear - handle.last.linear) / duration, (now.angular - handle.last.angular) / duration};
 }
 
 void HandleFrames::drive(Simulation& simulation, double duration, double s) const
@@ -235,7 +224,7 @@ void HandleFrames::finishTick(double duration, double s)
   for (auto& handle : handles_)
   {
     if (s > 0.0)  // a tick with no step moved nothing
-      handle.last = tickVelocity(handle.current, handle.target, duration);
+      handle.last = interpolationVelocity(handle.current, handle.target, duration);
     handle.current.translation = (1.0 - s) * handle.current.translation + s * handle.target.translation;
     handle.current.rotation = handle.current.rotation.slerp(s, handle.target.rotation);
   }
@@ -246,7 +235,7 @@ void HandleFrames::hold()
   for (auto& handle : handles_)
   {
     handle.target = handle.current;
-    handle.last = TickVelocity{};
+    handle.last = FrameVelocity{};
   }
 }
 
@@ -255,7 +244,7 @@ void HandleFrames::place(size_t h, const FramePose& pose)
   if (handles_[h].found)
   {
     handles_[h].current = handles_[h].target = pose;
-    handles_[h].last = TickVelocity{};
+    handles_[h].last = FrameVelocity{};
   }
 }
 
@@ -264,7 +253,7 @@ void HandleFrames::grip(size_t h, const FramePose& pose, const Eigen::Matrix3Xd&
   Handle& handle = handles_[h];
   handle.offsets = pose.rotation.conjugate().toRotationMatrix() * (points.colwise() - pose.translation);
   handle.start_pose = handle.current = pose;
-  handle.last = TickVelocity{};
+  handle.last = FrameVelocity{};
   if (snap)
   {
     // The frame is taken to be where their centre is now; the tick moves it to the frame's pose.
@@ -283,7 +272,7 @@ void HandleFrames::reset()
   for (auto& handle : handles_)
   {
     handle.current = handle.target = handle.start_pose;
-    handle.last = TickVelocity{};
+    handle.last = FrameVelocity{};
     if (handle.gripped_live)
       handle.found = handle.gripped_live = false;  // its particles are back at x_ref: gripped there anew
   }

@@ -20,13 +20,6 @@ namespace modal_mass_spring
 // broadcaster has stopped, and its particles (its collider) hold where they are until it comes back.
 constexpr double kStaleHandleFrameSeconds = 1.0;
 
-// A frame's velocity (m/s) and angular velocity (rad/s), world, over a tick.
-struct TickVelocity
-{
-  Eigen::Vector3d linear = Eigen::Vector3d::Zero();
-  Eigen::Vector3d angular = Eigen::Vector3d::Zero();
-};
-
 class HandleFrames
 {
 public:
@@ -110,8 +103,11 @@ private:
     // The frame's velocity and angular velocity (world) over the last tick: a tick moves the frame at
     // a constant velocity, so its change from tick to tick is an acceleration over the next tick, the
     // inertial load a cloth carried by the gripper feels (zero after a jump to a new pose).
-    TickVelocity last;
+    FrameVelocity last;
   };
+  // This tick's change of the handle's frame velocity since the last tick, over the tick's
+  // `duration`: its acceleration (linear) and angular acceleration (angular).
+  static FrameVelocity tickAcceleration(const Handle& handle, double duration);
   // Why the cloth cannot follow `pose` from the handle's current one, or empty.
   std::string refusal(const Handle& handle, const FramePose& pose) const;
   // Takes the particles' offsets anew at `pose`, where they are now (no jump).

@@ -61,6 +61,17 @@ Eigen::MatrixXd constraintModes(const SparseMatrix& k_ii, const SparseMatrix& k_
   return psi;
 }
 
+FrameVelocity interpolationVelocity(const FramePose& from, const FramePose& to, double duration)
+{
+  const Eigen::Quaterniond q0 = from.rotation.normalized();
+  Eigen::Quaterniond q1 = to.rotation.normalized();
+  if (q0.dot(q1) < 0.0)
+    q1.coeffs() = -q1.coeffs();  // the same rotation, the shorter way
+  // Slerp turns at a constant rate about a fixed axis: omega = angle / T along it (world frame).
+  const Eigen::AngleAxisd turn(q1 * q0.conjugate());
+  return {(to.translation - from.translation) / duration, turn.angle() * turn.axis() / duration};
+}
+
 RigidPointMotion interpolateRigidMotion(const Eigen::Matrix3Xd& offsets, const FramePose& from, const FramePose& to,
                                         double duration, double s)
 {
@@ -69,10 +80,9 @@ RigidPointMotion interpolateRigidMotion(const Eigen::Matrix3Xd& offsets, const F
   if (q0.dot(q1) < 0.0)
     q1.coeffs() = -q1.coeffs();  // the same rotation; slerp then takes the shorter way
   const Eigen::Quaterniond rotation = q0.slerp(s, q1);
-  // Slerp turns at a constant rate about a fixed axis: omega = angle / T along it (world frame).
-  const Eigen::AngleAxisd turn(q1 * q0.conjugate());
-  const Eigen::Vector3d omega = turn.angle() * turn.axis() / duration;
-  const Eigen::Vector3d velocity = (to.translation - from.translation) / duration;
+  const FrameVelocity frame = interpolationVelocity(from, to, duration);
+  const Eigen::Vector3d& omega = frame.angular;
+  const Eigen::Vector3d& velocity = frame.linear;
   const Eigen::Vector3d origin = from.translation + s * (to.translation - from.translation);
 
   RigidPointMotion motion;
@@ -134,10 +144,9 @@ FrameMotion interpolateFrameMotion(const FramePose& start, const FramePose& from
   Eigen::Quaterniond q0 = from.rotation.normalized(), q1 = to.rotation.normalized();
   if (q0.dot(q1) < 0.0)
     q1.coeffs() = -q1.coeffs();
-  const Eigen::AngleAxisd turn(q1 * q0.conjugate());
   FrameMotion m;
   m.rotation = (q0.slerp(s, q1) * start.rotation.normalized().conjugate()).toRotationMatrix();
-  m.angular_velocity = turn.angle() * turn.axis() / duration;
+  m.angular_velocity = interpolationVelocity(from, to, duration).angular;
   const Eigen::Vector3d r = m.rotation * start.translation;  // the start's origin, turned
   const Eigen::Vector3d& w = m.angular_velocity;
   m.translation = c.position.col(0) - r;
