@@ -13,6 +13,20 @@
 namespace modal_mass_spring
 {
 
+// A free particle inside a collider by at most this fraction of the thickness is on its surface:
+// round-off in placing a sheet on a surface stays far below it.
+constexpr double kSurfaceRoundOffFraction = 0.01;
+
+// The free particle (neither fixed nor held) of `points` (3 x particles, grid coordinates) deepest
+// inside `collider` at `pose`, and its depth (> 0); particle -1 where none is inside.
+struct DeepestParticle
+{
+  int particle = -1;
+  double depth = 0.0;
+};
+DeepestParticle deepestFreeParticle(const Grid& grid, const Eigen::Matrix3Xd& points, const Collider& collider,
+                                    const Eigen::Isometry3d& pose);
+
 // The shape's signed distance at p (the collider's frame) and, where it is below `limit`, its outward
 // unit normal there (that frame): the particles a pass rejects, and the depth checks, skip the
 // normal's divisions. unit_normal: the plane's normal, normalized. Inlined into the contact pass,

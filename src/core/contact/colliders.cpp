@@ -3,6 +3,7 @@
 #include "modal_mass_spring/contact.h"
 
 #include "modal_mass_spring/parameter_error.h"
+#include "contact/collider_shapes.h"
 
 #include <algorithm>
 #include <cmath>
@@ -274,6 +275,22 @@ void validateContactThickness(double thickness, double spacing)
   }
 }
 
+DeepestParticle deepestFreeParticle(const Grid& grid, const Eigen::Matrix3Xd& points, const Collider& collider,
+                                    const Eigen::Isometry3d& pose)
+{
+  DeepestParticle deepest;
+  for (int p = 0; p < grid.numParticles(); ++p)
+  {
+    if (grid.isFixed(p) || grid.isHandle(p))
+      continue;
+    Eigen::Vector3d unused;
+    const double depth = -signedDistance(collider, pose, points.col(p), unused);
+    if (depth > deepest.depth)
+      deepest = {p, depth};
+  }
+  return deepest;
+}
+
 void checkStartOutsideColliders(const Grid& grid, const Eigen::VectorXd& positions,
                                 const std::vector<Collider>& colliders, double thickness, const std::string& start)
 {
@@ -283,22 +300,8 @@ void checkStartOutsideColliders(const Grid& grid, const Eigen::VectorXd& positio
     const Collider& collider = colliders[c];
     if (!collider.frame.empty())
       continue;  // placed at its frame's first pose, later
-    double deepest = 0.0;
-    int particle = -1;
-    for (int p = 0; p < grid.numParticles(); ++p)
-    {
-      if (grid.isFixed(p) || grid.isHandle(p))
-        continue;
-      Eigen::Vector3d unused;
-      const double depth = -signedDistance(collider, collider.pose, points.col(p), unused);
-      if (depth > deepest)
-      {
-        deepest = depth;
-        particle = p;
-      }
-    }
-    // Round-off in placing a sheet on a surface stays far below a hundredth of the thickness.
-    if (particle < 0 || deepest <= 0.01 * thickness)
+    const auto [particle, deepest] = deepestFreeParticle(grid, points, collider, collider.pose);
+    if (particle < 0 || deepest <= kSurfaceRoundOffFraction * thickness)
       continue;
     std::ostringstream value, allowed;
     value << "a " << toString(collider.type);

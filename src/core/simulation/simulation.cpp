@@ -5,6 +5,7 @@
 
 #include "modal_mass_spring/spring_forces.h"
 #include "modal_mass_spring/validation.h"
+#include "contact/collider_shapes.h"
 #include "dynamics/method_model.h"
 #include "reduction/error_indicator.h"
 #include "solvers/equilibrium.h"
@@ -22,22 +23,14 @@ namespace
 {
 
 // Whether a free particle at `positions` (all dofs) lies inside an active collider of `contact` at its
-// pose (deeper than a hundredth of the thickness, as checkStartOutsideColliders counts it).
+// pose, deeper than round-off (as checkStartOutsideColliders counts it).
 bool insideCollider(const Grid& grid, const Contact& contact, const Eigen::VectorXd& positions)
 {
   const Eigen::Matrix3Xd points = grid.toPoints(positions);
   for (int i = 0; i < static_cast<int>(contact.colliders().size()); ++i)
-  {
-    if (!contact.active(i))
-      continue;
-    for (int p = 0; p < grid.numParticles(); ++p)
-    {
-      Eigen::Vector3d normal;
-      if (!grid.isFixed(p) && !grid.isHandle(p) &&
-          signedDistance(contact.colliders()[i], contact.pose(i), points.col(p), normal) < -0.01 * contact.thickness())
-        return true;
-    }
-  }
+    if (contact.active(i) && deepestFreeParticle(grid, points, contact.colliders()[i], contact.pose(i)).depth >
+                                 kSurfaceRoundOffFraction * contact.thickness())
+      return true;
   return false;
 }
 
