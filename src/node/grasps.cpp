@@ -6,8 +6,6 @@
 #include <cstdio>
 #include <numeric>
 
-#include <geometry_msgs/WrenchStamped.h>
-
 namespace modal_mass_spring
 {
 
@@ -344,7 +342,7 @@ void SimulationNode::swapInHeldSet(const NodeConfiguration& next, std::vector<st
     track.step_offset += track.simulation->stepCount();
     track.simulation = std::move(built[k]);
     track.divergence_message.clear();
-    advertiseHandleForces(track, next.node.handles.size());
+    advertiseWrenches(track, track.handle_force_pubs, "handle_force/handle_", next.node.handles.size());
   }
   handle_frames_ = std::move(frames);
   config_.grid = next.grid;
@@ -365,17 +363,6 @@ void SimulationNode::swapInHeldSet(const NodeConfiguration& next, std::vector<st
   private_params_["handle_formulation"] = std::string("constraint_modes");
   ++live_builds_;  // the rollouts' workers are built anew
   ++state_changes_;
-}
-
-void SimulationNode::advertiseHandleForces(Track& track, size_t handles)
-{
-  track.handle_force_pubs.clear();
-  if (track.shadow)
-    return;
-  ros::NodeHandle track_nh = lockstep() ? ros::NodeHandle(private_nh_, track.name) : private_nh_;
-  for (size_t h = 0; h < handles; ++h)
-    track.handle_force_pubs.push_back(
-        track_nh.advertise<geometry_msgs::WrenchStamped>("handle_force/handle_" + std::to_string(h), 10));
 }
 
 void SimulationNode::releaseSlippingGrasps()

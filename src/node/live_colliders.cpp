@@ -43,7 +43,7 @@ bool SimulationNode::setColliders(SetColliders::Request& request, SetColliders::
   accepted_.simulation.colliders = change.colliders;
   collider_frames_ = std::make_unique<ColliderFrames>(config_.simulation.colliders, config_.node.offset);
   for (Track& track : tracks_)
-    advertiseContactForces(track, change.colliders.size());
+    advertiseWrenches(track, track.contact_force_pubs, "contact_force/collider_", change.colliders.size());
   ++live_builds_;  // the rollouts' workers are built anew with the new colliders
   response.ids.clear();
   std::string ids;
@@ -57,17 +57,6 @@ bool SimulationNode::setColliders(SetColliders::Request& request, SetColliders::
                      (ids.empty() ? std::string("none") : ids) + " (the new ones act from the next step)";
   ROS_INFO("%s", response.message.c_str());
   return true;
-}
-
-void SimulationNode::advertiseContactForces(Track& track, size_t colliders)
-{
-  if (track.shadow || track.contact_force_pubs.size() == colliders)
-    return;
-  track.contact_force_pubs.resize(std::min(track.contact_force_pubs.size(), colliders));
-  ros::NodeHandle track_nh = lockstep() ? ros::NodeHandle(private_nh_, track.name) : private_nh_;
-  for (size_t i = track.contact_force_pubs.size(); i < colliders; ++i)
-    track.contact_force_pubs.push_back(
-        track_nh.advertise<geometry_msgs::WrenchStamped>("contact_force/collider_" + std::to_string(i), 10));
 }
 
 }  // namespace modal_mass_spring

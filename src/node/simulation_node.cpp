@@ -129,9 +129,20 @@ void SimulationNode::advertiseTracks()
     track.markers_pub = track_nh.advertise<visualization_msgs::MarkerArray>("markers", 1);
     track.status_pub = track_nh.advertise<Status>("status", 10);
     track.points_pub = track_nh.advertise<sensor_msgs::PointCloud2>("points", 1);
-    advertiseHandleForces(track, config_.node.handles.size());
-    advertiseContactForces(track, config_.simulation.colliders.size());
+    advertiseWrenches(track, track.handle_force_pubs, "handle_force/handle_", config_.node.handles.size());
+    advertiseWrenches(track, track.contact_force_pubs, "contact_force/collider_", config_.simulation.colliders.size());
   }
+}
+
+void SimulationNode::advertiseWrenches(const Track& track, std::vector<ros::Publisher>& pubs, const std::string& topic,
+                                       size_t count)
+{
+  if (track.shadow || pubs.size() == count)
+    return;
+  pubs.resize(std::min(pubs.size(), count));  // those kept keep their subscribers
+  ros::NodeHandle track_nh = lockstep() ? ros::NodeHandle(private_nh_, track.name) : private_nh_;
+  for (size_t k = pubs.size(); k < count; ++k)
+    pubs.push_back(track_nh.advertise<geometry_msgs::WrenchStamped>(topic + std::to_string(k), 10));
 }
 
 void SimulationNode::startServices()

@@ -112,6 +112,9 @@ private:
     // from a const track): fewer colliders then delete the rest.
     mutable size_t collider_markers = 0;
   };
+  // `pubs`: `count` wrench publishers, <topic><k> in the track's namespace (a shadow has none); those
+  // there are kept, the extra ones dropped.
+  void advertiseWrenches(const Track& track, std::vector<ros::Publisher>& pubs, const std::string& topic, size_t count);
 
   // What one tick publishes, built under the lock and sent after it.
   struct Output;
@@ -229,14 +232,12 @@ private:
   std::string lookupGraspFrame(const std::string& frame, FramePose& pose);
   // Lets handle h go (its particles free); `lock` as changeHandles (null: held throughout).
   std::string releaseHandle(ServiceLock* lock, size_t h);
-  void advertiseHandleForces(Track& track, size_t handles);  // ~handle_force/handle_<h>
   void releaseSlippingGrasps();  // with mutex_ held, after a tick's stepping
   std::vector<double> grasp_limits_;  // N per handle: beyond it the grasp lets go; 0: never
 
   // ~set_colliders (live_colliders.cpp): the colliders set, added, replaced or removed by id on every
   // track between two steps; a collider that appears on the cloth pushes it out from the next step.
   bool setColliders(SetColliders::Request& request, SetColliders::Response& response);
-  void advertiseContactForces(Track& track, size_t colliders);  // ~contact_force/collider_<i>
   std::atomic<bool> colliders_set_live_{false};  // since the first: see buildSimulation
 
   // Saving and restoring the state, and rollouts of candidate handle motions on simulations of their
