@@ -4,6 +4,7 @@ steps 300 steps from a saved state; restored, it steps the same positions again;
 state with the frame held where it is gives them too, on the node's own worker simulations; bad goals
 are refused by name."""
 import math
+import threading
 import time
 import unittest
 
@@ -12,7 +13,8 @@ import rospy
 import rostest
 from actionlib_msgs.msg import GoalStatus
 from geometry_msgs.msg import Pose
-from modal_mass_spring.msg import HandleTrajectory, RolloutAction, RolloutCandidate, RolloutGoal
+from modal_mass_spring.msg import (HandleTrajectory, RolloutAction, RolloutActionFeedback, RolloutCandidate,
+                                   RolloutGoal)
 from modal_mass_spring.srv import GetState, SetState, Step
 from std_srvs.srv import SetBool
 
@@ -33,6 +35,15 @@ class Rollouts(unittest.TestCase):
         cls.set_state = rospy.ServiceProxy(NODE + "/set_state", SetState)
         cls.step = rospy.ServiceProxy(NODE + "/step", Step)
         cls.pause = rospy.ServiceProxy(NODE + "/pause", SetBool)
+        cls.lock = threading.Lock()
+        cls.published_feedback = []
+
+        def on_feedback(msg):
+            with cls.lock:
+                cls.published_feedback.append(msg)
+
+        cls.feedback_sub = rospy.Subscriber(NODE + "/rollout/feedback", RolloutActionFeedback, on_feedback,
+                                            queue_size=100)
         cls.client = actionlib.SimpleActionClient(NODE + "/rollout", RolloutAction)
         assert cls.client.wait_for_server(rospy.Duration(30.0))
         # The gripper frame found and the cloth swinging from it, then held for the checks.
@@ -40,16 +51,19 @@ class Rollouts(unittest.TestCase):
         cls.pause(True)
 
     def rollout(self, goal):
-        feedback = []
-        self.client.send_goal(goal, feedback_cb=feedback.append)
+        self.client.send_goal(goal)
+        goal_id = self.client.gh.comm_state_machine.action_goal.goal_id.id
         self.assertTrue(self.client.wait_for_result(rospy.Duration(60.0)))
-        # The result and the feedback come on topics of their own: the last feedback, published just
-        # before the result, may still be on its way when the result is in.
+        # The last candidate's feedback and the result travel on topics of their own: the feedback may
+        # come after the result, which the client then drops; it is read as published.
         deadline = time.time() + 5.0
-        while (self.client.get_state() == GoalStatus.SUCCEEDED and len(feedback) < len(goal.candidates)
-               and time.time() < deadline):
+        while True:
+            with self.lock:
+                feedback = [m.feedback for m in self.published_feedback if m.status.goal_id.id == goal_id]
+            if (self.client.get_state() != GoalStatus.SUCCEEDED or len(feedback) >= len(goal.candidates)
+                    or time.time() > deadline):
+                return self.client.get_state(), self.client.get_result(), feedback
             time.sleep(0.05)
-        return self.client.get_state(), self.client.get_result(), feedback
 
     def test_state_restored_and_rolled_out_replays_the_steps(self):
         saved = self.get_state().state
