@@ -395,18 +395,33 @@ struct ContactRun
   double deepest = 0.0;
   Eigen::Matrix3Xd end;
 };
+// The sheet hanging in the x-z plane from row 0 at rest, a finger (a sphere) 0.1 m in front of it.
+struct FingerScene
+{
+  GridParams grid;
+  SimulationParams params;
+  Collider finger;
+};
+FingerScene fingerBeforeAHangingSheet(Method method)
+{
+  FingerScene scene;
+  scene.grid = flatSheet();
+  scene.grid.rotation_deg = 0.0;
+  scene.params = withColliders(method, IntegratorKind::Implicit, 5e-3, {});
+  scene.params.initial_state = InitialState::Equilibrium;
+  scene.finger.type = ColliderType::Sphere;
+  scene.finger.center = Eigen::Vector3d(0.225, 0.1, -0.3);
+  scene.finger.radius = 0.05;
+  scene.params.colliders = {scene.finger};
+  return scene;
+}
+
 ContactRun pushHangingSheet(Method method)
 {
-  GridParams g = flatSheet();
-  g.rotation_deg = 0.0;  // hanging in the x-z plane from row 0
-  SimulationParams s = withColliders(method, IntegratorKind::Implicit, 5e-3, {});
-  s.initial_state = InitialState::Equilibrium;
-  Collider finger;
-  finger.type = ColliderType::Sphere;
-  finger.center = Eigen::Vector3d(0.225, 0.1, -0.3);
-  finger.radius = 0.05;
-  s.colliders = {finger};
-  Simulation sim(g, s);
+  const FingerScene scene = fingerBeforeAHangingSheet(method);
+  const GridParams& g = scene.grid;
+  const Collider& finger = scene.finger;
+  Simulation sim(g, scene.params);
   ContactRun result;
   const int steps = 200;  // 1 s: the finger moves 0.2 m along -y, through the sheet's plane
   for (int k = 1; k <= steps; ++k)
@@ -432,16 +447,10 @@ TEST(Contact, EachParticleSaysWhichColliderItTouched)
 {
   for (Method method : {Method::Full, Method::Physical})
   {
-    GridParams g = flatSheet();
-    g.rotation_deg = 0.0;
-    SimulationParams s = withColliders(method, IntegratorKind::Implicit, 5e-3, {});
-    s.initial_state = InitialState::Equilibrium;
-    Collider finger;
-    finger.type = ColliderType::Sphere;
-    finger.center = Eigen::Vector3d(0.225, 0.1, -0.3);
-    finger.radius = 0.05;
-    s.colliders = {finger};
-    Simulation sim(g, s);
+    const FingerScene scene = fingerBeforeAHangingSheet(method);
+    const GridParams& g = scene.grid;
+    const Collider& finger = scene.finger;
+    Simulation sim(g, scene.params);
     for (int k = 1; k <= 100; ++k)  // halfway: the finger presses into the sheet
     {
       sim.setColliderPose(0, Eigen::Isometry3d(Eigen::Translation3d(0.0, -0.2 * k / 200, 0.0)));
