@@ -193,9 +193,12 @@ Collider colliderFromMessage(const PlacedCollider& message, const std::string& n
       if (!normal.allFinite() || !std::isfinite(k[3]) || !(normal.norm() > 1e-12))
         refuse(field + ".plane.coef", listText(coef),
                "must be finite with (a, b, c) non-zero: the plane a x + b y + c z + d = 0, the cloth on the side (a, b, c) points to");
+      // Its distance from the pose's origin, |d| / |(a, b, c)|, within the colliders' coordinates.
+      if (std::abs(k[3]) / normal.norm() > kMaxColliderCoordinate)
+        refuse(field + ".plane.coef", listText(coef), "must put the plane within 1e6 m of the pose's origin (|d| / |(a, b, c)|)");
       c.type = ColliderType::Plane;
-      c.normal = normal;
-      c.point = -k[3] * normal / normal.squaredNorm();
+      c.normal = normal / normal.norm();
+      c.point = -k[3] * c.normal / normal.norm();
       break;
     }
     default:

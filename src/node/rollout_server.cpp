@@ -46,12 +46,13 @@ bool SimulationNode::setState(SetState::Request& request, SetState::Response& re
     ROS_WARN("~set_state %s", response.message.c_str());
     return true;
   }
-  // A fixed collider stands where it is defined (~set_colliders may have moved it since the state was saved).
+  // A fixed collider stands where it is defined, active (~set_colliders may have put it there since the
+  // state was saved, where a frame's collider stood, inactive before its first pose).
   if (const Contact* contact = simulation.contact())
     for (int i = 0; i < static_cast<int>(contact->colliders().size()); ++i)
     {
       const Collider& c = contact->colliders()[i];
-      if (c.frame.empty() && !contact->pose(i).isApprox(c.pose, 0.0))
+      if (c.frame.empty() && (!contact->active(i) || !contact->pose(i).isApprox(c.pose, 0.0)))
         simulation.placeCollider(i, c.pose);
     }
   primary().name = toString(simulation.method());

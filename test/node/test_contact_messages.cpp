@@ -127,6 +127,7 @@ TEST(ColliderMessages, EveryBadColliderIsRefusedByFieldNameWithWhatIsAllowed)
       {"unknown type", [](PlacedCollider& m) { m.shape.type = 9; }, "must be BOX (1"},
       {"plane with sizes", [](PlacedCollider& m) { m.shape.type = 0; }, "takes none"},
       {"plane without normal", [](PlacedCollider& m) { m.shape.type = 0, m.shape.dimensions.clear(); }, ".plane.coef"},
+      {"plane far away", [](PlacedCollider& m) { m.shape.type = 0, m.shape.dimensions.clear(), m.plane.coef = {0.0, 0.0, 1e-9, 1.0}; }, "within 1e6 m of the pose's origin"},
       {"negative friction", [](PlacedCollider& m) { m.friction = -0.1; }, ".friction = -0.1"},
       {"NaN friction", [&](PlacedCollider& m) { m.friction = nan; }, "finite Coulomb coefficient >= 0"},
       {"empty id", [](PlacedCollider& m) { m.id.clear(); }, "colliders[0].id"},
