@@ -50,6 +50,9 @@ struct SimulationParams
   // The adaptive stepper's (adaptive.h): the reduced method, the RMS distance to `full` it accepts
   // (m), the time within it of the span before going back to it (s), the steps between checks.
   Method adaptive_method = Method::Cubature;
+  // Parameter `method: adaptive`: the simulation runs adaptive_method (its `method`), stepped by an
+  // AdaptiveStepper that falls back to `full` (the node's single method; the tools' --methods).
+  bool adaptive = false;
   double error_tolerance = 0.015;
   double adaptive_dwell = 0.2;
   int adaptive_check_steps = 10;

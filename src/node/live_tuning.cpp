@@ -91,7 +91,8 @@ std::vector<SimulationNode::TrackKind> SimulationNode::trackKinds() const
 {
   std::vector<TrackKind> kinds;
   for (const Track& track : tracks_)
-    kinds.push_back({track.simulation->method(), track.simulation->basisBuilt()});
+    kinds.push_back({adaptiveTrack(track) ? config_.simulation.adaptive_method : track.simulation->method(),
+                     track.simulation->basisBuilt()});
   return kinds;
 }
 

@@ -32,29 +32,34 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   }
   adoptTrainedCubature();  // a training done since the last tick
   Simulation& simulation = *primary().simulation;
-  Method method;
+  const std::string previous = methodName(primary());
+  // adaptive steps adaptive_method, falling back to full (adaptive_tracks.cpp).
+  const bool to_adaptive = request.method == "adaptive";
+  Method method = config_.simulation.adaptive_method;
   try
   {
-    method = parseMethod(request.method);
+    if (!to_adaptive)
+      method = parseMethod(request.method);
   }
   catch (const std::invalid_argument&)
   {
     std::string names;
     for (const auto& name : methodNames())
-      names += (names.empty() ? "" : ", ") + name;
+      names += name + ", ";
     response.success = false;
     response.message = "unknown method '" + request.method + "': must be one of " + names +
-                       "; still running '" + toString(simulation.method()) + "'";
+                       "adaptive; still running '" + previous + "'";
     return true;
   }
-  const std::string previous = toString(simulation.method());
   const bool was_diverged = simulation.diverged();
   if (training_ && method == Method::Cubature)
   {
+    adaptive_ = to_adaptive;
     switch_after_training_ = true;
     response.success = true;
     response.message = "the cubature is being trained in the background (" + trainingProgress() + "); still running '" +
-                       previous + "', switched to cubature when the training is done";
+                       previous + "', switched to " + (to_adaptive ? "adaptive" : "cubature") +
+                       " when the training is done";
     return true;
   }
   try
@@ -68,12 +73,13 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
     {
       // Training takes up to minutes on the skinning span: the current method steps on meanwhile.
       trainInBackground(simulation.cubatureTraining());  // refuses a training beyond memory_limit_gb
+      adaptive_ = to_adaptive;
       switch_after_training_ = true;
       response.success = true;
       response.message = "training the cubature in the background on basis " + toString(simulation.params().basis) +
                          "; still running '" + previous +
-                         "' (~status state REBUILDING, its message the training's progress), switched to cubature "
-                         "when the training is done";
+                         "' (~status state REBUILDING, its message the training's progress), switched to " +
+                         (to_adaptive ? "adaptive" : "cubature") + " when the training is done";
       ROS_INFO("%s", response.message.c_str());
       return true;
     }
@@ -94,6 +100,7 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
              "kept for a later switch)",
              request.method.c_str());
   }
+  adaptive_ = to_adaptive;
   response.success = true;
   response.message = finishSwitch(previous, method, was_diverged);
   return true;
@@ -102,11 +109,12 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
 std::string SimulationNode::finishSwitch(const std::string& previous, Method method, bool was_diverged)
 {
   const Simulation& simulation = *primary().simulation;
-  primary().name = toString(method);
+  primary().adaptive.reset();  // under adaptive, a stepper from this state
+  primary().name = methodName(primary());
   primary().divergence_message.clear();
   synchronise();  // the shadow full starts again from the state carried over
   ++state_changes_;
-  std::string message = "switched from " + previous + " to " + toString(method) + " at step " +
+  std::string message = "switched from " + previous + " to " + primary().name + " at step " +
                         std::to_string(steps(primary())) + (was_diverged ? ", recovering from the divergence" : "");
   // `linear` never runs on a richer basis (its force is the modes' own -Lambda q): say what it runs on.
   if (method == Method::Linear && simulation.params().basis != BasisKind::LinearModes)
@@ -211,6 +219,7 @@ bool SimulationNode::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Respo
   for (Track& track : tracks_)
   {
     track.simulation->reset();
+    track.adaptive.reset();  // its checkpoint was before the reset
     track.step_offset = 0;
     track.divergence_message.clear();
   }
@@ -220,7 +229,7 @@ bool SimulationNode::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Respo
   ++state_changes_;
   response.success = true;
   response.message = "reset to the initial state at rest (" +
-                     (lockstep() ? std::string("methods in lockstep") : "method " + toString(primary().simulation->method())) +
+                     (lockstep() ? std::string("methods in lockstep") : "method " + methodName(primary())) +
                      (paused_ ? ", still paused)" : ")");
   response.message += forcesActingNote();
   ROS_INFO("%s", response.message.c_str());

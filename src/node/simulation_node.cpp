@@ -302,12 +302,13 @@ void SimulationNode::buildTracks()
 {
   const NodeParams& params = config_.node;
   const std::vector<Method> methods = lockstep() ? params.methods : std::vector<Method>{config_.simulation.method};
+  adaptive_ = config_.simulation.adaptive && !lockstep();
   for (size_t k = 0; k < methods.size(); ++k)
   {
     SimulationParams sim_params = config_.simulation;
     sim_params.method = methods[k];
     Track track;
-    track.name = toString(methods[k]);
+    track.name = adaptive_ ? "adaptive" : toString(methods[k]);
     track.simulation = buildSimulation(config_.grid, sim_params, true);
     track.offset = lockstep() ? methodOffset(params, k) : params.offset;
     track.grid_frame = lockstep() ? track.name + "/" + params.grid_frame : params.grid_frame;
@@ -521,9 +522,10 @@ bool SimulationNode::stepAll()
     applyHandForce(k);
     const auto start = Clock::now();
     const double cpu_start = threadCpuSeconds();
-    const StepResult result = track.simulation->step(1);
+    const StepResult result = stepTrack(track);
     track.tick_cpu_seconds += threadCpuSeconds() - cpu_start;
     track.tick_seconds += secondsSince(start);
+    refreshErrorEstimate(track);
     track.tick_steps += result.steps_taken;
     if (result.diverged)
     {
@@ -670,21 +672,6 @@ void SimulationNode::stepTick(std::unique_lock<std::mutex>& lock, double period)
     handle_frames_->finishTick(steps * dt, static_cast<double>(stepped) / steps);
     collider_frames_->finishTick(static_cast<double>(stepped) / steps);
   }
-}
-
-std::string SimulationNode::statusLine() const
-{
-  const Track& first = tracks_.front();
-  const double dt = config_.simulation.time_step;
-  char line[480];
-  std::snprintf(line, sizeof line,
-                "%s: %s, step %ld, simulated %.3f s, energy %.6g J, %.3f ms of stepping per tick; %s%s%s",
-                stateName(first).c_str(),
-                lockstep() ? "methods in lockstep" : ("method " + toString(first.simulation->method())).c_str(),
-                steps(first), simTime(first), first.last_energy, 1e3 * tick_step_seconds_,
-                lockstep() ? (first.name + ": ").c_str() : "", formatCpuPace(first.step_cpu_seconds, dt).c_str(),
-                lockstep() ? ("; achieved real-time factor " + std::to_string(achieved_factor_)).c_str() : "");
-  return line;
 }
 
 void SimulationNode::warnDropped(const std::string& text)

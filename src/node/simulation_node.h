@@ -7,6 +7,7 @@
 #include "collider_frames.h"
 #include "handle_frames.h"
 #include "warning_throttle.h"
+#include "modal_mass_spring/adaptive.h"
 #include "modal_mass_spring/ApplyForce.h"
 #include "modal_mass_spring/GetState.h"
 #include "modal_mass_spring/RolloutAction.h"
@@ -84,6 +85,15 @@ private:
     std::string name;    // the method's name; "shadow_full" for the shadow
     bool shadow = false; // the unreduced reference beside a single method: no topics of its own
     std::unique_ptr<Simulation> simulation;
+    // Method adaptive (the single method's track): its stepper, made for `simulation` once that runs
+    // the reduced method, and the switches it has logged. Declared after `simulation`, which it uses.
+    std::unique_ptr<AdaptiveStepper> adaptive;
+    const Simulation* adaptive_of = nullptr;
+    int logged_switches = 0;
+    // A reduced method's estimated RMS distance to full (m; the stepper's last check under adaptive),
+    // and the wall time it was last refreshed.
+    double error_estimate = 0.0;
+    double estimate_wall = -1.0;
     Eigen::Vector3d offset = Eigen::Vector3d::Zero();
     std::string grid_frame;
     std::string ns_prefix;  // of its marker namespaces
@@ -138,6 +148,14 @@ private:
   // One step of every track that has not diverged; false when stepping must stop (the single method
   // diverged, or every method of the comparison).
   bool stepAll();
+  // Method adaptive (adaptive_tracks.cpp): whether `track` runs it; one step of a track, through its
+  // AdaptiveStepper when it does (each switch logged once); a reduced track's error estimate,
+  // refreshed at most once a second (its indicator costs a full force and a sparse solve).
+  bool adaptiveTrack(const Track& track) const { return adaptive_ && &track == &tracks_.front(); }
+  StepResult stepTrack(Track& track);
+  void refreshErrorEstimate(Track& track);
+  std::string methodName(const Track& track) const;   // "adaptive" or the method
+  std::string adaptiveNote(const Track& track) const;  // the status line's part
   void onTick();
   // The tick's stepping (with mutex_ held through `lock`, which a waiting service call opens between
   // two steps), and the periodic status line.
@@ -363,6 +381,7 @@ private:
   // it), and its progress (with progress_mutex_: the training thread updates it without mutex_).
   bool training_ = false;
   bool switch_after_training_ = false;
+  bool adaptive_ = false;  // the single method is adaptive (method: adaptive, or ~set_method)
   std::optional<Cubature> trained_;
   std::string training_failure_;
   std::atomic<bool> cancel_training_{false};

@@ -246,7 +246,15 @@ Status SimulationNode::trackStatus(const Track& track, bool measured, const ros:
   Status status;
   status.header.stamp = stamp;
   status.header.frame_id = config_.node.fixed_frame;
-  status.method = toString(simulation.method());
+  status.method = methodName(track);
+  status.active_method = toString(simulation.method());
+  status.error_estimate = track.error_estimate;
+  status.reduced_share = simulation.method() == Method::Full ? 0.0 : 1.0;
+  if (track.adaptive && adaptiveTrack(track))
+  {
+    status.reduced_share = track.adaptive->reducedShare();
+    status.switches = static_cast<uint32_t>(track.adaptive->switches());
+  }
   status.linearization = toString(simulation.params().linearization);
   status.integrator = toString(simulation.params().integrator);
   status.newton_iterations = simulation.lastNewtonIterations();
@@ -409,10 +417,25 @@ void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& statu
                         "handles " + handle_frames_->status() + " (their particles hold where they are)");
   if (!collider_frames_->status().empty())
     status.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN, collider_frames_->status());
+  for (const Track& track : tracks_)
+    if (!track.shadow && !adaptiveTrack(track) && track.error_estimate > config_.simulation.error_tolerance)
+      status.mergeSummary(diagnostic_msgs::DiagnosticStatus::WARN,
+                          (lockstep() ? track.name + ": " : "") + "estimated distance to full " +
+                              formatDistance(track.error_estimate) + " above error_tolerance " +
+                              formatDistance(config_.simulation.error_tolerance) +
+                              ": the reduced span may not follow this motion (method adaptive falls back to full)");
   status.add("state", stateName(first));
   if (training_)
     status.add("cubature training", trainingProgress());
-  status.add("method", lockstep() ? "lockstep" : toString(simulation.method()));
+  status.add("method", lockstep() ? "lockstep" : methodName(first));
+  status.add("estimated distance to full (m)", first.error_estimate);
+  if (first.adaptive && adaptiveTrack(first))
+  {
+    status.add("adaptive: stepping now", toString(simulation.method()));
+    status.add("adaptive: share of steps reduced", first.adaptive->reducedShare());
+    status.add("adaptive: switches", first.adaptive->switches());
+    status.add("adaptive: last switch", first.adaptive->lastSwitch());
+  }
   status.add("step count", steps(first));
   status.add("simulated time (s)", simTime(first));
   status.add("steps per tick", params.real_time_factor / (params.publish_rate * config_.simulation.time_step));
@@ -425,6 +448,39 @@ void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& statu
     status.add("achieved real-time factor", achieved_factor_);
   diag_ticks_ = diag_late_ticks_ = 0;
   diag_step_seconds_ = 0.0;
+}
+
+std::string SimulationNode::methodName(const Track& track) const
+{
+  return adaptiveTrack(track) ? "adaptive" : toString(track.simulation->method());
+}
+
+std::string SimulationNode::adaptiveNote(const Track& track) const
+{
+  if (!adaptiveTrack(track))
+    return "";
+  if (!track.adaptive)
+    return "; adaptive: waiting for " + toString(config_.simulation.adaptive_method);
+  char text[200];
+  std::snprintf(text, sizeof text, "; adaptive: now %s, %.1f%% of steps reduced, %d switches, estimate %s",
+                toString(track.simulation->method()).c_str(), 100.0 * track.adaptive->reducedShare(),
+                track.adaptive->switches(), formatDistance(track.error_estimate).c_str());
+  return text;
+}
+
+std::string SimulationNode::statusLine() const
+{
+  const Track& first = tracks_.front();
+  const double dt = config_.simulation.time_step;
+  char line[480];
+  std::snprintf(line, sizeof line,
+                "%s: %s, step %ld, simulated %.3f s, energy %.6g J, %.3f ms of stepping per tick; %s%s%s",
+                stateName(first).c_str(),
+                lockstep() ? "methods in lockstep" : ("method " + methodName(first)).c_str(), steps(first),
+                simTime(first), first.last_energy, 1e3 * tick_step_seconds_,
+                lockstep() ? (first.name + ": ").c_str() : "", formatCpuPace(first.step_cpu_seconds, dt).c_str(),
+                lockstep() ? ("; achieved real-time factor " + std::to_string(achieved_factor_)).c_str() : "");
+  return line + adaptiveNote(first);
 }
 
 }  // namespace modal_mass_spring

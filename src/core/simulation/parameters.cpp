@@ -1,6 +1,8 @@
 // Parameter names and types shared by the node and the tools.
 #include "modal_mass_spring/parameters.h"
 
+#include "modal_mass_spring/parameter_error.h"
+
 #include <limits>
 #include <stdexcept>
 
@@ -46,8 +48,23 @@ GridParams loadGridParams(const ParameterSource& s)
 SimulationParams loadSimulationParams(const ParameterSource& s)
 {
   SimulationParams p;
-  if (const auto method = s.getString("method"))
-    p.method = parseMethod(*method);
+  // `adaptive` runs adaptive_method, read below, through an AdaptiveStepper.
+  const auto method = s.getString("method");
+  p.adaptive = method && *method == "adaptive";
+  if (method && !p.adaptive)
+  {
+    try
+    {
+      p.method = parseMethod(*method);
+    }
+    catch (const std::invalid_argument&)
+    {
+      std::string names;
+      for (const auto& name : methodNames())
+        names += name + ", ";
+      rejectParameter("method", "'" + *method + "'", "must be one of " + names + "adaptive");
+    }
+  }
   p.num_modes = s.getInt("num_modes").value_or(p.num_modes);
   p.alpha = s.getDouble("alpha").value_or(p.alpha);
   p.beta = s.getDouble("beta").value_or(p.beta);
@@ -65,6 +82,8 @@ SimulationParams loadSimulationParams(const ParameterSource& s)
   p.tangent_refresh_steps = s.getInt("tangent_refresh_steps").value_or(p.tangent_refresh_steps);
   if (const auto name = s.getString("adaptive_method"))
     p.adaptive_method = parseMethod(*name);
+  if (p.adaptive)
+    p.method = p.adaptive_method;
   p.error_tolerance = s.getDouble("error_tolerance").value_or(p.error_tolerance);
   p.adaptive_dwell = s.getDouble("adaptive_dwell").value_or(p.adaptive_dwell);
   p.adaptive_check_steps = s.getInt("adaptive_check_steps").value_or(p.adaptive_check_steps);

@@ -1,0 +1,86 @@
+// Method adaptive in the node: the single method's track stepped by an AdaptiveStepper (the reduced
+// method where its error estimate allows, full where it does not), and every reduced track's error
+// estimate for ~status and /diagnostics.
+#include "simulation_node.h"
+
+#include <cmath>
+
+namespace modal_mass_spring
+{
+namespace
+{
+
+// Wall seconds between two refreshes of a reduced method's error estimate outside adaptive.
+constexpr double kEstimatePeriod = 1.0;
+
+}  // namespace
+
+StepResult SimulationNode::stepTrack(Track& track)
+{
+  if (!adaptiveTrack(track))
+  {
+    track.adaptive.reset();
+    return track.simulation->step(1);
+  }
+  if (track.adaptive && track.adaptive_of != track.simulation.get())
+    track.adaptive.reset();  // a rebuild or a new held set replaced the simulation
+  if (!track.adaptive)
+  {
+    // Made once the reduced method can run without a training (a cubature may still be training in
+    // the background): in it, or with its basis and cubature at hand, as after a reset under full.
+    Simulation& simulation = *track.simulation;
+    const Method reduced = config_.simulation.adaptive_method;
+    if (simulation.method() != reduced &&
+        !(simulation.basisBuilt() && (reduced != Method::Cubature || simulation.cubature())))
+      return simulation.step(1);
+    try
+    {
+      track.adaptive = std::make_unique<AdaptiveStepper>(simulation, adaptiveSettings(config_.simulation));
+    }
+    catch (const std::exception& error)
+    {
+      adaptive_ = false;
+      ROS_ERROR("adaptive: cannot step %s: %s; method %s steps on", toString(reduced).c_str(), error.what(),
+                toString(simulation.method()).c_str());
+      return simulation.step(1);
+    }
+    track.adaptive_of = &simulation;
+    track.logged_switches = 0;
+  }
+  const StepResult result = track.adaptive->step();
+  track.error_estimate = track.adaptive->lastEstimate();
+  if (track.adaptive->switches() != track.logged_switches)
+  {
+    track.logged_switches = track.adaptive->switches();
+    ROS_INFO("adaptive: %s", track.adaptive->lastSwitch().c_str());
+  }
+  return result;
+}
+
+void SimulationNode::refreshErrorEstimate(Track& track)
+{
+  Simulation& simulation = *track.simulation;
+  if (adaptiveTrack(track) || track.shadow)
+    return;
+  if (simulation.method() == Method::Full || simulation.diverged())
+  {
+    track.error_estimate = 0.0;
+    return;
+  }
+  const double now = ros::WallTime::now().toSec();
+  if (track.estimate_wall >= 0.0 && now - track.estimate_wall < kEstimatePeriod)
+    return;
+  track.estimate_wall = now;
+  try
+  {
+    const double estimate = AdaptiveSettings{}.indicator_scale * simulation.errorIndicator();
+    track.error_estimate = std::isfinite(estimate) ? estimate : 0.0;
+  }
+  catch (const std::exception& error)
+  {
+    track.error_estimate = 0.0;
+    warnDropped("no error estimate for " + track.name + ": " + error.what());
+  }
+}
+
+}  // namespace modal_mass_spring
