@@ -462,9 +462,10 @@ std::string SimulationNode::adaptiveNote(const Track& track) const
   if (!track.adaptive)
     return "; adaptive: waiting for " + toString(config_.simulation.adaptive_method);
   char text[200];
-  std::snprintf(text, sizeof text, "; adaptive: now %s, %.1f%% of steps reduced, %d switches, estimate %s",
-                toString(track.simulation->method()).c_str(), 100.0 * track.adaptive->reducedShare(),
-                track.adaptive->switches(), formatDistance(track.error_estimate).c_str());
+  const int switches = track.adaptive->switches();
+  std::snprintf(text, sizeof text, "; adaptive: now %s, %.1f%% of steps reduced, %d switch%s, estimate %s",
+                toString(track.simulation->method()).c_str(), 100.0 * track.adaptive->reducedShare(), switches,
+                switches == 1 ? "" : "es", formatDistance(track.error_estimate).c_str());
   return text;
 }
 

@@ -278,6 +278,19 @@ TEST(NodeParams, CoreParametersAreCheckedFirst)
   EXPECT_EQ(refusal({{"time_step", -1.0}, {"real_time_factor", 2000.0}}).rfind("invalid parameter 'time_step'", 0), 0u);
 }
 
+// `method: adaptive` runs adaptive_method through the adaptive stepper; its refusal lists it.
+TEST(NodeParams, MethodAdaptiveRunsTheAdaptiveMethod)
+{
+  const SimulationParams p = loadSimulationParams(FakeSource({{"method", std::string("adaptive")},
+                                                              {"adaptive_method", std::string("physical")}}));
+  EXPECT_TRUE(p.adaptive);
+  EXPECT_EQ(p.method, Method::Physical);
+  EXPECT_FALSE(loadSimulationParams(FakeSource({{"method", std::string("cubature")}})).adaptive);
+  EXPECT_EQ(refusal({{"method", std::string("adaptiv")}}),
+            "invalid parameter 'method' = 'adaptiv': must be one of full, linear, physical, cubature, adaptive");
+  EXPECT_EQ(refusal({{"method", std::string("adaptive")}, {"error_tolerance", 0.0}}).rfind("invalid parameter 'error_tolerance' = 0", 0), 0u);
+}
+
 TEST(NodeParams, HugeGridWithABadNodeParameterNamesTheNodeParameter)
 {
   const std::map<std::string, Value> huge{{"rows", 600}, {"cols", 600}, {"dimension", 3}, {"num_modes", 30},
