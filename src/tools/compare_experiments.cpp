@@ -154,6 +154,10 @@ void runCostExperiment(const Options& o, const std::vector<ExperimentSetup>& set
                  " timed runs; wall and this thread's CPU time per step, the CPU time per simulated second and "
                  "the real-time factor it allows (time_step / CPU per step)",
              table);
+  for (const CostRow& r : rows)
+    if (r.method == "adaptive")
+      std::cout << "adaptive (" << r.variant << ", " << r.rows << "x" << r.cols << "): " << fmt(100.0 * r.reduced_share)
+                << "% of its steps reduced, " << r.switches << " switches (the last timed run)\n";
 }
 
 namespace
@@ -306,7 +310,9 @@ std::vector<std::string> checkImplicitAtFactor(const Options& o, const std::vect
       if (explicit_row == explicit_rows.end() || !(explicit_row->stable_dt > 0.0))
         continue;
       row.check_dt = o.check_factor * explicit_row->stable_dt;
-      row.check_stable = checkStableAt(setups[s], parseMethod(row.method), row.check_dt, o.stability.steps);
+      const bool adaptive = row.method == "adaptive";
+      row.check_stable = checkStableAt(setups[s], adaptive ? setups[s].sim.adaptive_method : parseMethod(row.method),
+                                       row.check_dt, o.stability.steps, adaptive);
       checks.push_back(row.variant + ", " + row.method + " at " + fmt(o.check_factor) + " x the explicit " +
                        row.method + "'s largest stable step (" + fmt(1e3 * row.check_dt, 4) + " ms, " +
                        twin->variant + "): " + (row.check_stable ? "stable" : "DIVERGED") + " over " +

@@ -33,8 +33,8 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
   --output DIR          folder for the CSV files (default: .)
   --tag NAME            file name tag, <experiment>_<tag>.csv (default: the config file's stem); no '/'
   --methods LIST        comma-separated of full, linear, physical, cubature, adaptive (default: the first four;
-                        adaptive, in accuracy and handles only: adaptive_method stepped while its error
-                        indicator allows, full where it does not (error_tolerance, adaptive_dwell);
+                        adaptive: adaptive_method stepped while its error indicator allows, full
+                        where it does not (error_tolerance, adaptive_dwell), in every experiment;
                         accuracy always runs full as the reference and writes cubature's training
                         report, |T|, training and held-out error and time, to accuracy_<tag>_cubature.csv)
   --set KEY=VALUE       override one parameter of the config (VALUE is YAML); repeatable, once per key
@@ -308,7 +308,9 @@ void finishOptions(Options& o)
   o.accuracy.methods = o.methods;
   o.accuracy.adaptive = o.adaptive;
   o.stability.methods = o.methods;
+  o.stability.adaptive = o.adaptive;
   o.cost.methods = o.methods;
+  o.cost.adaptive = o.adaptive;
   if (o.tag.empty())
     setTag(o, std::filesystem::path(o.config).stem().string());
 }

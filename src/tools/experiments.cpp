@@ -75,17 +75,42 @@ std::unique_ptr<Simulation> buildTimed(const GridParams& grid, const SimulationP
   return sim;
 }
 
+// `steps` steps from the initial state (a reset): of the simulation's method, or with `adaptive`
+// through an AdaptiveStepper made after the reset, whose share and switches go to `stats`. Stops at a
+// divergence.
+StepResult stepFromReset(Simulation& sim, int steps, const std::optional<AdaptiveSettings>& adaptive,
+                         CostRow* stats = nullptr)
+{
+  sim.reset();
+  if (!adaptive)
+    return sim.step(steps);
+  AdaptiveStepper stepper(sim, *adaptive);
+  StepResult total;
+  for (int k = 0; k < steps && !total.diverged; ++k)
+  {
+    const StepResult result = stepper.step();
+    total.diverged = result.diverged;
+    total.message = result.message;
+    total.steps_taken += result.diverged ? 0 : 1;
+  }
+  if (stats)
+  {
+    stats->reduced_share = stepper.reducedShare();
+    stats->switches = stepper.switches();
+  }
+  return total;
+}
+
 // Steps per timed run so that one run lasts about min_repeat_seconds, timed on the steps the method
 // takes: one that diverges is timed up to its divergence (its timed runs end there).
-int stepsPerRepeat(Simulation& sim, double min_repeat_seconds)
+int stepsPerRepeat(Simulation& sim, double min_repeat_seconds, const std::optional<AdaptiveSettings>& adaptive)
 {
   int calibration = 10;
   double per_step = 0.0;
   while (true)
   {
-    sim.reset();
     const auto start = Clock::now();
-    const StepResult result = sim.step(calibration);
+    const StepResult result = stepFromReset(sim, calibration, adaptive);
     const double elapsed = seconds(start);
     per_step = elapsed / (result.steps_taken + (result.diverged ? 1 : 0));
     if (result.diverged || elapsed > 0.2 * min_repeat_seconds || calibration >= 1000000)
@@ -101,12 +126,13 @@ int stepsPerRepeat(Simulation& sim, double min_repeat_seconds)
 // run is 1). Starting over and going on instead would time resets, millions of them for a method
 // that diverges at its first step. Wall time per step; the thread's CPU time per step goes to
 // `cpu_seconds`.
-double timedRun(Simulation& sim, int steps, long& diverged_step, double& cpu_seconds)
+double timedRun(Simulation& sim, int steps, const std::optional<AdaptiveSettings>& adaptive, CostRow& row,
+                double& cpu_seconds)
 {
-  sim.reset();
+  long& diverged_step = row.diverged_step;
   const auto start = Clock::now();
   const double cpu_start = threadCpuSeconds();
-  const StepResult result = sim.step(steps);
+  const StepResult result = stepFromReset(sim, steps, adaptive, &row);
   const double elapsed = seconds(start), cpu = threadCpuSeconds() - cpu_start;
   const long taken = result.diverged ? result.steps_taken + 1 : steps;
   if (result.diverged)
@@ -131,11 +157,16 @@ std::vector<CostRow> runCost(const ExperimentSetup& setup, const CostOptions& op
     double build_seconds = 0.0;
     const std::unique_ptr<Simulation> sim = buildTimed(grid, setup.sim, options.build_repeats, build_seconds);
 
-    for (size_t m = 0; m < options.methods.size(); ++m)
+    const size_t runs = options.methods.size() + (options.adaptive ? 1 : 0);
+    for (size_t m = 0; m < runs; ++m)
     {
+      // The last run is adaptive's: its reduced method under its stepper.
+      const bool adaptive = m == options.methods.size();
+      const std::optional<AdaptiveSettings> settings =
+          adaptive ? std::optional<AdaptiveSettings>(adaptiveSettings(setup.sim)) : std::nullopt;
       CostRow row;
       row.variant = setup.variant;
-      row.method = toString(options.methods[m]);
+      row.method = adaptive ? "adaptive" : toString(options.methods[m]);
       row.dimension = grid.dimension;
       row.rows = grid.rows;
       row.cols = grid.cols;
@@ -145,15 +176,14 @@ std::vector<CostRow> runCost(const ExperimentSetup& setup, const CostOptions& op
       row.num_modes = setup.sim.num_modes;
       row.build_seconds = build_seconds;
       row.repeats = options.repeats;
-      sim->setMethod(options.methods[m]);
-      row.steps_per_repeat = stepsPerRepeat(*sim, options.min_repeat_seconds);
+      sim->setMethod(adaptive ? setup.sim.adaptive_method : options.methods[m]);
+      row.steps_per_repeat = stepsPerRepeat(*sim, options.min_repeat_seconds, settings);
       std::vector<double> per_step, cpu_per_step;
       for (int r = 0; r < options.repeats; ++r)
       {
         cpu_per_step.emplace_back();
-        per_step.push_back(timedRun(*sim, row.steps_per_repeat, row.diverged_step, cpu_per_step.back()));
-        report(progress, label + " " + row.method,
-               (s + (m + (r + 1.0) / options.repeats) / options.methods.size()) / total);
+        per_step.push_back(timedRun(*sim, row.steps_per_repeat, settings, row, cpu_per_step.back()));
+        report(progress, label + " " + row.method, (s + (m + (r + 1.0) / options.repeats) / runs) / total);
       }
       row.step_seconds = median(per_step);
       row.step_seconds_min = *std::min_element(per_step.begin(), per_step.end());
@@ -180,12 +210,13 @@ double highestFrequencyAtRest(const Grid& grid, int max_dofs)
   return std::sqrt(std::max(0.0, solver.eigenvalues().maxCoeff()));
 }
 
-bool checkStableAt(const ExperimentSetup& setup, Method method, double dt, int steps)
+bool checkStableAt(const ExperimentSetup& setup, Method method, double dt, int steps, bool adaptive)
 {
-  SimulationParams params = withMethod(setup.sim, method);
+  SimulationParams params = withMethod(setup.sim, adaptive ? setup.sim.adaptive_method : method);
   params.time_step = dt;
   Simulation sim(setup.grid, params);
-  return !sim.step(steps).diverged;
+  return !stepFromReset(sim, steps, adaptive ? std::optional<AdaptiveSettings>(adaptiveSettings(params)) : std::nullopt)
+              .diverged;
 }
 
 namespace
@@ -196,8 +227,9 @@ namespace
 class StabilitySearch
 {
 public:
-  StabilitySearch(Simulation& sim, const StabilityOptions& options, StabilityRow& row)
-    : sim_(sim), options_(options), row_(row)
+  StabilitySearch(Simulation& sim, const StabilityOptions& options, StabilityRow& row,
+                  std::optional<AdaptiveSettings> adaptive)
+    : sim_(sim), options_(options), row_(row), adaptive_(std::move(adaptive))
   {
   }
 
@@ -298,8 +330,7 @@ private:
   bool stable(double dt)
   {
     sim_.setTimeStep(dt);
-    sim_.reset();
-    const bool ok = !sim_.step(options_.steps).diverged;
+    const bool ok = !stepFromReset(sim_, options_.steps, adaptive_).diverged;
     row_.tried.push_back({dt, ok});
     ++row_.trials;
     return ok;
@@ -308,6 +339,7 @@ private:
   Simulation& sim_;
   const StabilityOptions& options_;
   StabilityRow& row_;
+  std::optional<AdaptiveSettings> adaptive_;  // method "adaptive": each trial through its stepper
 };
 
 }  // namespace
@@ -337,13 +369,16 @@ std::vector<StabilityRow> runStability(const ExperimentSetup& setup, const Stabi
     rejectParameter("--max-time-step", options.max_time_step,
                     "must be above time_step = " + std::to_string(setup.sim.time_step) + " s, where the search starts");
   std::vector<StabilityRow> rows;
-  for (size_t m = 0; m < options.methods.size(); ++m)
+  const size_t runs = options.methods.size() + (options.adaptive ? 1 : 0);
+  for (size_t m = 0; m < runs; ++m)
   {
-    const Method method = options.methods[m];
+    // The last run is adaptive's: its reduced method under its stepper.
+    const bool adaptive = m == options.methods.size();
+    const Method method = adaptive ? setup.sim.adaptive_method : options.methods[m];
     Simulation sim(setup.grid, withMethod(setup.sim, method), StageFn{}, options.cache);
     StabilityRow row;
     row.variant = setup.variant;
-    row.method = toString(method);
+    row.method = adaptive ? "adaptive" : toString(method);
     row.steps = options.steps;
     row.tolerance = options.tolerance;
     sim.buildBasis();  // `full` builds none by itself; its row reports the modal bound beside its own
@@ -351,13 +386,14 @@ std::vector<StabilityRow> runStability(const ExperimentSetup& setup, const Stabi
     row.modal_bound = 2.0 / basis.frequencies.maxCoeff();
     row.full_bound = 2.0 / highestFrequencyAtRest(sim.grid());
     const std::string label = "stability " + row.method;
-    report(progress, label, static_cast<double>(m) / options.methods.size());
-    StabilitySearch search(sim, options, row);
+    report(progress, label, static_cast<double>(m) / runs);
+    StabilitySearch search(sim, options, row,
+                           adaptive ? std::optional<AdaptiveSettings>(adaptiveSettings(setup.sim)) : std::nullopt);
     search.boundary(setup.sim.time_step);
-    report(progress, label, (m + 0.6) / options.methods.size());
+    report(progress, label, (m + 0.6) / runs);
     search.windows();
     rows.push_back(row);
-    report(progress, label, (m + 1.0) / options.methods.size());
+    report(progress, label, (m + 1.0) / runs);
   }
   return rows;
 }
@@ -408,14 +444,15 @@ void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows)
 {
   precise(out) << "variant,method,dimension,rows,cols,particles,free_dofs,springs,num_modes,"
                   "build_seconds,step_seconds,step_seconds_min,step_cpu_seconds,time_step,cpu_per_simulated_second,"
-                  "real_time_factor,repeats,steps_per_repeat,diverged,diverged_step\n";
+                  "real_time_factor,repeats,steps_per_repeat,diverged,diverged_step,reduced_share,switches\n";
   for (const CostRow& r : rows)
     out << r.variant << ',' << r.method << ',' << r.dimension << ',' << r.rows << ',' << r.cols << ','
         << r.particles << ',' << r.free_dofs << ',' << r.springs << ',' << r.num_modes << ','
         << Field{r.build_seconds} << ',' << Field{r.step_seconds} << ',' << Field{r.step_seconds_min} << ','
         << Field{r.step_cpu_seconds} << ',' << Field{r.time_step} << ',' << Field{r.cpu_per_simulated_second} << ','
         << Field{r.real_time_factor} << ',' << r.repeats << ',' << r.steps_per_repeat << ','
-        << (r.diverged_step > 0 ? 1 : 0) << ',' << r.diverged_step << '\n';
+        << (r.diverged_step > 0 ? 1 : 0) << ',' << r.diverged_step << ',' << Field{r.reduced_share} << ','
+        << (r.switches >= 0 ? std::to_string(r.switches) : "") << '\n';
 }
 
 void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows)

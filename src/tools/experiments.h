@@ -56,6 +56,7 @@ struct CostOptions
   int repeats = 7;                   // timed runs per method and size; the median is reported
   double min_repeat_seconds = 0.02;  // each timed run takes at least this many steps' worth
   int build_repeats = 3;             // basis builds per size; the median is reported
+  bool adaptive = false;             // also time method "adaptive" (as AccuracyOptions::adaptive)
 };
 
 struct CostRow
@@ -72,6 +73,10 @@ struct CostRow
   // A timed run diverged: the step it diverged at (1: the first; the same in every run), and each run
   // ended there, its time per step over the steps up to and including that one. 0: none diverged.
   long diverged_step = 0;
+  // Method "adaptive": the share of the last timed run's steps taken reduced and its switches (else
+  // NaN, -1).
+  double reduced_share = std::numeric_limits<double>::quiet_NaN();
+  int switches = -1;
 };
 
 std::vector<CostRow> runCost(const ExperimentSetup& setup, const CostOptions& options, const ProgressFn& progress = {});
@@ -187,6 +192,7 @@ struct StabilityOptions
   // at most max_time_step).
   double window_factor = 2.0;
   CacheOptions cache;  // as AccuracyOptions::cache
+  bool adaptive = false;  // also search method "adaptive" (as AccuracyOptions::adaptive)
 };
 
 // The smallest and largest step of a run of consecutive stable scan steps above the boundary.
@@ -238,8 +244,9 @@ std::vector<StabilityRow> runStability(const ExperimentSetup& setup, const Stabi
 constexpr int kMaxReferenceSubsteps = 100000;
 int referenceSubsteps(double time_step, double reference_time_step);
 
-// Whether `method` on the setup runs `steps` steps at time step `dt` without diverging.
-bool checkStableAt(const ExperimentSetup& setup, Method method, double dt, int steps);
+// Whether `method` on the setup runs `steps` steps at time step `dt` without diverging; with
+// `adaptive`, the setup's adaptive_method stepped through an AdaptiveStepper.
+bool checkStableAt(const ExperimentSetup& setup, Method method, double dt, int steps, bool adaptive = false);
 
 // Largest dense eigen-frequency of M^-1 K(x0) on the free dofs, NaN above `max_dofs`.
 double highestFrequencyAtRest(const Grid& grid, int max_dofs = 3000);

@@ -90,6 +90,31 @@ TEST(Stability, ModalMethodsAllowLargerStepsThanFullOnThePaper2dSetup)
   EXPECT_LE(linear.unstable_dt - linear.stable_dt, options.tolerance * linear.stable_dt);
 }
 
+// Method "adaptive" steps what it runs: under a tolerance it never meets it is `full` from its first
+// check on (the steps before taken again under `full`), so its stability is full's trial for trial;
+// under one it always meets it is its reduced method's.
+TEST(Stability, AdaptiveIsBoundedByWhatItRuns)
+{
+  ExperimentSetup setup = loadSetup("config/compare/paper_2d.yaml");
+  setup.sim.adaptive_method = Method::Physical;
+  StabilityOptions options;
+  options.steps = 1000;
+  options.tolerance = 1e-2;
+  options.methods = {Method::Full, Method::Physical};
+  options.adaptive = true;
+  setup.sim.error_tolerance = 1e-15;
+  std::vector<StabilityRow> rows = runStability(setup, options);
+  ASSERT_EQ(rows.size(), 3u);
+  ASSERT_EQ(rows[2].method, "adaptive");
+  EXPECT_LT(rows[0].stable_dt, rows[1].stable_dt) << "full must be bounded below physical for this test";
+  EXPECT_EQ(rows[2].stable_dt, rows[0].stable_dt);
+  EXPECT_EQ(rows[2].unstable_dt, rows[0].unstable_dt);
+  setup.sim.error_tolerance = 1e3;
+  rows = runStability(setup, options);
+  EXPECT_EQ(rows[2].stable_dt, rows[1].stable_dt);
+  EXPECT_EQ(rows[2].unstable_dt, rows[1].unstable_dt);
+}
+
 // A grid whose stability is not monotone in the time step: 5 x 5 in 2D, 1 m, 1 kg, 50 N/m, alpha 0.1, 4 modes.
 // Explicit `physical` diverges at 0.3165 s and 0.32 s but runs 5000 steps at 0.317, 0.33 and 0.34 s:
 // stability is not monotone in the time step. Bisection from a doubling bracket [0.256, 0.512] can
@@ -498,8 +523,41 @@ TEST(Cost, AMethodThatDivergesAtOnceIsReportedWithItsStep)
   }
   std::ostringstream csv;
   writeCostCsv(csv, rows);
-  EXPECT_NE(csv.str().find(",diverged,diverged_step\n"), std::string::npos) << csv.str();
-  EXPECT_NE(csv.str().find(",1,1\n"), std::string::npos) << csv.str();
+  EXPECT_NE(csv.str().find(",diverged,diverged_step,reduced_share,switches\n"), std::string::npos) << csv.str();
+  EXPECT_NE(csv.str().find(",1,1,,\n"), std::string::npos) << csv.str();
+}
+
+// Method "adaptive" is timed after the others, with the share of its steps taken reduced: all of
+// them under a tolerance it always meets, none under one it never does (its first check fails and
+// its steps are taken again under `full`).
+TEST(Cost, AdaptiveIsTimedAfterTheMethodsWithItsShareOfReducedSteps)
+{
+  ExperimentSetup setup;
+  setup.sim.adaptive_method = Method::Physical;
+  CostOptions options;
+  options.sizes = {5};
+  options.methods = {Method::Full};
+  options.adaptive = true;
+  options.repeats = 2;
+  options.min_repeat_seconds = 1e-3;
+  options.build_repeats = 1;
+  setup.sim.error_tolerance = 1e3;
+  std::vector<CostRow> rows = runCost(setup, options);
+  ASSERT_EQ(rows.size(), 2u);
+  EXPECT_EQ(rows[0].method, "full");
+  EXPECT_EQ(rows[1].method, "adaptive");
+  EXPECT_GT(rows[1].step_cpu_seconds, 0.0);
+  EXPECT_EQ(rows[1].diverged_step, 0);
+  EXPECT_EQ(rows[1].reduced_share, 1.0);
+  EXPECT_EQ(rows[1].switches, 0);
+  EXPECT_TRUE(std::isnan(rows[0].reduced_share));
+  setup.sim.error_tolerance = 1e-15;
+  rows = runCost(setup, options);
+  EXPECT_EQ(rows[1].reduced_share, 0.0);
+  EXPECT_EQ(rows[1].switches, 1);
+  std::ostringstream csv;
+  writeCostCsv(csv, rows);
+  EXPECT_NE(csv.str().find(",0,1\n"), std::string::npos) << csv.str();
 }
 
 TEST(Experiments, RankCorrelationIsSpearmansWithTiesAtTheirMeanRank)
