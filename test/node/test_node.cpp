@@ -595,13 +595,15 @@ TEST(Divergence, HoldsTheLastGoodStateReportsErrorAndRecovers)
   const auto running = node.status([](const Status& s) { return s.state == Status::RUNNING && s.tick_steps > 0; });
   ASSERT_TRUE(running);
   EXPECT_GT(running->step_count, diverged->step_count);
-  const auto is_ok = [](const diagnostic_msgs::DiagnosticArray& a) {
+  // No longer ERROR; a WARN may remain (the recovering method's estimated distance to full).
+  const auto is_recovered = [](const diagnostic_msgs::DiagnosticArray& a) {
     for (const auto& s : a.status)
-      if (s.name.find("simulation") != std::string::npos && s.level == diagnostic_msgs::DiagnosticStatus::OK)
+      if (s.name.find("simulation") != std::string::npos && s.level < diagnostic_msgs::DiagnosticStatus::ERROR &&
+          s.message.find("diverged") == std::string::npos)
         return true;
     return false;
   };
-  EXPECT_TRUE(waitFor<diagnostic_msgs::DiagnosticArray>("/diagnostics", is_ok));
+  EXPECT_TRUE(waitFor<diagnostic_msgs::DiagnosticArray>("/diagnostics", is_recovered));
 
   // A reset recovers too: back to step 0 and running, under the method that diverged.
   ASSERT_TRUE(node.setMethod(diverged->method).success);
@@ -1230,6 +1232,9 @@ protected:
 TEST_F(ByHand, DragPullsTheNearestFreeParticleTowardTheMarkerWithEveryMethodUntilReleased)
 {
   using Feedback = visualization_msgs::InteractiveMarkerFeedback;
+  // Subscribed long before the first grab: the node's /rosout connects to a new subscriber late
+  // under load.
+  Recorder<rosgraph_msgs::Log> log("/rosout");
   for (const std::string method : {"full", "linear", "physical", "cubature"})
   {
     ASSERT_TRUE(node.setMethod(method).success) << method;
@@ -1237,7 +1242,7 @@ TEST_F(ByHand, DragPullsTheNearestFreeParticleTowardTheMarkerWithEveryMethodUnti
     ASSERT_EQ(free.size(), 25u);
     const Eigen::Vector3d start = vec(free[corner]);
     const Eigen::Vector3d target = start + Eigen::Vector3d(0.0, 0.1, 0.05);
-    Recorder<rosgraph_msgs::Log> log("/rosout");
+    log.clear();
     const auto pulled = run(node, 100, [&] {
       drag(feedback_pub, Feedback::MOUSE_DOWN, start + Eigen::Vector3d(0.02, 0.01, -0.02));
       drag(feedback_pub, Feedback::POSE_UPDATE, target);
