@@ -3,11 +3,17 @@
 // interpolated in the grid's material coordinates onto the fine grid's particles, and compared with a
 // converged explicit `full` on the fine grid over a config's first handle scenario. The scenario's
 // handles are mapped to the coarse particles whose interpolation covers the fine handle particles.
-//   coarse_grid_accuracy --config FILE --coarse 25x25 [--coarse 17x17 ...] --reference-step 0.00025
-//     [--sample 0.05] [--implicit-step 0.005] [--explicit-from 0.0005] [--set key=value ...]
+//   coarse_grid_accuracy --config FILE --coarse 25x25 [--coarse 17x17 ...] --reference-step 0.0001
+//     [--sample 0.05] [--implicit-step 0.005] [--explicit-from 0.0005] [--handle-map cover|nearest]
+//     [--hold SECONDS] [--series K] [--set key=value ...]
 // prints one row per run: mean and largest RMS distance over the fine grid's free particles to the
-// reference, the deepest of them inside a collider, and the thread's CPU per simulated second (of the
-// steps and the handles' motion only). For callgrind, one run alone with only its steps instrumented:
+// reference (the mean also split where the reference stops being converged), the deepest of them
+// inside a collider, their mean y at the end, and the thread's CPU per simulated second (of the steps
+// and the handles' motion only). Each grid's explicit step is its largest stable one of the form
+// sample / n, searched from --explicit-from up. --handle-map nearest holds the coarse particle nearest
+// each fine handle particle instead of those covering it; --hold replaces the scenario's hold time;
+// --series K prints every K-th sample's RMS distance and mean y after each row. For callgrind, one
+// run alone with only its steps instrumented:
 //   valgrind --tool=callgrind --instr-atstart=no coarse_grid_accuracy --config FILE --only 25x25
 //     --integrator explicit --step 0.002 [--until 2.0]
 // docs/benchmarks.md, "A coarse grid as the reduced model: accuracy and cost", has the figures.
@@ -129,8 +135,15 @@ Eigen::Matrix3Xd interpolate(const Eigen::Matrix3Xd& coarse_points, const std::v
 // The same cloth on a coarse grid: the width kept (spacing scaled), the total mass kept (mass per
 // particle scaled), the spring constants kept (a square mass-spring grid's stretch modulus is k,
 // whatever the spacing), the contact thickness kept in metres; the scenario's handles are the coarse
-// particles that interpolate a fine handle particle with a weight above round-off.
-Scene coarseScene(const Scene& fine, const GridSize& size)
+// particles that interpolate a fine handle particle with a weight above round-off (cover), or the
+// coarse particle nearest each fine handle particle in material coordinates (nearest).
+enum class HandleMap
+{
+  Cover,
+  Nearest
+};
+
+Scene coarseScene(const Scene& fine, const GridSize& size, HandleMap map)
 {
   const double width = (fine.grid.cols - 1) * fine.grid.spacing;
   const double height = (fine.grid.rows - 1) * fine.grid.spacing;
@@ -154,9 +167,15 @@ Scene coarseScene(const Scene& fine, const GridSize& size)
   {
     std::set<int> mapped;
     for (int p : path.particles)
-      for (int k = 0; k < 4; ++k)
-        if (stencils[static_cast<size_t>(p)].weight[k] > 1e-9)
-          mapped.insert(stencils[static_cast<size_t>(p)].particle[k]);
+    {
+      const Stencil& s = stencils[static_cast<size_t>(p)];
+      if (map == HandleMap::Nearest)
+        mapped.insert(s.particle[std::max_element(s.weight, s.weight + 4) - s.weight]);
+      else
+        for (int k = 0; k < 4; ++k)
+          if (s.weight[k] > 1e-9)
+            mapped.insert(s.particle[k]);
+    }
     for (int p : mapped)
       if (!taken.insert(p).second)
         throw std::invalid_argument("two handles of the scenario map to coarse particle " + std::to_string(p) +
@@ -347,6 +366,8 @@ int run(int argc, char** argv)
 {
   std::string config, only, integrator = "explicit";
   std::vector<GridSize> coarse_sizes;
+  double hold = -1.0;
+  HandleMap handle_map = HandleMap::Cover;
   double reference_step = 0.0, sample = 0.05, implicit_step = 0.005, explicit_from = 0.0005, step = 0.0, until = -1.0;
   std::vector<std::pair<std::string, std::string>> sets;
   for (int i = 1; i < argc; ++i)
@@ -373,6 +394,14 @@ int run(int argc, char** argv)
       integrator = value;
     else if (arg == "--step")
       step = std::stod(value);
+    else if (arg == "--handle-map")
+    {
+      if (value != "cover" && value != "nearest")
+        throw std::invalid_argument("--handle-map must be cover or nearest, got '" + value + "'");
+      handle_map = value == "cover" ? HandleMap::Cover : HandleMap::Nearest;
+    }
+    else if (arg == "--hold")
+      hold = std::stod(value);
     else if (arg == "--series")
       series_every = std::stoi(value);
     else if (arg == "--until")
@@ -407,12 +436,14 @@ int run(int argc, char** argv)
   if (!scenarios_node.IsDefined())
     throw std::invalid_argument("config '" + config + "' has no handle_scenarios");
   fine.scenario = parseHandleScenarios(scenarios_node, "handle_scenarios").front();
+  if (hold >= 0.0)
+    fine.scenario.hold_time = hold;
 
   if (!only.empty())  // one run alone, for callgrind
   {
     if (!(step > 0.0))
       throw std::invalid_argument("--only needs --step > 0 s");
-    const Scene scene = only == "fine" ? fine : coarseScene(fine, parseSize(only));
+    const Scene scene = only == "fine" ? fine : coarseScene(fine, parseSize(only), handle_map);
     const Run r = runFull(scene, parseIntegrator(integrator), step, sample, until);
     std::printf("%s, %s %.4g ms: %ld steps, %.3f simulated s%s, CPU per simulated second %.3g\n", only.c_str(),
                 integrator.c_str(), 1e3 * step, r.steps, r.simulated_seconds,
@@ -464,7 +495,7 @@ int run(int argc, char** argv)
   both(fine, nullptr, sizeLabel(fine.grid.rows, fine.grid.cols));
   for (const GridSize& size : coarse_sizes)
   {
-    const Scene coarse = coarseScene(fine, size);
+    const Scene coarse = coarseScene(fine, size, handle_map);
     const std::vector<Stencil> stencils = interpolationStencils(fine.grid, size);
     std::printf("| %s: spacing %.4g m, mass %.4g kg, handle particles %zu |\n", sizeLabel(size.rows, size.cols).c_str(),
                 coarse.grid.spacing, coarse.grid.mass, coarse.scenario.handles.front().particles.size());
