@@ -249,7 +249,7 @@ Run runFull(const Scene& scene, IntegratorKind integrator, double dt, double sam
 // without diverging: n lowered by about 10% from sample / from until a run diverges, then bisected.
 int largestStableSubdivision(const Scene& scene, double sample, double from)
 {
-  int stable = static_cast<int>(std::lround(sample / from));
+  int stable = std::max(1, static_cast<int>(std::lround(sample / from)));
   if (runFull(scene, IntegratorKind::Explicit, sample / stable, sample).diverged)
     throw std::runtime_error("explicit `full` diverges already at " + std::to_string(sample / stable) +
                              " s: give a smaller --explicit-from");
@@ -362,6 +362,22 @@ IntegratorKind parseIntegrator(const std::string& name)
   throw std::invalid_argument("--integrator must be explicit or implicit, got '" + name + "'");
 }
 
+// A number of an option, or an error naming the option.
+double number(const std::string& option, const std::string& value)
+{
+  try
+  {
+    size_t used = 0;
+    const double x = std::stod(value, &used);
+    if (used == value.size() && std::isfinite(x))
+      return x;
+  }
+  catch (const std::exception&)
+  {
+  }
+  throw std::invalid_argument(option + " must be a finite number, got '" + value + "'");
+}
+
 int run(int argc, char** argv)
 {
   std::string config, only, integrator = "explicit";
@@ -381,19 +397,19 @@ int run(int argc, char** argv)
     else if (arg == "--coarse")
       coarse_sizes.push_back(parseSize(value));
     else if (arg == "--reference-step")
-      reference_step = std::stod(value);
+      reference_step = number(arg, value);
     else if (arg == "--sample")
-      sample = std::stod(value);
+      sample = number(arg, value);
     else if (arg == "--implicit-step")
-      implicit_step = std::stod(value);
+      implicit_step = number(arg, value);
     else if (arg == "--explicit-from")
-      explicit_from = std::stod(value);
+      explicit_from = number(arg, value);
     else if (arg == "--only")
       only = value;
     else if (arg == "--integrator")
       integrator = value;
     else if (arg == "--step")
-      step = std::stod(value);
+      step = number(arg, value);
     else if (arg == "--handle-map")
     {
       if (value != "cover" && value != "nearest")
@@ -401,11 +417,19 @@ int run(int argc, char** argv)
       handle_map = value == "cover" ? HandleMap::Cover : HandleMap::Nearest;
     }
     else if (arg == "--hold")
-      hold = std::stod(value);
+    {
+      hold = number(arg, value);
+      if (hold < 0.0)
+        throw std::invalid_argument("--hold must be >= 0 s, got '" + value + "'");
+    }
     else if (arg == "--series")
-      series_every = std::stoi(value);
+    {
+      series_every = static_cast<int>(number(arg, value));
+      if (series_every < 1)
+        throw std::invalid_argument("--series must be a whole number >= 1, got '" + value + "'");
+    }
     else if (arg == "--until")
-      until = std::stod(value);
+      until = number(arg, value);
     else if (arg == "--set")
     {
       const size_t eq = value.find('=');
@@ -453,6 +477,13 @@ int run(int argc, char** argv)
 
   if (!(reference_step > 0.0))
     throw std::invalid_argument("need --reference-step > 0 s (the converged explicit `full` on the fine grid)");
+  // Every coarse grid checked before the fine runs.
+  std::vector<Scene> coarse_scenes;
+  for (const GridSize& size : coarse_sizes)
+  {
+    coarse_scenes.push_back(coarseScene(fine, size, handle_map));
+    gridWithHandles(coarse_scenes.back().grid, coarse_scenes.back().scenario);
+  }
   const GridParams fine_held = gridWithHandles(fine.grid, fine.scenario);
   std::vector<bool> free(static_cast<size_t>(fine.grid.rows) * fine.grid.cols, true);
   for (const auto& handle : fine_held.handles)
@@ -493,9 +524,10 @@ int run(int argc, char** argv)
       printRow(label + ", implicit", imp, compare(imp, stencils, reference, free, fine.sim.colliders));
   };
   both(fine, nullptr, sizeLabel(fine.grid.rows, fine.grid.cols));
-  for (const GridSize& size : coarse_sizes)
+  for (size_t i = 0; i < coarse_sizes.size(); ++i)
   {
-    const Scene coarse = coarseScene(fine, size, handle_map);
+    const GridSize& size = coarse_sizes[i];
+    const Scene& coarse = coarse_scenes[i];
     const std::vector<Stencil> stencils = interpolationStencils(fine.grid, size);
     std::printf("| %s: spacing %.4g m, mass %.4g kg, handle particles %zu |\n", sizeLabel(size.rows, size.cols).c_str(),
                 coarse.grid.spacing, coarse.grid.mass, coarse.scenario.handles.front().particles.size());
