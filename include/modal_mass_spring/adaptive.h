@@ -58,13 +58,14 @@ public:
   const std::string& lastSwitch() const { return last_switch_; }
 
 private:
-  // What the caller gave a step: the handles' motion, B's, the colliders' poses.
+  // What the caller gave a step: the handles' motion, B's, the colliders' poses, the external force.
   struct Motion
   {
     HandleMotion handles;
     FrameMotion frame;
     std::vector<Eigen::Isometry3d> colliders;
     std::vector<bool> active;
+    Eigen::VectorXd external_force;
   };
   Motion motion() const;
   void apply(const Motion& m);

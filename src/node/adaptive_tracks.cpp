@@ -22,8 +22,6 @@ StepResult SimulationNode::stepTrack(Track& track)
     track.adaptive.reset();
     return track.simulation->step(1);
   }
-  if (track.adaptive && track.adaptive_of != track.simulation.get())
-    track.adaptive.reset();  // a rebuild or a new held set replaced the simulation
   if (!track.adaptive)
   {
     // Made once the reduced method can run without a training (a cubature may still be training in
@@ -44,11 +42,24 @@ StepResult SimulationNode::stepTrack(Track& track)
                 toString(simulation.method()).c_str());
       return simulation.step(1);
     }
-    track.adaptive_of = &simulation;
     track.logged_switches = 0;
   }
-  const StepResult result = track.adaptive->step();
-  track.error_estimate = track.adaptive->lastEstimate();
+  StepResult result;
+  try
+  {
+    result = track.adaptive->step();
+  }
+  catch (const std::exception& error)
+  {
+    // What the stepper cannot do (a checkpoint the simulation refuses): the method it runs steps on.
+    track.restartAdaptive();
+    adaptive_ = false;
+    ROS_ERROR("adaptive: %s; method %s steps on (~set_method adaptive starts it again)", error.what(),
+              toString(track.simulation->method()).c_str());
+    return StepResult{};
+  }
+  const double estimate = track.adaptive->lastEstimate();
+  track.error_estimate = std::isfinite(estimate) ? estimate : 0.0;
   if (track.adaptive->switches() != track.logged_switches)
   {
     track.logged_switches = track.adaptive->switches();

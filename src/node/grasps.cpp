@@ -338,9 +338,12 @@ void SimulationNode::swapInHeldSet(const NodeConfiguration& next, std::vector<st
   for (size_t k = 0; k < tracks_.size(); ++k)
   {
     Track& track = tracks_[k];
+    if (built[k]->method() != track.simulation->method())
+      built[k]->setMethod(track.simulation->method());  // adaptive under full: full carries its state
     carryOver(*track.simulation, *built[k]);
     track.step_offset += track.simulation->stepCount();
     track.simulation = std::move(built[k]);
+    track.restartAdaptive();
     track.divergence_message.clear();
     advertiseWrenches(track, track.handle_force_pubs, "handle_force/handle_", next.node.handles.size());
   }

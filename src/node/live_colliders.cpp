@@ -43,7 +43,10 @@ bool SimulationNode::setColliders(SetColliders::Request& request, SetColliders::
   accepted_.simulation.colliders = change.colliders;
   collider_frames_ = std::make_unique<ColliderFrames>(config_.simulation.colliders, config_.node.offset);
   for (Track& track : tracks_)
+  {
+    track.restartAdaptive();  // its checkpoints hold the old colliders
     advertiseWrenches(track, track.contact_force_pubs, "contact_force/collider_", change.colliders.size());
+  }
   ++live_builds_;  // the rollouts' workers are built anew with the new colliders
   response.ids.clear();
   std::string ids;

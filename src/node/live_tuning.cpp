@@ -43,11 +43,11 @@ void SimulationNode::reconfigure(SimulationConfig& config, uint32_t)
   const SimulationParams& self = candidate.simulation;
   if (self.self_collision)
     for (const Track& track : tracks_)
-      if (track.simulation->method() != Method::Full)
+      if (track.simulation->method() != Method::Full || adaptiveTrack(track))
       {
         ROS_ERROR("dynamic_reconfigure: self_collision: true needs method full on every grid, but '%s' runs %s; "
                   "refused, nothing changed",
-                  track.name.c_str(), toString(track.simulation->method()).c_str());
+                  track.name.c_str(), methodName(track).c_str());
         config = liveValues(accepted_);
         return;
       }
@@ -184,6 +184,7 @@ void SimulationNode::swapRebuilt()
     next.setPhysicalState(next.grid().gatherFree(old.positions() - next.linearizationPositions()), old.velocity());
     track.step_offset += old.stepCount();
     track.simulation = std::move(rebuilt_[k]);
+    track.restartAdaptive();
     track.divergence_message.clear();
   }
   rebuilt_.clear();

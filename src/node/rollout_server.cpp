@@ -55,7 +55,7 @@ bool SimulationNode::setState(SetState::Request& request, SetState::Response& re
       if (c.frame.empty() && (!contact->active(i) || !contact->pose(i).isApprox(c.pose, 0.0)))
         simulation.placeCollider(i, c.pose);
     }
-  primary().adaptive.reset();  // under adaptive, a stepper from the restored state
+  primary().restartAdaptive();  // under adaptive, a stepper from the restored state
   primary().name = methodName(primary());
   primary().step_offset = 0;
   primary().divergence_message = simulation.diverged() ? request.state.divergence_message : "";

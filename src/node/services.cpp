@@ -54,7 +54,7 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   const bool was_diverged = simulation.diverged();
   if (training_ && method == Method::Cubature)
   {
-    adaptive_ = to_adaptive;
+    adaptive_after_training_ = to_adaptive;
     switch_after_training_ = true;
     response.success = true;
     response.message = "the cubature is being trained in the background (" + trainingProgress() + "); still running '" +
@@ -73,7 +73,7 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
     {
       // Training takes up to minutes on the skinning span: the current method steps on meanwhile.
       trainInBackground(simulation.cubatureTraining());  // refuses a training beyond memory_limit_gb
-      adaptive_ = to_adaptive;
+      adaptive_after_training_ = to_adaptive;
       switch_after_training_ = true;
       response.success = true;
       response.message = "training the cubature in the background on basis " + toString(simulation.params().basis) +
@@ -109,7 +109,7 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
 std::string SimulationNode::finishSwitch(const std::string& previous, Method method, bool was_diverged)
 {
   const Simulation& simulation = *primary().simulation;
-  primary().adaptive.reset();  // under adaptive, a stepper from this state
+  primary().restartAdaptive();  // under adaptive, a stepper from this state
   primary().name = methodName(primary());
   primary().divergence_message.clear();
   synchronise();  // the shadow full starts again from the state carried over
@@ -178,7 +178,7 @@ void SimulationNode::adoptTrainedCubature()
   if (training_ || (!trained_ && training_failure_.empty()))
     return;
   Simulation& simulation = *primary().simulation;
-  const std::string previous = toString(simulation.method());
+  const std::string previous = methodName(primary());
   if (!trained_)
   {
     ROS_ERROR("cannot switch to cubature: its training failed: %s; still running '%s'", training_failure_.c_str(),
@@ -204,6 +204,7 @@ void SimulationNode::adoptTrainedCubature()
     ROS_ERROR("cannot switch to cubature: %s; still running '%s'", error.what(), previous.c_str());
     return;
   }
+  adaptive_ = adaptive_after_training_;
   finishSwitch(previous, Method::Cubature, was_diverged);
 }
 
@@ -219,7 +220,7 @@ bool SimulationNode::reset(std_srvs::Trigger::Request&, std_srvs::Trigger::Respo
   for (Track& track : tracks_)
   {
     track.simulation->reset();
-    track.adaptive.reset();  // its checkpoint was before the reset
+    track.restartAdaptive();  // its checkpoints were before the reset
     track.step_offset = 0;
     track.divergence_message.clear();
   }

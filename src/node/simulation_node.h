@@ -88,12 +88,19 @@ private:
     // Method adaptive (the single method's track): its stepper, made for `simulation` once that runs
     // the reduced method, and the switches it has logged. Declared after `simulation`, which it uses.
     std::unique_ptr<AdaptiveStepper> adaptive;
-    const Simulation* adaptive_of = nullptr;
     int logged_switches = 0;
     // A reduced method's estimated RMS distance to full (m; the stepper's last check under adaptive),
     // and the wall time it was last refreshed.
     double error_estimate = 0.0;
     double estimate_wall = -1.0;
+    // After a state, a simulation or colliders the stepper's checkpoints do not know: made again at
+    // the next step, the estimate measured again.
+    void restartAdaptive()
+    {
+      adaptive.reset();
+      error_estimate = 0.0;
+      estimate_wall = -1.0;
+    }
     Eigen::Vector3d offset = Eigen::Vector3d::Zero();
     std::string grid_frame;
     std::string ns_prefix;  // of its marker namespaces
@@ -382,6 +389,7 @@ private:
   bool training_ = false;
   bool switch_after_training_ = false;
   bool adaptive_ = false;  // the single method is adaptive (method: adaptive, or ~set_method)
+  bool adaptive_after_training_ = false;  // the switch after the training is to adaptive
   std::optional<Cubature> trained_;
   std::string training_failure_;
   std::atomic<bool> cancel_training_{false};

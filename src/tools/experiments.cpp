@@ -75,31 +75,45 @@ std::unique_ptr<Simulation> buildTimed(const GridParams& grid, const SimulationP
   return sim;
 }
 
-// `steps` steps from the initial state (a reset): of the simulation's method, or with `adaptive`
-// through an AdaptiveStepper made after the reset, whose share and switches go to `stats`. Stops at a
-// divergence.
-StepResult stepFromReset(Simulation& sim, int steps, const std::optional<AdaptiveSettings>& adaptive,
-                         CostRow* stats = nullptr)
+// A run from the initial state: the simulation reset and, with `adaptive`, an AdaptiveStepper made
+// there (both before any timing starts); then steps of the simulation's method or through the
+// stepper, which stop at a divergence.
+class RunFromReset
 {
-  sim.reset();
-  if (!adaptive)
-    return sim.step(steps);
-  AdaptiveStepper stepper(sim, *adaptive);
-  StepResult total;
-  for (int k = 0; k < steps && !total.diverged; ++k)
+public:
+  RunFromReset(Simulation& sim, const std::optional<AdaptiveSettings>& adaptive) : sim_(sim)
   {
-    const StepResult result = stepper.step();
-    total.diverged = result.diverged;
-    total.message = result.message;
-    total.steps_taken += result.diverged ? 0 : 1;
+    sim_.reset();
+    if (adaptive)
+      stepper_.emplace(sim_, *adaptive);
   }
-  if (stats)
+  StepResult step(int steps)
   {
-    stats->reduced_share = stepper.reducedShare();
-    stats->switches = stepper.switches();
+    if (!stepper_)
+      return sim_.step(steps);
+    StepResult total;
+    for (int k = 0; k < steps && !total.diverged; ++k)
+    {
+      const StepResult result = stepper_->step();
+      total.diverged = result.diverged;
+      total.message = result.message;
+      total.steps_taken += result.diverged ? 0 : 1;
+    }
+    return total;
   }
-  return total;
-}
+  // Method "adaptive": its share of reduced steps and its switches.
+  void report(CostRow& row) const
+  {
+    if (!stepper_)
+      return;
+    row.reduced_share = stepper_->reducedShare();
+    row.switches = stepper_->switches();
+  }
+
+private:
+  Simulation& sim_;
+  std::optional<AdaptiveStepper> stepper_;
+};
 
 // Steps per timed run so that one run lasts about min_repeat_seconds, timed on the steps the method
 // takes: one that diverges is timed up to its divergence (its timed runs end there).
@@ -109,8 +123,9 @@ int stepsPerRepeat(Simulation& sim, double min_repeat_seconds, const std::option
   double per_step = 0.0;
   while (true)
   {
+    RunFromReset run(sim, adaptive);
     const auto start = Clock::now();
-    const StepResult result = stepFromReset(sim, calibration, adaptive);
+    const StepResult result = run.step(calibration);
     const double elapsed = seconds(start);
     per_step = elapsed / (result.steps_taken + (result.diverged ? 1 : 0));
     if (result.diverged || elapsed > 0.2 * min_repeat_seconds || calibration >= 1000000)
@@ -130,10 +145,12 @@ double timedRun(Simulation& sim, int steps, const std::optional<AdaptiveSettings
                 double& cpu_seconds)
 {
   long& diverged_step = row.diverged_step;
+  RunFromReset run(sim, adaptive);
   const auto start = Clock::now();
   const double cpu_start = threadCpuSeconds();
-  const StepResult result = stepFromReset(sim, steps, adaptive, &row);
+  const StepResult result = run.step(steps);
   const double elapsed = seconds(start), cpu = threadCpuSeconds() - cpu_start;
+  run.report(row);
   const long taken = result.diverged ? result.steps_taken + 1 : steps;
   if (result.diverged)
     diverged_step = taken;
@@ -215,7 +232,8 @@ bool checkStableAt(const ExperimentSetup& setup, Method method, double dt, int s
   SimulationParams params = withMethod(setup.sim, adaptive ? setup.sim.adaptive_method : method);
   params.time_step = dt;
   Simulation sim(setup.grid, params);
-  return !stepFromReset(sim, steps, adaptive ? std::optional<AdaptiveSettings>(adaptiveSettings(params)) : std::nullopt)
+  return !RunFromReset(sim, adaptive ? std::optional<AdaptiveSettings>(adaptiveSettings(params)) : std::nullopt)
+              .step(steps)
               .diverged;
 }
 
@@ -330,7 +348,7 @@ private:
   bool stable(double dt)
   {
     sim_.setTimeStep(dt);
-    const bool ok = !stepFromReset(sim_, options_.steps, adaptive_).diverged;
+    const bool ok = !RunFromReset(sim_, adaptive_).step(options_.steps).diverged;
     row_.tried.push_back({dt, ok});
     ++row_.trials;
     return ok;

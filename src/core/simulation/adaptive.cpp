@@ -45,7 +45,7 @@ AdaptiveStepper::AdaptiveStepper(Simulation& sim, const AdaptiveSettings& settin
 
 AdaptiveStepper::Motion AdaptiveStepper::motion() const
 {
-  Motion m{sim_.handleMotion(), sim_.frameMotion(), {}, {}};
+  Motion m{sim_.handleMotion(), sim_.frameMotion(), {}, {}, sim_.externalForce()};
   if (const Contact* contact = sim_.contact())
     for (int i = 0; i < static_cast<int>(contact->colliders().size()); ++i)
     {
@@ -69,6 +69,7 @@ void AdaptiveStepper::apply(const Motion& m)
   for (size_t i = 0; i < m.colliders.size(); ++i)
     if (m.active[i])
       sim_.setColliderPose(static_cast<int>(i), m.colliders[i]);
+  sim_.setExternalForce(m.external_force);
 }
 
 StepResult AdaptiveStepper::step()

@@ -171,3 +171,31 @@ TEST(Adaptive, GoesBackToTheSpanOnceTheStateIsWithinToleranceForTheDwell)
   EXPECT_TRUE(contains(second.lastSwitch(), "to physical at t = ")) << second.lastSwitch();
   EXPECT_LT(jump, 0.01);  // the step's own motion: the switch moved nothing
 }
+
+// A fall back takes its steps again with the external force each had: a push on one step of the
+// window is neither lost (the checkpoint's force is none) nor repeated on every step.
+TEST(Adaptive, AFallBackRetakesEachStepWithItsExternalForce)
+{
+  Simulation full(topRowHeld(), heldParams(Method::Full, BasisKind::LinearModes));
+  Simulation unpushed(topRowHeld(), heldParams(Method::Full, BasisKind::LinearModes));
+  Simulation adaptive_sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
+  AdaptiveSettings settings;
+  settings.reduced = Method::Physical;
+  settings.tolerance = 1e-15;  // its first check fails: `full` from the start
+  AdaptiveStepper adaptive(adaptive_sim, settings);
+  const Eigen::VectorXd none = Eigen::VectorXd::Zero(full.externalForce().size());
+  Eigen::VectorXd push = none;
+  push[3 * 95 + 1] = 0.5;  // N on a particle of the bottom row, along y
+  for (int k = 1; k <= 20; ++k)
+  {
+    const Eigen::VectorXd& force = k == 3 ? push : none;
+    full.setExternalForce(force);
+    adaptive_sim.setExternalForce(force);
+    ASSERT_FALSE(full.step().diverged);
+    ASSERT_FALSE(unpushed.step().diverged);
+    ASSERT_FALSE(adaptive.step().diverged);
+  }
+  EXPECT_EQ(adaptive.reducedShare(), 0.0);
+  EXPECT_GT(largestParticleDistance(full, unpushed.positions()), 1e-3) << "the push must move the cloth";
+  EXPECT_LT(largestParticleDistance(adaptive_sim, full.positions()), 1e-9);
+}
