@@ -75,6 +75,12 @@ std::unique_ptr<Simulation> buildTimed(const GridParams& grid, const SimulationP
   return sim;
 }
 
+// Method "adaptive"'s settings from a setup's parameters, or none for the plain methods.
+std::optional<AdaptiveSettings> adaptiveIf(bool adaptive, const SimulationParams& params)
+{
+  return adaptive ? std::optional<AdaptiveSettings>(adaptiveSettings(params)) : std::nullopt;
+}
+
 // A run from the initial state: the simulation reset and, with `adaptive`, an AdaptiveStepper made
 // there (both before any timing starts); then steps of the simulation's method or through the
 // stepper, which stop at a divergence.
@@ -179,8 +185,7 @@ std::vector<CostRow> runCost(const ExperimentSetup& setup, const CostOptions& op
     {
       // The last run is adaptive's: its reduced method under its stepper.
       const bool adaptive = m == options.methods.size();
-      const std::optional<AdaptiveSettings> settings =
-          adaptive ? std::optional<AdaptiveSettings>(adaptiveSettings(setup.sim)) : std::nullopt;
+      const std::optional<AdaptiveSettings> settings = adaptiveIf(adaptive, setup.sim);
       CostRow row;
       row.variant = setup.variant;
       row.method = adaptive ? "adaptive" : toString(options.methods[m]);
@@ -232,9 +237,7 @@ bool checkStableAt(const ExperimentSetup& setup, Method method, double dt, int s
   SimulationParams params = withMethod(setup.sim, adaptive ? setup.sim.adaptive_method : method);
   params.time_step = dt;
   Simulation sim(setup.grid, params);
-  return !RunFromReset(sim, adaptive ? std::optional<AdaptiveSettings>(adaptiveSettings(params)) : std::nullopt)
-              .step(steps)
-              .diverged;
+  return !RunFromReset(sim, adaptiveIf(adaptive, params)).step(steps).diverged;
 }
 
 namespace
@@ -405,8 +408,7 @@ std::vector<StabilityRow> runStability(const ExperimentSetup& setup, const Stabi
     row.full_bound = 2.0 / highestFrequencyAtRest(sim.grid());
     const std::string label = "stability " + row.method;
     report(progress, label, static_cast<double>(m) / runs);
-    StabilitySearch search(sim, options, row,
-                           adaptive ? std::optional<AdaptiveSettings>(adaptiveSettings(setup.sim)) : std::nullopt);
+    StabilitySearch search(sim, options, row, adaptiveIf(adaptive, setup.sim));
     search.boundary(setup.sim.time_step);
     report(progress, label, (m + 0.6) / runs);
     search.windows();

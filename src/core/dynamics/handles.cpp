@@ -6,6 +6,7 @@
 
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace modal_mass_spring
 {
@@ -61,12 +62,25 @@ Eigen::MatrixXd constraintModes(const SparseMatrix& k_ii, const SparseMatrix& k_
   return psi;
 }
 
-FrameVelocity interpolationVelocity(const FramePose& from, const FramePose& to, double duration)
+namespace
+{
+
+// The two poses' rotations as unit quaternions on the same side (q and -q are the same rotation), so
+// that the slerp between them and the turn they make take the shorter way.
+std::pair<Eigen::Quaterniond, Eigen::Quaterniond> shorterWay(const FramePose& from, const FramePose& to)
 {
   const Eigen::Quaterniond q0 = from.rotation.normalized();
   Eigen::Quaterniond q1 = to.rotation.normalized();
   if (q0.dot(q1) < 0.0)
-    q1.coeffs() = -q1.coeffs();  // the same rotation, the shorter way
+    q1.coeffs() = -q1.coeffs();
+  return {q0, q1};
+}
+
+}  // namespace
+
+FrameVelocity interpolationVelocity(const FramePose& from, const FramePose& to, double duration)
+{
+  const auto [q0, q1] = shorterWay(from, to);
   // Slerp turns at a constant rate about a fixed axis: omega = angle / T along it (world frame).
   const Eigen::AngleAxisd turn(q1 * q0.conjugate());
   return {(to.translation - from.translation) / duration, turn.angle() * turn.axis() / duration};
@@ -75,10 +89,7 @@ FrameVelocity interpolationVelocity(const FramePose& from, const FramePose& to, 
 RigidPointMotion interpolateRigidMotion(const Eigen::Matrix3Xd& offsets, const FramePose& from, const FramePose& to,
                                         double duration, double s)
 {
-  const Eigen::Quaterniond q0 = from.rotation.normalized();
-  Eigen::Quaterniond q1 = to.rotation.normalized();
-  if (q0.dot(q1) < 0.0)
-    q1.coeffs() = -q1.coeffs();  // the same rotation; slerp then takes the shorter way
+  const auto [q0, q1] = shorterWay(from, to);
   const Eigen::Quaterniond rotation = q0.slerp(s, q1);
   const FrameVelocity frame = interpolationVelocity(from, to, duration);
   const Eigen::Vector3d& omega = frame.angular;
@@ -141,9 +152,7 @@ FrameMotion interpolateFrameMotion(const FramePose& start, const FramePose& from
   // x = c + Q Q_start^-1 (y - c_start), so R = Q Q_start^-1 and p = c - R c_start.
   const Eigen::Matrix3Xd origin = Eigen::Vector3d::Zero();
   const RigidPointMotion c = interpolateRigidMotion(origin, from, to, duration, s);
-  Eigen::Quaterniond q0 = from.rotation.normalized(), q1 = to.rotation.normalized();
-  if (q0.dot(q1) < 0.0)
-    q1.coeffs() = -q1.coeffs();
+  const auto [q0, q1] = shorterWay(from, to);
   FrameMotion m;
   m.rotation = (q0.slerp(s, q1) * start.rotation.normalized().conjugate()).toRotationMatrix();
   m.angular_velocity = interpolationVelocity(from, to, duration).angular;
