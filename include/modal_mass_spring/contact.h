@@ -162,6 +162,11 @@ public:
   // next step, whether it is active, and whether one moved since the reset. Sizes checked by the caller.
   void restore(const std::vector<Eigen::Isometry3d>& poses, const std::vector<bool>& active, bool moved);
   const ContactReport& report() const { return report_; }
+  // Takes `other`'s colliders, thickness and poses (the next step's start and end, which are active):
+  // a second grid against the same colliders (method `coarse`'s grid for the simulation's).
+  void follow(const Contact& other);
+  // The last step's report, from a caller that corrected a grid standing for this one.
+  void setReport(ContactReport report) { report_ = std::move(report); }
 
   // `full`: corrects the free dofs' end positions x (absolute) and velocities v, given the start
   // positions x_start, the free dofs' masses and the step dt. Returns the largest correction.

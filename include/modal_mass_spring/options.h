@@ -13,6 +13,7 @@ enum class Method
   Linear,    // modal, F = -Lambda X
   Physical,  // modal, F = Phi^T f(x0 + Phi X)
   Cubature,  // modal, F ~ sum over a few springs of w_s Phi_s^T f_s (An, Kim & James 2008)
+  Coarse,    // the same cloth on a coarser grid, `full` there, interpolated onto the grid
 };
 
 // Where K is taken and the modal coordinates are measured from.
@@ -62,11 +63,13 @@ enum class HandleFormulation
   MovingFrame,      // the grid simulated in the frame of the one rigid body that holds every handle
 };
 
-// "full", "linear", "physical", "cubature"
+// "full", "linear", "physical", "cubature", "coarse"
 std::string toString(Method method);
 // Throws std::invalid_argument naming the valid methods.
 Method parseMethod(const std::string& name);
 const std::vector<std::string>& methodNames();
+// The methods that simulate in a modal basis (linear, physical, cubature).
+bool isModal(Method method);
 // "rest", "equilibrium"; "explicit", "implicit"; "initial", "equilibrium". The parsers throw
 // std::invalid_argument naming the parameter and the valid values.
 std::string toString(Linearization linearization);

@@ -34,7 +34,7 @@ public:
 //   equilibrium_max_iterations, hht_alpha, energy_tolerance,
 //   memory_limit_gb, basis, num_derivative_modes, num_skinning_weights, cubature_tolerance, cubature_max_springs,
 //   cubature_training_poses, cubature_max_training_poses, cubature_pose_size, cubature_seed,
-//   contact_thickness, self_collision, self_collision_thickness, self_friction
+//   contact_thickness, self_collision, self_collision_thickness, self_friction, coarse_cols
 GridParams loadGridParams(const ParameterSource& source);
 SimulationParams loadSimulationParams(const ParameterSource& source);
 

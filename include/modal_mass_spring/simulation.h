@@ -25,6 +25,7 @@ namespace modal_mass_spring
 // The method objects and what builds them are internal (src/core/dynamics/method_model.h).
 class ErrorIndicator;
 class MethodModel;
+struct CoarseGrid;
 struct IntegratorSettings;
 enum class Remainder;
 
@@ -86,6 +87,9 @@ struct SimulationParams
   int cubature_max_training_poses = 0;
   double cubature_pose_size = 0.4;
   int cubature_seed = 1;
+  // `coarse`'s grid: its columns, its rows following from the spacing (0: about a third of cols; see
+  // reduction/coarse_grid.h).
+  int coarse_cols = 0;
   // How the modal methods follow moving handles. constraint_modes: Craig-Bampton (see
   // setHandleMotion), linear in the handles' displacement, so large turns distort it. moving_frame:
   // every method simulates the grid in the frame B of the one rigid body that holds every handle
@@ -203,6 +207,8 @@ public:
   const DerivativeBasisInfo& derivativeInfo() const { return derivative_info_; }
   // What building the skinning subspace did (all zero unless basis: skinning).
   const SkinningInfo& skinningInfo() const { return skinning_info_; }
+  // `coarse`'s grid (reduction/coarse_grid.h): null until the method is first used.
+  const Grid* coarseGrid() const;
   const SimulationParams& params() const { return params_; }
   Method method() const;
 
@@ -306,7 +312,8 @@ public:
   // How far the current state is estimated to be from what `full` would do from it (m, an RMS over
   // the free particles): the displacement that balances the full model's force outside the
   // method's span (reduction/error_indicator.h). 0 for `full`. O(springs + n r) and a sparse solve;
-  // the first call factorises the springs' Laplacian.
+  // the first call factorises the springs' Laplacian. A modal method's only (std::logic_error for
+  // `coarse`, which has no span).
   double errorIndicator();
   // How far the current state is from the span of method `reduced` (m, an RMS over the free
   // particles): the part of the displacement (less the handles' constraint modes) that its
@@ -471,6 +478,7 @@ private:
   double start_energy_ = 0.0;  // the method's energy at the start of the run, carried over switches
   double projection_error_ = 0.0;
   std::unique_ptr<ErrorIndicator> error_indicator_;  // built at the first errorIndicator()
+  std::unique_ptr<CoarseGrid> coarse_;               // built at the first use of `coarse`
   Eigen::VectorXd external_force_;  // on every dof; zero: none
   SparseMatrix handle_coupling_;        // K_ib at x_ref (interior x handle dofs)
   Eigen::MatrixXd constraint_modes_;    // Psi; empty until a modal method needs it

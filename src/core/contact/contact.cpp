@@ -76,6 +76,16 @@ void Contact::restore(const std::vector<Eigen::Isometry3d>& poses, const std::ve
   moved_ = moved;
 }
 
+void Contact::follow(const Contact& other)
+{
+  colliders_ = other.colliders_;
+  thickness_ = other.thickness_;
+  poses_ = other.poses_;
+  start_poses_ = other.start_poses_;
+  active_ = other.active_;
+  moved_ = other.moved_;
+}
+
 namespace
 {
 

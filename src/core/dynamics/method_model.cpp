@@ -112,7 +112,12 @@ void MethodModel::setState(const Eigen::VectorXd& q, const Eigen::VectorXd& v)
 void MethodModel::restore(const State& state, const Eigen::VectorXd&) { state_ = state; }
 
 FullMethod::FullMethod(const LinearizedGrid& linearized, const IntegratorSettings& settings)
-  : MethodModel(Method::Full, linearized, std::make_unique<FullForceModel>(linearized.grid, linearized.x_ref))
+  : FullMethod(Method::Full, linearized, settings)
+{
+}
+
+FullMethod::FullMethod(Method method, const LinearizedGrid& linearized, const IntegratorSettings& settings)
+  : MethodModel(method, linearized, std::make_unique<FullForceModel>(linearized.grid, linearized.x_ref))
 {
   configure(settings);
 }
@@ -520,6 +525,8 @@ std::unique_ptr<MethodModel> makeMethod(Method method, const LinearizedGrid& lin
 {
   if (method == Method::Full)
     return std::make_unique<FullMethod>(linearized, settings);
+  if (method == Method::Coarse)
+    return std::make_unique<CoarseMethod>(linearized, settings);
   return std::make_unique<ModalMethod>(method, linearized, settings);
 }
 

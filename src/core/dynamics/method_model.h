@@ -12,6 +12,7 @@
 #include "modal_mass_spring/options.h"
 #include "modal_mass_spring/self_collision.h"
 #include "dynamics/integrator.h"
+#include "reduction/coarse_grid.h"
 
 #include <Eigen/Core>
 
@@ -36,6 +37,8 @@ struct LinearizedGrid
   // Psi is the static response -K_ii^-1 K_ib (Craig-Bampton); false for another particular solution
   // of the handles (the skinning span's), whose stiffness coupling K_ii Psi + K_ib is not zero.
   bool static_constraint_modes = true;
+  // `coarse`'s grid (built when the method is first used; null before).
+  const CoarseGrid* coarse = nullptr;
 };
 
 // A method's force model plus a constant external load G in the same coordinates: F(q) + G, with
@@ -211,6 +214,8 @@ class FullMethod : public MethodModel
 {
 public:
   FullMethod(const LinearizedGrid& linearized, const IntegratorSettings& settings);
+  // `full` on another grid standing for this one (`coarse`).
+  FullMethod(Method method, const LinearizedGrid& linearized, const IntegratorSettings& settings);
   double assign(const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder) override;
   Eigen::VectorXd displacement(const State& s) const override { return s.q; }
   Eigen::VectorXd velocity(const State& s) const override { return s.v; }
@@ -318,6 +323,54 @@ private:
   // |offset + Phi X - anchor|_M^2 = c + 2 b.X + X.X with b = Phi^T M (offset - anchor).
   Eigen::VectorXd anchor_b_;
   double anchor_c_ = 0.0;
+};
+
+// `coarse`: `full` on the coarse grid (reduction/coarse_grid.h), its q the coarse free dofs'
+// displacement from the coarse rest; the fine grid's free dofs follow by interpolation,
+// u = offset + P x_c - x_ref, reconstructed only when read. The fine handle motion moves the coarse
+// handle particles; contact is the coarse particles' against the simulation's colliders.
+class CoarseMethod : public FullMethod
+{
+public:
+  // `fine`: the simulation's grid, with fine.coarse set.
+  CoarseMethod(const LinearizedGrid& fine, const IntegratorSettings& settings);
+  // Samples the fine displacement and velocity at the coarse particles; Keep freezes what the
+  // interpolation of the sample misses as the offset.
+  double assign(const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder) override;
+  Eigen::VectorXd displacement(const State& s) const override;
+  Eigen::VectorXd velocity(const State& s) const override;
+  double displacementAt(const State& s, int k) const override;
+  double velocityAt(const State& s, int k) const override;
+  void setAnchor(const Eigen::VectorXd& u_anchor, const Eigen::VectorXd& handles_anchor) override;
+  void setHandleMotion(const HandleMotion& motion) override;
+  Eigen::VectorXd offset() const override { return offset_; }
+  void restore(const State& state, const Eigen::VectorXd& offset) override;
+  // The coarse particles against colliders posed as the simulation's; its report in the fine
+  // grid's terms (a fine particle touches what the heaviest of its stencil touched).
+  void correctContacts(Contact& contact) override;
+
+private:
+  // P^T f: a fine free-dof force on the coarse free dofs.
+  Eigen::VectorXd generalizedForce(const Eigen::VectorXd& f_free) const override;
+  // The coarse grid's every dof: its rest plus q on the free dofs and the handles' displacement.
+  Eigen::VectorXd coarsePositions(const Eigen::VectorXd& q) const;
+  Eigen::VectorXd coarseVelocities(const Eigen::VectorXd& v) const;
+  // A fine free-dof vector with the fine handle dofs' values (empty: zero), sampled at the coarse
+  // free dofs.
+  Eigen::VectorXd sampleFree(const Eigen::VectorXd& fine_free, const Eigen::VectorXd& fine_handles) const;
+  HandleMotion coarseMotion(const HandleMotion& fine) const;
+  // Fine free dof k interpolated from the coarse free dofs' values, the handle dofs' and a rest
+  // (every coarse dof; empty: zero).
+  double interpolateAt(const Eigen::VectorXd& free, const Eigen::VectorXd& handles, const Eigen::VectorXd& rest,
+                       int k) const;
+
+  const LinearizedGrid fine_;
+  const CoarseGrid& coarse_;
+  Eigen::VectorXd fine_reference_;  // x_ref on the fine free dofs
+  Eigen::VectorXd offset_;          // fine free dofs; empty: none
+  HandleMotion fine_motion_, coarse_motion_;
+  std::vector<int> handle_index_;     // per coarse dof: its index in the coarse handle dofs, -1 none
+  std::unique_ptr<Contact> contact_;  // built at the first contact
 };
 
 std::unique_ptr<MethodModel> makeMethod(Method method, const LinearizedGrid& linearized,

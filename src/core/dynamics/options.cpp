@@ -31,9 +31,14 @@ const std::vector<std::string> kHandleFormulations{"auto", "constraint_modes", "
 
 const std::vector<std::string>& methodNames()
 {
-  static const std::vector<std::string> names{"full", "linear", "physical", "cubature"};
+  static const std::vector<std::string> names{"full", "linear", "physical", "cubature", "coarse"};
   return names;
 }
+bool isModal(Method method)
+{
+  return method == Method::Linear || method == Method::Physical || method == Method::Cubature;
+}
+
 std::string toString(Method method) { return methodNames()[static_cast<int>(method)]; }
 Method parseMethod(const std::string& name) { return static_cast<Method>(parseName("method", name, methodNames())); }
 

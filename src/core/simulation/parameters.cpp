@@ -105,6 +105,7 @@ SimulationParams loadSimulationParams(const ParameterSource& s)
   p.cubature_max_training_poses = s.getInt("cubature_max_training_poses").value_or(p.cubature_max_training_poses);
   p.cubature_pose_size = s.getDouble("cubature_pose_size").value_or(p.cubature_pose_size);
   p.cubature_seed = s.getInt("cubature_seed").value_or(p.cubature_seed);
+  p.coarse_cols = s.getInt("coarse_cols").value_or(p.coarse_cols);
   if (const auto name = s.getString("handle_formulation"))
     p.handle_formulation = parseHandleFormulation(*name);
   return p;

@@ -87,10 +87,6 @@ Simulation::Simulation(const GridParams& grid_params, const SimulationParams& pa
       on_stage("cubature");
     prepareCubature(on_iteration);
   }
-  if (!params_.colliders.empty())
-    contact_ = std::make_unique<Contact>(grid_, params_.colliders,
-                                         params_.contact_thickness > 0.0 ? params_.contact_thickness
-                                                                         : kDefaultThicknessFraction * g.spacing);
   if (params_.self_collision)
     self_collision_ = std::make_unique<SelfCollision>(grid_, params_.self_collision_thickness, params_.self_friction);
   reset();
@@ -149,7 +145,7 @@ void Simulation::precompute(const StageFn& on_stage, const IterationFn& on_itera
   }
   // `full` needs no basis: it is built at the first switch to a modal method, so that a run of `full`
   // alone does not wait for it.
-  else if (params_.method != Method::Full)
+  else if (isModal(params_.method))
     buildBasis(on_stage, on_iteration);
 }
 
@@ -186,6 +182,8 @@ void Simulation::linearizeAtEquilibrium(Precomputed& data, bool cached, const St
 }
 
 Simulation::~Simulation() = default;
+
+const Grid* Simulation::coarseGrid() const { return coarse_ ? &coarse_->grid : nullptr; }
 
 Method Simulation::method() const { return model_->method(); }
 int Simulation::lastNewtonIterations() const { return model_->integrator().lastIterations(); }
@@ -329,7 +327,7 @@ void Simulation::prepareConstraintModes(Method method)
   const bool handles = grid_.numHandleDofs() > 0;
   const bool moving_frame = formulation_ == HandleFormulation::MovingFrame;
   const bool skinning = params_.basis == BasisKind::Skinning && method != Method::Linear;
-  if (!handles || moving_frame || method == Method::Full || skinning || constraint_modes_.size() > 0)
+  if (!handles || moving_frame || !isModal(method) || skinning || constraint_modes_.size() > 0)
     return;
   try
   {
@@ -353,9 +351,11 @@ void Simulation::prepareConstraintModes(Method method)
 void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder)
 {
   // `linear` needs the eigenbasis (F = -Lambda X); every other modal method uses the physical basis,
-  // and the cubature is trained on it.
-  if (method != Method::Full)
+  // and the cubature is trained on it. `coarse` needs its grid.
+  if (isModal(method))
     buildBasis();
+  if (method == Method::Coarse && !coarse_)
+    coarse_ = std::make_unique<CoarseGrid>(grid_, params_.coarse_cols);
   const ModalBasis& basis = method == Method::Linear ? basis_ : physical_basis_;
   // Before a cubature's training: a held set the method cannot follow is refused at once.
   prepareConstraintModes(method);
@@ -374,6 +374,7 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
                             handles ? &handle_coupling_ : nullptr,
                             handles && !moving_frame && psi.size() > 0 ? &psi : nullptr};
   linearized.static_constraint_modes = !skinning;
+  linearized.coarse = coarse_.get();
   model_ = makeMethod(method, linearized, integratorSettings());
   params_.method = method;
   if (handles)

@@ -55,12 +55,15 @@ void Simulation::restoreState(const SimulationState& s)
   validateParameters(grid_.params(), changed);
   if (self_collision_ && s.method != Method::Full)
     rejectParameter("state.method", toString(s.method), kSelfCollisionMethods);
-  if (s.method != Method::Full)
+  if (isModal(s.method))
     buildBasis();
+  if (s.method == Method::Coarse && !coarse_)
+    coarse_ = std::make_unique<CoarseGrid>(grid_, params_.coarse_cols);
   const Eigen::Index free_dofs = u_start_.size();
-  const Eigen::Index coordinates = s.method == Method::Full  ? free_dofs
+  const Eigen::Index coordinates = s.method == Method::Full     ? free_dofs
+                                   : s.method == Method::Coarse ? coarse_->grid.numFreeDofs()
                                    : s.method == Method::Linear ? basis_.phi.cols()
-                                                                 : physical_basis_.phi.cols();
+                                                                : physical_basis_.phi.cols();
   auto check = [](const std::string& name, const Eigen::VectorXd& values, Eigen::Index size, bool may_be_empty) {
     if (values.size() != size && !(may_be_empty && values.size() == 0))
       rejectParameter("state." + name, std::to_string(values.size()) + " values",
@@ -217,6 +220,8 @@ double Simulation::errorIndicator()
 {
   if (params_.method == Method::Full)
     return 0.0;
+  if (params_.method == Method::Coarse)
+    throw std::logic_error("errorIndicator: method 'coarse' has no span to measure the force outside of");
   if (!error_indicator_)
     error_indicator_ = std::make_unique<ErrorIndicator>(grid_, mass_);
   // In the body frame where one moves: the springs do not see the frame, and the basis lives there.
@@ -231,7 +236,7 @@ double Simulation::errorIndicator()
 
 double Simulation::spanDistance(Method reduced) const
 {
-  if (!basis_built_ || reduced == Method::Full)
+  if (!basis_built_ || !isModal(reduced))
     throw std::logic_error("spanDistance: needs a modal method whose basis is built");
   const bool skinning = params_.basis == BasisKind::Skinning && reduced != Method::Linear;
   const ModalBasis& basis = reduced == Method::Linear ? basis_ : physical_basis_;

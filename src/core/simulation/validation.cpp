@@ -4,6 +4,7 @@
 
 #include "modal_mass_spring/adaptive.h"
 #include "modal_mass_spring/simulation.h"
+#include "reduction/coarse_grid.h"
 
 #include <algorithm>
 #include <cmath>
@@ -258,6 +259,9 @@ void validateParameters(const GridParams& grid, const SimulationParams& p)
   validateCubatureSettings(grid, p);
   validateMovingFrame(grid, p);
   validateContactSettings(grid, p);
+  // A coarse_cols given for a later switch to `coarse` is checked now.
+  if (p.method == Method::Coarse || p.coarse_cols != 0)
+    coarseGridParams(grid, p.coarse_cols);
   validateMemory(grid, p);
 }
 

@@ -1,0 +1,209 @@
+// `coarse`: `full` on the same cloth's coarse grid, read out on the fine grid by interpolation.
+#include "dynamics/method_model.h"
+
+#include <stdexcept>
+
+namespace modal_mass_spring
+{
+namespace
+{
+
+// The coarse grid's own parts, in the form `full` takes them.
+LinearizedGrid coarseLinearized(const LinearizedGrid& fine)
+{
+  if (!fine.coarse)
+    throw std::logic_error("the coarse method needs its coarse grid");
+  const CoarseGrid& c = *fine.coarse;
+  return LinearizedGrid{c.grid,    fine.basis, c.x_ref, c.stiffness, c.mass, nullptr,
+                        c.grid.numHandleDofs() > 0 ? &c.handle_coupling : nullptr};
+}
+
+// A vector over the handle dofs of one grid from another's: entry k is source[k]'s (empty stays empty).
+Eigen::VectorXd gather(const Eigen::VectorXd& values, const std::vector<int>& source)
+{
+  if (values.size() == 0)
+    return Eigen::VectorXd();
+  Eigen::VectorXd out(static_cast<Eigen::Index>(source.size()));
+  for (size_t k = 0; k < source.size(); ++k)
+    out[static_cast<Eigen::Index>(k)] = values[source[k]];
+  return out;
+}
+
+}  // namespace
+
+CoarseMethod::CoarseMethod(const LinearizedGrid& fine, const IntegratorSettings& settings)
+  : FullMethod(Method::Coarse, coarseLinearized(fine), settings), fine_(fine), coarse_(*fine.coarse)
+{
+  fine_reference_ = fine_.grid.gatherFree(fine_.x_ref);
+  handle_index_.assign(coarse_.grid.numDofs(), -1);
+  const std::vector<int>& dofs = coarse_.grid.handleDofs();
+  for (size_t k = 0; k < dofs.size(); ++k)
+    handle_index_[dofs[k]] = static_cast<int>(k);
+}
+
+Eigen::VectorXd CoarseMethod::coarsePositions(const Eigen::VectorXd& q) const
+{
+  Eigen::VectorXd x = coarse_.x_ref;
+  coarse_.grid.addFree(q, x);
+  const std::vector<int>& dofs = coarse_.grid.handleDofs();
+  if (coarse_motion_.displacement.size() > 0)
+    for (size_t k = 0; k < dofs.size(); ++k)
+      x[dofs[k]] += coarse_motion_.displacement[static_cast<Eigen::Index>(k)];
+  return x;
+}
+
+Eigen::VectorXd CoarseMethod::coarseVelocities(const Eigen::VectorXd& v) const
+{
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(coarse_.grid.numDofs());
+  coarse_.grid.addFree(v, x);
+  const std::vector<int>& dofs = coarse_.grid.handleDofs();
+  if (coarse_motion_.velocity.size() > 0)
+    for (size_t k = 0; k < dofs.size(); ++k)
+      x[dofs[k]] = coarse_motion_.velocity[static_cast<Eigen::Index>(k)];
+  return x;
+}
+
+Eigen::VectorXd CoarseMethod::sampleFree(const Eigen::VectorXd& fine_free, const Eigen::VectorXd& fine_handles) const
+{
+  Eigen::VectorXd all = Eigen::VectorXd::Zero(fine_.grid.numDofs());
+  fine_.grid.addFree(fine_free, all);
+  const std::vector<int>& dofs = fine_.grid.handleDofs();
+  if (fine_handles.size() > 0)
+    for (size_t k = 0; k < dofs.size(); ++k)
+      all[dofs[k]] = fine_handles[static_cast<Eigen::Index>(k)];
+  return coarse_.grid.gatherFree(coarse_.sampling * all);
+}
+
+HandleMotion CoarseMethod::coarseMotion(const HandleMotion& fine) const
+{
+  return HandleMotion{gather(fine.displacement, coarse_.handle_source), gather(fine.velocity, coarse_.handle_source),
+                      gather(fine.acceleration, coarse_.handle_source)};
+}
+
+double CoarseMethod::assign(const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder)
+{
+  // The fine positions sampled at the coarse particles, less the coarse rest (which the sampled fine
+  // rest equals unless the fine grid is linearized elsewhere, at its equilibrium).
+  Eigen::VectorXd x_ref = fine_.x_ref;
+  fine_.grid.addFree(u, x_ref);
+  const std::vector<int>& dofs = fine_.grid.handleDofs();
+  if (fine_motion_.displacement.size() > 0)
+    for (size_t k = 0; k < dofs.size(); ++k)
+      x_ref[dofs[k]] += fine_motion_.displacement[static_cast<Eigen::Index>(k)];
+  const Eigen::VectorXd q = coarse_.grid.gatherFree(coarse_.sampling * x_ref - coarse_.x_ref);
+  offset_.resize(0);
+  FullMethod::assign(q, sampleFree(v, fine_motion_.velocity), remainder);
+  const Eigen::VectorXd missed = u - displacement(state());
+  if (remainder == Remainder::Keep)
+  {
+    offset_ = missed;
+    return 0.0;
+  }
+  const int dim = fine_.grid.dimension();
+  return missed.size() == 0 ? 0.0 : std::sqrt(missed.reshaped(dim, missed.size() / dim).colwise().squaredNorm().maxCoeff());
+}
+
+Eigen::VectorXd CoarseMethod::displacement(const State& s) const
+{
+  Eigen::VectorXd u = coarse_.interpolation * coarsePositions(s.q) - fine_reference_;
+  if (offset_.size() > 0)
+    u += offset_;
+  return u;
+}
+
+Eigen::VectorXd CoarseMethod::velocity(const State& s) const { return coarse_.interpolation * coarseVelocities(s.v); }
+
+double CoarseMethod::interpolateAt(const Eigen::VectorXd& free, const Eigen::VectorXd& handles,
+                                   const Eigen::VectorXd& rest, int k) const
+{
+  const int dim = fine_.grid.dimension();
+  const int dof = fine_.grid.freeDofs()[k];
+  const Stencil& stencil = coarse_.interpolation_stencils[dof / dim];
+  double x = 0.0;
+  for (int i = 0; i < 4; ++i)
+  {
+    const int c = stencil.particle[i] * dim + dof % dim;
+    double value = rest.size() > 0 ? rest[c] : 0.0;
+    if (const int f = coarse_.grid.freeIndex(c); f >= 0)
+      value += free[f];
+    else if (handles.size() > 0 && handle_index_[c] >= 0)
+      value += handles[handle_index_[c]];
+    x += stencil.weight[i] * value;
+  }
+  return x;
+}
+
+double CoarseMethod::displacementAt(const State& s, int k) const
+{
+  return interpolateAt(s.q, coarse_motion_.displacement, coarse_.x_ref, k) - fine_reference_[k] +
+         (offset_.size() > 0 ? offset_[k] : 0.0);
+}
+
+double CoarseMethod::velocityAt(const State& s, int k) const
+{
+  return interpolateAt(s.v, coarse_motion_.velocity, Eigen::VectorXd(), k);
+}
+
+void CoarseMethod::setAnchor(const Eigen::VectorXd& u_anchor, const Eigen::VectorXd& handles_anchor)
+{
+  Eigen::VectorXd x = fine_.x_ref;
+  fine_.grid.addFree(u_anchor, x);
+  const std::vector<int>& dofs = fine_.grid.handleDofs();
+  if (handles_anchor.size() > 0)
+    for (size_t k = 0; k < dofs.size(); ++k)
+      x[dofs[k]] += handles_anchor[static_cast<Eigen::Index>(k)];
+  FullMethod::setAnchor(coarse_.grid.gatherFree(coarse_.sampling * x - coarse_.x_ref),
+                        gather(handles_anchor, coarse_.handle_source));
+}
+
+void CoarseMethod::setHandleMotion(const HandleMotion& motion)
+{
+  fine_motion_ = motion;
+  coarse_motion_ = coarseMotion(motion);
+  FullMethod::setHandleMotion(coarse_motion_);
+}
+
+void CoarseMethod::restore(const State& state, const Eigen::VectorXd& offset)
+{
+  MethodModel::restore(state, offset);
+  offset_ = offset;
+}
+
+Eigen::VectorXd CoarseMethod::generalizedForce(const Eigen::VectorXd& f_free) const
+{
+  return coarse_.grid.gatherFree(coarse_.interpolation.transpose() * f_free);
+}
+
+void CoarseMethod::correctContacts(Contact& contact)
+{
+  if (!contact_)
+    contact_ = std::make_unique<Contact>(coarse_.grid, contact.colliders(), contact.thickness());
+  contact_->follow(contact);
+  FullMethod::correctContacts(*contact_);
+
+  // A fine free particle touches what the heaviest particle of its stencil touched.
+  const ContactReport& coarse = contact_->report();
+  ContactReport fine = coarse;
+  const int dim = fine_.grid.dimension();
+  const std::vector<int>& free_dofs = fine_.grid.freeDofs();
+  fine.touched_by.assign(free_dofs.size() / dim, -1);
+  std::fill(fine.touching.begin(), fine.touching.end(), 0);
+  for (size_t j = 0; j < fine.touched_by.size(); ++j)
+  {
+    const Stencil& stencil = coarse_.interpolation_stencils[free_dofs[j * dim] / dim];
+    int heaviest = 0;
+    for (int i = 1; i < 4; ++i)
+      if (stencil.weight[i] > stencil.weight[heaviest])
+        heaviest = i;
+    const int free = coarse_.grid.freeIndex(stencil.particle[heaviest] * dim);
+    if (free < 0 || coarse.touched_by.empty())
+      continue;
+    const int collider = coarse.touched_by[free / dim];
+    fine.touched_by[j] = collider;
+    if (collider >= 0)
+      ++fine.touching[collider];
+  }
+  contact.setReport(std::move(fine));
+}
+
+}  // namespace modal_mass_spring

@@ -1,0 +1,60 @@
+// Method `coarse`'s reduced model: the same cloth on a coarser grid. The coarse grid keeps the fine
+// one's width, height, total mass and spring constants (a square grid's in-plane stiffness does not
+// depend on its spacing), so its particles are heavier and further apart and it is stable at a
+// larger explicit step. The fine particles follow it by bilinear interpolation in material
+// coordinates; the fine grid's fixed and handle particles hold the coarse particles nearest them.
+#pragma once
+
+#include "modal_mass_spring/grid.h"
+#include "modal_mass_spring/spring_forces.h"  // SparseMatrix
+
+#include <Eigen/Core>
+
+#include <array>
+#include <vector>
+
+namespace modal_mass_spring
+{
+
+// A point of one grid as a bilinear blend of four particles of another.
+struct Stencil
+{
+  std::array<int, 4> particle;
+  std::array<double, 4> weight;
+};
+
+struct CoarseGrid
+{
+  // The coarse grid for `fine` (coarse_cols as coarseGridParams takes it, which throws).
+  CoarseGrid(const Grid& fine, int coarse_cols);
+
+  Grid grid;
+  // Its linearization at its own rest (the positions the fine grid's interpolate): what `full` on it
+  // takes as x_ref, K (Rayleigh damping), the free dofs' masses and K_ib.
+  Eigen::VectorXd x_ref;
+  SparseMatrix stiffness;
+  Eigen::VectorXd mass;
+  SparseMatrix handle_coupling;
+  // P: the fine grid's free dofs from every coarse dof (four entries a row, one per stencil particle).
+  SparseMatrix interpolation;
+  // Per fine particle, its stencil on the coarse grid.
+  std::vector<Stencil> interpolation_stencils;
+  // R: every coarse particle's position sampled from the fine grid's every dof (a coarse particle
+  // lies between fine ones unless the spacings divide).
+  SparseMatrix sampling;
+  // Per coarse handle dof (Grid::handleDofs() order): the fine handle dof (an index into the fine
+  // grid's handleDofs()) whose motion it copies, that of the fine handle particle nearest it.
+  std::vector<int> handle_source;
+};
+
+// The coarse grid's columns for `coarse_cols` (0: about a third of the fine grid's columns): its rows
+// follow from the spacing, (rows - 1) (coarse_cols - 1) / (cols - 1), which must be whole so that both
+// grids span the same cloth. Throws std::invalid_argument naming coarse_cols, with the allowed values.
+int resolveCoarseCols(const GridParams& fine, int coarse_cols);
+// The coarse grid's parameters for `coarse_cols` (0 resolved as above): the fine grid's with the
+// spacing and particle mass scaled, and the fine grid's fixed and handle particles moved to the
+// coarse particles nearest them. Throws std::invalid_argument naming coarse_cols when it is not
+// allowed, or when two fine handles, or a handle and a fixed particle, fall on one coarse particle.
+GridParams coarseGridParams(const GridParams& fine, int coarse_cols);
+
+}  // namespace modal_mass_spring

@@ -1,0 +1,261 @@
+// Method `coarse`: the same cloth on a coarser grid, interpolated onto the grid.
+#include "modal_mass_spring/simulation.h"
+#include "reduction/coarse_grid.h"
+
+#include "test_support.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <iostream>
+
+using namespace modal_mass_spring;
+
+namespace
+{
+
+// The RMS over the particles of the distance between two position vectors (m).
+double rmsDistance(const Eigen::VectorXd& a, const Eigen::VectorXd& b, int dim)
+{
+  const Eigen::VectorXd d = a - b;
+  return std::sqrt(d.squaredNorm() / (d.size() / dim));
+}
+
+// A sheet turned 60 degrees from hanging, top row fixed: it swings down.
+GridParams swingingSheet(int n)
+{
+  GridParams g = clothSheet(n);
+  g.rotation_deg = 60.0;
+  return g;
+}
+
+SimulationParams coarseParams(int coarse_cols, double dt = 1e-3)
+{
+  SimulationParams s = methodParams(Method::Coarse, 4, dt);
+  s.coarse_cols = coarse_cols;
+  return s;
+}
+
+// The handles' rigid motion at step k: a slide along x and down.
+void driveHandles(Simulation& sim, const Eigen::VectorXd& start, long k)
+{
+  const double t = (k + 1) * sim.params().time_step;
+  Eigen::VectorXd x = start, v = Eigen::VectorXd::Zero(start.size()), a = v;
+  for (Eigen::Index d = 0; d < x.size(); d += 3)
+  {
+    x[d] += 0.2 * t * t, v[d] = 0.4 * t, a[d] = 0.4;
+    x[d + 2] -= 0.1 * t, v[d + 2] = -0.1;
+  }
+  sim.setHandleMotion(x, v, a);
+}
+
+}  // namespace
+
+TEST(CoarseGrid, SpansTheSameClothWithItsMass)
+{
+  GridParams fine = swingingSheet(13);
+  const Grid grid(fine);
+  const CoarseGrid coarse(grid, 5);
+  EXPECT_EQ(coarse.grid.params().rows, 5);
+  EXPECT_DOUBLE_EQ(coarse.grid.params().spacing, 3 * fine.spacing);
+  EXPECT_NEAR(coarse.grid.particleMass() * coarse.grid.numParticles(), fine.mass * grid.numParticles(), 1e-12);
+  // The fine rest is the interpolation of the coarse rest, and the coarse rest the sample of the fine.
+  const Eigen::VectorXd interpolated = coarse.interpolation * coarse.x_ref;
+  EXPECT_LT((interpolated - grid.gatherFree(grid.initialPositions())).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_LT((coarse.sampling * grid.initialPositions() - coarse.x_ref).cwiseAbs().maxCoeff(), 1e-12);
+  // The top row stays fixed.
+  EXPECT_EQ(coarse.grid.fixedParticles(), (std::vector<int>{0, 1, 2, 3, 4}));
+}
+
+TEST(CoarseGrid, AboutAThirdOfTheColumnsByDefault)
+{
+  GridParams g = clothSheet(100);
+  EXPECT_EQ(resolveCoarseCols(g, 0), 34);
+  g = clothSheet(50);
+  EXPECT_EQ(resolveCoarseCols(g, 0), 18);
+  // 30 rows, 40 columns: only columns whose rows come out whole.
+  g.rows = 30, g.cols = 40;
+  const int cols = resolveCoarseCols(g, 0);
+  EXPECT_EQ(29 * (cols - 1) % 39, 0) << cols;
+}
+
+TEST(CoarseGrid, RefusesByNameWhatCannotSpanOrHoldTheCloth)
+{
+  GridParams g = clothSheet(30);
+  g.cols = 40;
+  const std::string uneven = refusal([&] { resolveCoarseCols(g, 20); });
+  EXPECT_TRUE(contains(uneven, "'coarse_cols' = 20")) << uneven;
+  EXPECT_TRUE(contains(uneven, "whole")) << uneven;
+  EXPECT_TRUE(contains(refusal([&] { resolveCoarseCols(g, -1); }), "coarse_cols"));
+  // Two neighbouring grips fall on one particle of a grid three times coarser.
+  const GridParams held = heldCloth({{0}, {1}}, 10);
+  const std::string clash = refusal([&] { CoarseGrid(Grid(held), 4); });
+  EXPECT_TRUE(contains(clash, "handles[0] and handles[1]")) << clash;
+  SimulationParams s = coarseParams(4);
+  EXPECT_TRUE(contains(refusal([&] { Simulation(held, s); }), "coarse_cols")) << "refused before the build";
+}
+
+TEST(CoarseGrid, HandlesHoldTheNearestCoarseParticles)
+{
+  const GridParams held = heldCloth({{0, 1}, {9}}, 10);
+  const CoarseGrid coarse(Grid(held), 4);
+  ASSERT_EQ(coarse.grid.handles().size(), 2u);
+  EXPECT_EQ(coarse.grid.handles()[0], std::vector<int>{0});
+  EXPECT_EQ(coarse.grid.handles()[1], std::vector<int>{3});
+  // Each copies its own fine particle's motion: handle 0's particle 0, handle 1's particle 9.
+  EXPECT_EQ(coarse.handle_source, (std::vector<int>{0, 1, 2, 6, 7, 8}));
+  EXPECT_TRUE(coarse.grid.fixedParticles().empty());
+}
+
+// With as many columns as the grid, the coarse grid is the grid: `coarse` steps as `full` does, held
+// by moving handles over a table it lands on.
+TEST(Coarse, OnTheGridItselfIsFull)
+{
+  const GridParams g = heldCloth({{0}, {7}}, 8);
+  SimulationParams s = coarseParams(8);
+  s.alpha = 0.5;
+  Collider table;
+  table.type = ColliderType::Plane;
+  table.point = Eigen::Vector3d(0.0, 0.0, Grid(g).toPoints(Grid(g).initialPositions()).row(2).minCoeff() - 0.02);
+  s.colliders = {table};
+  Simulation coarse(g, s);
+  s.method = Method::Full;
+  Simulation full(g, s);
+  const Eigen::VectorXd start = full.handlePositions();
+  double largest = 0.0;
+  for (long k = 0; k < 300; ++k)
+  {
+    driveHandles(full, start, k);
+    driveHandles(coarse, start, k);
+    ASSERT_FALSE(full.step().diverged);
+    ASSERT_FALSE(coarse.step().diverged);
+    largest = std::max(largest, (full.positions() - coarse.positions()).cwiseAbs().maxCoeff());
+  }
+  EXPECT_LT(largest, 1e-12);
+  ASSERT_GT(full.contact()->report().touching[0], 0) << "the cloth must reach the table for the test to mean anything";
+  EXPECT_EQ(coarse.contact()->report().touching, full.contact()->report().touching);
+  EXPECT_EQ(coarse.particleContacts(), full.particleContacts());
+  const Eigen::VectorXd v_full = full.velocity(), v_coarse = coarse.velocity();
+  EXPECT_LT((v_full - v_coarse).cwiseAbs().maxCoeff(), 1e-10);
+  for (int k = 0; k < v_full.size(); k += 5)
+    EXPECT_NEAR(coarse.displacement()[k], full.displacement()[k], 1e-12);
+}
+
+// A sheet swinging down from 60 degrees: the coarser the grid, the further from `full`, and on half
+// the columns within a centimetre.
+TEST(Coarse, ApproachesFullAsTheCoarseGridRefines)
+{
+  const GridParams g = swingingSheet(13);
+  SimulationParams s = methodParams(Method::Full, 4, 5e-4);
+  s.alpha = 0.2;
+  Simulation full(g, s);
+  std::vector<std::unique_ptr<Simulation>> coarse;
+  for (int cols : {4, 5, 7})
+    coarse.push_back(std::make_unique<Simulation>(g, coarseParams(cols, 5e-4)));
+  std::vector<double> mean(coarse.size(), 0.0);
+  const int samples = 20;
+  for (int k = 0; k < samples; ++k)
+  {
+    ASSERT_FALSE(full.step(50).diverged);
+    for (size_t i = 0; i < coarse.size(); ++i)
+    {
+      ASSERT_FALSE(coarse[i]->step(50).diverged);
+      mean[i] += rmsDistance(coarse[i]->positions(), full.positions(), 3) / samples;
+    }
+  }
+  EXPECT_GT((full.positions() - Grid(g).initialPositions()).cwiseAbs().maxCoeff(), 0.1) << "it must swing";
+  EXPECT_GT(mean[0], mean[1]);
+  EXPECT_GT(mean[1], mean[2]);
+  EXPECT_LT(mean[2], 0.01) << mean[2];
+  std::cout << "mean RMS to full on 4, 5, 7 columns: " << mean[0] << ", " << mean[1] << ", " << mean[2] << " m\n";
+}
+
+// Without damping `coarse` conserves its grid's energy as `full` does its own.
+TEST(Coarse, ConservesEnergyWithoutDamping)
+{
+  Simulation sim(swingingSheet(13), coarseParams(7, 5e-4));
+  const double start = sim.methodEnergy();
+  double farthest = 0.0;
+  for (int k = 0; k < 40; ++k)
+  {
+    ASSERT_FALSE(sim.step(50).diverged);
+    farthest = std::max(farthest, std::abs(sim.methodEnergy() - start));
+  }
+  EXPECT_GT(start - sim.totalEnergy(), -1.0) << "sanity";
+  EXPECT_LT(farthest, 1e-3 * sim.energyScale());
+}
+
+// A switch carries the state over without moving a particle, both ways.
+TEST(Coarse, SwitchMovesNoParticle)
+{
+  Simulation sim(swingingSheet(13), methodParams(Method::Full, 4, 5e-4));
+  sim.step(200);
+  const Eigen::VectorXd before = sim.positions();
+  sim.setMethod(Method::Coarse);
+  EXPECT_EQ(sim.method(), Method::Coarse);
+  EXPECT_NE(sim.coarseGrid(), nullptr);
+  EXPECT_LT((sim.positions() - before).cwiseAbs().maxCoeff(), 1e-12);
+  ASSERT_FALSE(sim.step(200).diverged);
+  const Eigen::VectorXd later = sim.positions();
+  sim.setMethod(Method::Full);
+  EXPECT_LT((sim.positions() - later).cwiseAbs().maxCoeff(), 1e-12);
+}
+
+// A saved state of `coarse` (its offset too) replays in a simulation still on `full`.
+TEST(Coarse, RestoredStateReplays)
+{
+  const GridParams g = swingingSheet(13);
+  Simulation live(g, methodParams(Method::Full, 4, 5e-4));
+  live.step(100);
+  live.setMethod(Method::Coarse);
+  live.step(50);
+  const SimulationState saved = live.saveState();
+  ASSERT_GT(saved.offset.cwiseAbs().maxCoeff(), 1e-6);
+  live.step(100);
+  const Eigen::VectorXd original = live.positions();
+  Simulation copy(g, methodParams(Method::Full, 4, 5e-4));
+  copy.restoreState(saved);
+  EXPECT_EQ(copy.method(), Method::Coarse);
+  copy.step(100);
+  EXPECT_EQ((copy.positions() - original).cwiseAbs().maxCoeff(), 0.0);
+}
+
+// A cloth dropped on a table: no particle of the grid, interpolated, ends up inside it, and the table
+// carries the cloth's weight.
+TEST(Coarse, KeepsTheGridOutOfATable)
+{
+  GridParams g = clothSheet(13);
+  g.rotation_deg = 90.0;  // lying flat
+  g.fixed = {0};
+  SimulationParams s = coarseParams(5, 5e-4);
+  s.alpha = 1.0;
+  Collider table;
+  table.type = ColliderType::Plane;
+  table.point = Eigen::Vector3d(0.0, 0.0, -0.05);
+  s.colliders = {table};
+  Simulation sim(g, s);
+  ASSERT_FALSE(sim.step(3000).diverged);
+  const Eigen::Matrix3Xd points = sim.points();
+  EXPECT_GT(points.row(2).minCoeff(), -0.05 - 1e-3);
+  EXPECT_LT(points.row(2).minCoeff(), -0.04) << "the cloth must lie on the table";
+  const double weight = sim.grid().particleMass() * (sim.grid().numParticles() - 1) * 9.81;
+  EXPECT_NEAR(sim.contact()->report().force[0].z(), -weight, 0.2 * weight);
+  int touching = 0;
+  for (int c : sim.particleContacts())
+    touching += c == 0;
+  EXPECT_GT(touching, 100);
+}
+
+TEST(Coarse, RefusedWhereItHasNoMeaning)
+{
+  SimulationParams s = coarseParams(0);
+  s.self_collision = true;
+  EXPECT_TRUE(contains(refusal([&] { Simulation(clothSheet(13), s); }), "method"));
+  Simulation sim(swingingSheet(13), coarseParams(0));
+  EXPECT_THROW(sim.errorIndicator(), std::logic_error);
+  GridParams row = clothSheet(13);
+  row.rows = 1;
+  row.fixed = {0};
+  const std::string one_row = refusal([&] { Simulation(row, coarseParams(0)); });
+  EXPECT_TRUE(contains(one_row, "2 x 2")) << one_row;
+}
