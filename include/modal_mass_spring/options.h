@@ -68,6 +68,8 @@ std::string toString(Method method);
 // Throws std::invalid_argument naming the valid methods.
 Method parseMethod(const std::string& name);
 const std::vector<std::string>& methodNames();
+// methodNames() as a message lists them: "full, linear, physical, cubature, coarse".
+std::string methodList();
 // The methods that simulate in a modal basis (linear, physical, cubature).
 bool isModal(Method method);
 // "rest", "equilibrium"; "explicit", "implicit"; "initial", "equilibrium". The parsers throw

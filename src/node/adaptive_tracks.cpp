@@ -73,7 +73,8 @@ void SimulationNode::refreshErrorEstimate(Track& track)
   Simulation& simulation = *track.simulation;
   if (adaptiveTrack(track) || track.shadow)
     return;
-  if (simulation.method() == Method::Full || simulation.diverged())
+  // `full` is its own reference; `coarse` has no span for the indicator to measure outside of.
+  if (!isModal(simulation.method()) || simulation.diverged())
   {
     track.error_estimate = 0.0;
     return;

@@ -38,7 +38,7 @@ void SimulationNode::reconfigure(SimulationConfig& config, uint32_t)
   }
   // The colliders are ~set_colliders's since the start: the set in force, not the parameter's.
   candidate.simulation.colliders = config_.simulation.colliders;
-  // Self-collision acts from the next step on every track; a track that runs a modal method now (a
+  // Self-collision acts from the next step on every track; a track that runs a reduced method now (a
   // switch since the start) refuses it, and then nothing changes.
   const SimulationParams& self = candidate.simulation;
   if (self.self_collision)

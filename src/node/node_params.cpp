@@ -182,9 +182,7 @@ void loadMethods(const NodeParameterSource& s, const GridParams& grid, NodeParam
 {
   if (const auto names = s.getStringList("methods"))
   {
-    std::string allowed;
-    for (const auto& name : methodNames())
-      allowed += (allowed.empty() ? "" : ", ") + name;
+    const std::string allowed = methodList();
     if (names->empty() || names->size() > methodNames().size())
       rejectParameter("methods", std::to_string(names->size()) + " names",
                       "must list 1 to " + std::to_string(methodNames().size()) + " of " + allowed);

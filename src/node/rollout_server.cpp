@@ -114,16 +114,17 @@ RolloutOutcome outcomeMessage(const CandidateOutcome& outcome)
   return m;
 }
 
-// The goal's method: `full` when it names none.
+// The goal's method: `coarse` when it names none, the fastest within a centimetre or two of `full`
+// on a held cloth (docs/benchmarks.md, "Rollouts").
 Method rolloutMethod(const std::string& name)
 {
   try
   {
-    return name.empty() ? Method::Full : parseMethod(name);
+    return name.empty() ? Method::Coarse : parseMethod(name);
   }
   catch (const std::invalid_argument&)
   {
-    throw std::invalid_argument("method '" + name + "': must be full, linear, physical or cubature (empty: full)");
+    throw std::invalid_argument("method '" + name + "': must be one of " + methodList() + " (empty: coarse)");
   }
 }
 

@@ -43,12 +43,9 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   }
   catch (const std::invalid_argument&)
   {
-    std::string names;
-    for (const auto& name : methodNames())
-      names += name + ", ";
     response.success = false;
-    response.message = "unknown method '" + request.method + "': must be one of " + names +
-                       "adaptive; still running '" + previous + "'";
+    response.message = "unknown method '" + request.method + "': must be one of " + methodList() +
+                       ", adaptive; still running '" + previous + "'";
     return true;
   }
   const bool was_diverged = simulation.diverged();
@@ -64,7 +61,7 @@ bool SimulationNode::setMethod(SetMethod::Request& request, SetMethod::Response&
   }
   try
   {
-    if (method != Method::Full)
+    if (isModal(method))
     {
       buildBasis(simulation, "building the modal basis");  // once, with its progress logged
       simulation.prepareConstraintModes(method);           // before any training

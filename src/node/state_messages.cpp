@@ -109,7 +109,7 @@ SimulationState simulationState(const SavedState& m, const HandleFrames& frames)
   }
   catch (const std::invalid_argument&)
   {
-    rejectParameter("state.method", "'" + m.method + "'", "must be full, linear, physical or cubature");
+    rejectParameter("state.method", "'" + m.method + "'", "must be one of " + methodList());
   }
   s.time_step = m.time_step;
   s.step_count = m.step_count;

@@ -32,7 +32,7 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
                         paper's three: cost, accuracy and stability; handles runs only when named)
   --output DIR          folder for the CSV files (default: .)
   --tag NAME            file name tag, <experiment>_<tag>.csv (default: the config file's stem); no '/'
-  --methods LIST        comma-separated of full, linear, physical, cubature, adaptive (default: the first four;
+  --methods LIST        comma-separated of full, linear, physical, cubature, coarse, adaptive (default: the first four;
                         adaptive: adaptive_method stepped while its error indicator allows, full
                         where it does not (error_tolerance, adaptive_dwell), in every experiment;
                         accuracy always runs full as the reference and writes cubature's training
@@ -195,10 +195,7 @@ void setMethods(Options& o, const std::string& text)
     }
     catch (const std::invalid_argument&)
     {
-      std::string names;
-      for (const std::string& known : methodNames())
-        names += (names.empty() ? "" : ", ") + known;
-      rejectParameter("--methods", "'" + name + "'", "unknown method: must be one of " + names + ", adaptive");
+      rejectParameter("--methods", "'" + name + "'", "unknown method: must be one of " + methodList() + ", adaptive");
     }
   }
 }

@@ -113,7 +113,7 @@ class Adaptive(unittest.TestCase):
         self.assertTrue(rospy.ServiceProxy("/plain/reset", Trigger)().success)
         bad = set_method("adaptiv")
         self.assertFalse(bad.success)
-        self.assertIn("must be one of full, linear, physical, cubature, adaptive", bad.message)
+        self.assertIn("must be one of full, linear, physical, cubature, coarse, adaptive", bad.message)
         reply = set_method("adaptive")
         self.assertTrue(reply.success, reply.message)
         self.assertIn("from physical to adaptive", reply.message)

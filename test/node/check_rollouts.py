@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Rostest checker of ~get_state, ~set_state and ~rollout (test/node/rollouts.test): paused, the node
 steps 300 steps from a saved state; restored, it steps the same positions again; a rollout from that
-state with the frame held where it is gives them too, on the node's own worker simulations; bad goals
-are refused by name."""
+state with the frame held where it is gives them too, on the node's own worker simulations, with
+`full` and with the default method, `coarse`; bad goals are refused by name."""
 import math
 import threading
 import time
@@ -15,7 +15,7 @@ from actionlib_msgs.msg import GoalStatus
 from geometry_msgs.msg import Pose
 from modal_mass_spring.msg import (HandleTrajectory, RolloutAction, RolloutActionFeedback, RolloutCandidate,
                                    RolloutGoal)
-from modal_mass_spring.srv import GetState, SetState, Step
+from modal_mass_spring.srv import GetState, SetMethod, SetState, Step
 from std_srvs.srv import SetBool
 
 NODE = "/modal_mass_spring"
@@ -34,6 +34,7 @@ class Rollouts(unittest.TestCase):
         cls.get_state = rospy.ServiceProxy(NODE + "/get_state", GetState)
         cls.set_state = rospy.ServiceProxy(NODE + "/set_state", SetState)
         cls.step = rospy.ServiceProxy(NODE + "/step", Step)
+        cls.set_method = rospy.ServiceProxy(NODE + "/set_method", SetMethod)
         cls.pause = rospy.ServiceProxy(NODE + "/pause", SetBool)
         cls.lock = threading.Lock()
         cls.published_feedback = []
@@ -79,7 +80,7 @@ class Rollouts(unittest.TestCase):
         self.assertLess(largest_distance(self.get_state().state.positions, stepped.positions), 1e-9)
 
         horizon = STEPS * saved.time_step
-        goal = RolloutGoal(use_state=True, state=saved, horizon=horizon, sample_times=[horizon],
+        goal = RolloutGoal(use_state=True, state=saved, method="full", horizon=horizon, sample_times=[horizon],
                            candidates=[RolloutCandidate()] * 3)
         status, result, feedback = self.rollout(goal)
         self.assertEqual(status, GoalStatus.SUCCEEDED, result.message)
@@ -93,6 +94,26 @@ class Rollouts(unittest.TestCase):
             self.assertEqual(len(sample.contact_forces), 1)
         # The live run was not touched.
         self.assertLess(largest_distance(self.get_state().state.positions, stepped.positions), 1e-9)
+
+    def test_default_method_coarse_replays_the_live_coarse_steps(self):
+        original = self.get_state().state
+        try:
+            reply = self.set_method("coarse")
+            self.assertTrue(reply.success, reply.message)
+            saved = self.get_state().state
+            self.assertEqual(saved.method, "coarse")
+            self.step(STEPS)
+            stepped = self.get_state().state
+            self.assertGreater(largest_distance(saved.positions, stepped.positions), 1e-4, "the cloth must move")
+            horizon = STEPS * saved.time_step
+            goal = RolloutGoal(use_state=True, state=saved, horizon=horizon, sample_times=[horizon],
+                               candidates=[RolloutCandidate()])
+            status, result, _ = self.rollout(goal)
+            self.assertEqual(status, GoalStatus.SUCCEEDED, result.message)
+            self.assertIn("with coarse", result.message)
+            self.assertLess(largest_distance(result.outcomes[0].samples[-1].positions, stepped.positions), 1e-9)
+        finally:
+            self.assertTrue(self.set_state(original).success)
 
     def test_bad_goals_refused_by_name(self):
         state = self.get_state().state

@@ -287,7 +287,7 @@ TEST(NodeParams, MethodAdaptiveRunsTheAdaptiveMethod)
   EXPECT_EQ(p.method, Method::Physical);
   EXPECT_FALSE(loadSimulationParams(FakeSource({{"method", std::string("cubature")}})).adaptive);
   EXPECT_EQ(refusal({{"method", std::string("adaptiv")}}),
-            "invalid parameter 'method' = 'adaptiv': must be one of full, linear, physical, cubature, adaptive");
+            "invalid parameter 'method' = 'adaptiv': must be one of full, linear, physical, cubature, coarse, adaptive");
   EXPECT_EQ(refusal({{"method", std::string("adaptive")}, {"error_tolerance", 0.0}}).rfind("invalid parameter 'error_tolerance' = 0", 0), 0u);
 }
 

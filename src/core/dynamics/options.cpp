@@ -34,6 +34,14 @@ const std::vector<std::string>& methodNames()
   static const std::vector<std::string> names{"full", "linear", "physical", "cubature", "coarse"};
   return names;
 }
+std::string methodList()
+{
+  std::string list;
+  for (const std::string& name : methodNames())
+    list += (list.empty() ? "" : ", ") + name;
+  return list;
+}
+
 bool isModal(Method method)
 {
   return method == Method::Linear || method == Method::Physical || method == Method::Cubature;

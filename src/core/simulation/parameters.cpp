@@ -59,10 +59,7 @@ SimulationParams loadSimulationParams(const ParameterSource& s)
     }
     catch (const std::invalid_argument&)
     {
-      std::string names;
-      for (const auto& name : methodNames())
-        names += name + ", ";
-      rejectParameter("method", "'" + *method + "'", "must be one of " + names + "adaptive");
+      rejectParameter("method", "'" + *method + "'", "must be one of " + methodList() + ", adaptive");
     }
   }
   p.num_modes = s.getInt("num_modes").value_or(p.num_modes);

@@ -58,6 +58,8 @@ TEST(CoarseGrid, SpansTheSameClothWithItsMass)
   const CoarseGrid coarse(grid, 5);
   EXPECT_EQ(coarse.grid.params().rows, 5);
   EXPECT_DOUBLE_EQ(coarse.grid.params().spacing, 3 * fine.spacing);
+  EXPECT_DOUBLE_EQ(coarse.grid.params().structural_stiffness, fine.structural_stiffness);
+  EXPECT_DOUBLE_EQ(coarse.grid.params().bending_stiffness, fine.bending_stiffness / 9);
   EXPECT_NEAR(coarse.grid.particleMass() * coarse.grid.numParticles(), fine.mass * grid.numParticles(), 1e-12);
   // The fine rest is the interpolation of the coarse rest, and the coarse rest the sample of the fine.
   const Eigen::VectorXd interpolated = coarse.interpolation * coarse.x_ref;
