@@ -121,10 +121,11 @@ double signedDistance(const Collider& collider, const Eigen::Isometry3d& pose, c
 struct ContactReport
 {
   // Per collider: the force the cloth puts on it over the step (N, grid coordinates, the velocity
-  // impulses divided by the time step), and the particles touching it.
+  // impulses divided by the time step), and the particles touching it (`coarse`: its grid's).
   std::vector<Eigen::Vector3d> force;
   std::vector<int> touching;
-  // Per free particle (in free-dof order): the first collider it touched over the step, -1 none.
+  // Per free particle (in free-dof order): the first collider it touched over the step, -1 none
+  // (empty under `coarse`: Simulation::particleContacts() says it).
   std::vector<int> touched_by;
   // The deepest a free particle was below a surface before and after the correction (m, >= 0).
   double penetration_before = 0.0;

@@ -208,7 +208,7 @@ ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, const Accurac
     e.switches = run.adaptive->switches();
     e.error_indicator = run.adaptive->reduced() ? run.sim->errorIndicator() : std::numeric_limits<double>::quiet_NaN();
   }
-  else if (method != "full" && method != "reference" && method != "reference_half_step")
+  else if (isModal(run.sim->method()))
     e.error_indicator = run.sim->errorIndicator();
   return e;
 }

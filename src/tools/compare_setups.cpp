@@ -320,20 +320,25 @@ void buildEverySetup(const Options& o, const std::vector<ExperimentSetup>& setup
                                   toString(m) + "): " + e.what());
     }
   };
+  // `coarse` builds its own grid (cheap): built too, so that its parameters are checked.
+  std::vector<Method> builds{method};
+  if (std::find(o.methods.begin(), o.methods.end(), Method::Coarse) != o.methods.end())
+    builds.push_back(Method::Coarse);
   for (const ExperimentSetup& setup : setups)
-  {
-    try
+    for (Method m : builds)
     {
-      build(setup, method);
+      try
+      {
+        build(setup, m);
+      }
+      catch (const std::invalid_argument& e)
+      {
+        if (!methods_may_fail || m == Method::Full)
+          throw;
+        build(setup, Method::Full);
+        std::cout << "note: " << e.what() << "; the methods that cannot be built are reported as 'did not build'\n";
+      }
     }
-    catch (const std::invalid_argument& e)
-    {
-      if (!methods_may_fail || method == Method::Full)
-        throw;
-      build(setup, Method::Full);
-      std::cout << "note: " << e.what() << "; the methods that cannot be built are reported as 'did not build'\n";
-    }
-  }
 }
 
 void validateHandleSetups(const Options& o, const std::vector<ExperimentSetup>& handle_setups)

@@ -1,6 +1,7 @@
 // `coarse`: `full` on the same cloth's coarse grid, read out on the fine grid by interpolation.
 #include "dynamics/method_model.h"
 
+#include <algorithm>
 #include <stdexcept>
 
 namespace modal_mass_spring
@@ -180,30 +181,28 @@ void CoarseMethod::correctContacts(Contact& contact)
     contact_ = std::make_unique<Contact>(coarse_.grid, contact.colliders(), contact.thickness());
   contact_->follow(contact);
   FullMethod::correctContacts(*contact_);
+  ContactReport report = contact_->report();
+  report.touched_by.clear();
+  contact.setReport(std::move(report));
+}
 
-  // A fine free particle touches what the heaviest particle of its stencil touched.
-  const ContactReport& coarse = contact_->report();
-  ContactReport fine = coarse;
+std::vector<int> CoarseMethod::touchedBy(const Contact&) const
+{
   const int dim = fine_.grid.dimension();
   const std::vector<int>& free_dofs = fine_.grid.freeDofs();
-  fine.touched_by.assign(free_dofs.size() / dim, -1);
-  std::fill(fine.touching.begin(), fine.touching.end(), 0);
-  for (size_t j = 0; j < fine.touched_by.size(); ++j)
+  std::vector<int> touched(free_dofs.size() / dim, -1);
+  if (!contact_)
+    return touched;
+  const std::vector<int>& coarse = contact_->report().touched_by;
+  for (size_t j = 0; j < touched.size(); ++j)
   {
     const Stencil& stencil = coarse_.interpolation_stencils[free_dofs[j * dim] / dim];
-    int heaviest = 0;
-    for (int i = 1; i < 4; ++i)
-      if (stencil.weight[i] > stencil.weight[heaviest])
-        heaviest = i;
+    const int heaviest = static_cast<int>(std::max_element(stencil.weight.begin(), stencil.weight.end()) - stencil.weight.begin());
     const int free = coarse_.grid.freeIndex(stencil.particle[heaviest] * dim);
-    if (free < 0 || coarse.touched_by.empty())
-      continue;
-    const int collider = coarse.touched_by[free / dim];
-    fine.touched_by[j] = collider;
-    if (collider >= 0)
-      ++fine.touching[collider];
+    if (free >= 0 && static_cast<size_t>(free / dim) < coarse.size())
+      touched[j] = coarse[free / dim];
   }
-  contact.setReport(std::move(fine));
+  return touched;
 }
 
 }  // namespace modal_mass_spring

@@ -161,6 +161,8 @@ public:
   // Corrects next() for contact with the colliders (Contact), before commit(): per particle for
   // `full`, through the basis for the modal methods. The acceleration is left as the forces gave it.
   virtual void correctContacts(Contact& contact) = 0;
+  // Per free particle of the grid: the collider it touched in the last step's correction, -1 none.
+  virtual std::vector<int> touchedBy(const Contact& contact) const { return contact.report().touched_by; }
   // Corrects next() for self-collision, before commit(): `full` only (the Simulation refuses it for
   // the modal methods; they throw std::logic_error).
   virtual void correctSelfCollision(SelfCollision& self, const Contact* contact);
@@ -345,9 +347,11 @@ public:
   void setHandleMotion(const HandleMotion& motion) override;
   Eigen::VectorXd offset() const override { return offset_; }
   void restore(const State& state, const Eigen::VectorXd& offset) override;
-  // The coarse particles against colliders posed as the simulation's; its report in the fine
-  // grid's terms (a fine particle touches what the heaviest of its stencil touched).
+  // The coarse particles against colliders posed as the simulation's; `contact` takes their report
+  // (its particles the coarse ones) but for touched_by, which touchedBy() gives when asked: a fine
+  // particle touches what the heaviest of its stencil touched.
   void correctContacts(Contact& contact) override;
+  std::vector<int> touchedBy(const Contact& contact) const override;
 
 private:
   // P^T f: a fine free-dof force on the coarse free dofs.

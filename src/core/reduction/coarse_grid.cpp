@@ -85,10 +85,6 @@ GridParams coarseGridParams(const GridParams& f, int coarse_cols)
   g.cols = cols;
   g.spacing = f.spacing * ratio;
   g.mass = f.mass * f.rows * f.cols / (static_cast<double>(rows) * cols);
-  // Springs to the particle two away resist folds more the further apart their ends: scaled by the
-  // square of the spacing ratio, what came closest to `full` on held towels laid on a table
-  // (docs/benchmarks.md, "Rollouts").
-  g.bending_stiffness = f.bending_stiffness / (ratio * ratio);
   g.fixed.clear();
   g.handles.assign(f.handles.size(), {});
 

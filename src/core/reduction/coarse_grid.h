@@ -1,8 +1,7 @@
 // Method `coarse`'s reduced model: the same cloth on a coarser grid. The coarse grid keeps the fine
-// one's width, height, total mass and its structural and shear springs' constants (a square grid's
-// in-plane stiffness does not depend on its spacing); its bending springs are softened by the
-// square of the spacing ratio. Its particles are heavier and further apart, and it is stable at a
-// larger explicit step. The fine particles follow it by bilinear interpolation in material
+// one's width, height, total mass and spring constants (a square grid's stiffness in tension does
+// not depend on its spacing; docs/design.md has what softening the bending springs did), so its
+// particles are heavier and further apart and it is stable at a larger explicit step. The fine particles follow it by bilinear interpolation in material
 // coordinates; the fine grid's fixed and handle particles hold the coarse particles nearest them.
 #pragma once
 

@@ -191,7 +191,7 @@ std::vector<int> Simulation::particleContacts() const
   std::vector<int> contacts(static_cast<size_t>(grid_.numParticles()), -1);
   if (!contact_)
     return contacts;
-  const std::vector<int>& touched = contact_->report().touched_by;
+  const std::vector<int> touched = model_->touchedBy(*contact_);
   const int dim = grid_.dimension();
   for (size_t p = 0; p < touched.size(); ++p)
     contacts[static_cast<size_t>(grid_.freeDofs()[dim * p] / dim)] = touched[p];
