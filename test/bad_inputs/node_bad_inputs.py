@@ -54,6 +54,8 @@ CASES = [
     ({"method": "adaptive", "error_tolerance": NAN}, [], ["error_tolerance"]),
     ({"method": "adaptive", "adaptive_dwell": -0.5}, [], ["adaptive_dwell"]),
     ({"method": "adaptive", "adaptive_method": "linear"}, [], ["adaptive_method"]),
+    ({"method": "coarse", "coarse_cols": 9}, [], ["coarse_cols"], "[2, cols 5]"),
+    ({"coarse_cols": -1}, [], ["coarse_cols"]),
     ({"num_modes": 0}, [], ["num_modes"]),
     ({"num_modes": 60}, [], ["num_modes"]),
     ({"alpha": -1.0}, [], ["alpha"]),

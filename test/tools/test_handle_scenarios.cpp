@@ -8,6 +8,7 @@
 #include <cmath>
 #include <algorithm>
 #include <functional>
+#include <map>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -515,4 +516,39 @@ TEST(HandleScenarios, AdaptiveRunsBesideTheMethodsAndReportsItsShareOfReducedSte
   EXPECT_EQ(tight.switches, 1);
   EXPECT_EQ(tight.reduced_share, 0.0);
   EXPECT_LT(tight.mean_rms, 1e-12);
+}
+
+// Method "coarse" runs as the others, without an error indicator (it has no span): on as many
+// columns as the grid it is `full` to round-off, on fewer it is further from the reference.
+TEST(HandleScenarios, CoarseRunsBesideTheMethodsAndOnTheGridItselfIsFull)
+{
+  const HandleScenario scenario =
+      parse("[{name: lift, move_time: 0.1, hold_time: 0.1, handles: [{particles: [0, 1, 2, 3], translation: [0, 0.05, 0.05]}]}]")
+          .front();
+  ExperimentSetup setup = heldSheet(scenario);
+  AccuracyOptions options;
+  options.methods = {Method::Full, Method::Coarse};
+  options.sample = 10;
+  options.steps = options.interval = 400;
+  options.snapshots = false;
+  options.reference_time_step = setup.sim.time_step / 5;
+  // The mean RMS of `full` and of `coarse` on coarse_cols columns.
+  auto meanRms = [&](int coarse_cols) {
+    setup.sim.coarse_cols = coarse_cols;
+    const AccuracyResult result = runAccuracy(setup, options);
+    for (const ErrorSample& e : result.errors)
+      EXPECT_TRUE(e.method != "coarse" || std::isnan(e.error_indicator));
+    std::map<std::string, double> mean;
+    for (const AccuracySummary& s : summarizeAccuracy(result.errors))
+      mean[s.method] = s.mean_rms;
+    EXPECT_EQ(mean.count("full") + mean.count("coarse"), 2u);
+    return std::make_pair(mean["full"], mean["coarse"]);
+  };
+  const auto [full, same] = meanRms(4);
+  EXPECT_GT(full, 0.0);
+  EXPECT_NEAR(same, full, 1e-12);
+  const auto [full_again, coarser] = meanRms(2);
+  EXPECT_EQ(full_again, full);
+  EXPECT_GT(coarser, 2 * full);
+  EXPECT_LT(coarser, 0.05);
 }
