@@ -440,6 +440,8 @@ private:
   // In a moving frame: a world free-dof displacement and velocity in B and back (identity else).
   void toBody(Eigen::VectorXd& u, Eigen::VectorXd& v) const;
   Eigen::VectorXd bodyDisplacement() const;
+  // Positions in B (any grid's, every dof) in the world: themselves unless a moving frame moved.
+  Eigen::VectorXd worldPositions(Eigen::VectorXd x) const;
   Eigen::VectorXd bodyVelocity() const;
   FrameForces frameForcesOf(const FrameMotion& motion) const;
   // Throws std::invalid_argument for a frame motion setHandleFrameMotion refuses.

@@ -114,17 +114,32 @@ RolloutOutcome outcomeMessage(const CandidateOutcome& outcome)
   return m;
 }
 
-// The goal's method: `coarse` when it names none, the fastest within a centimetre or two of `full`
-// on a held cloth (docs/benchmarks.md, "Rollouts").
-Method rolloutMethod(const std::string& name)
+// The goal's method. When it names none: `coarse`, the fastest within a few centimetres of `full` on
+// a held cloth (docs/benchmarks.md, "Rollouts"), or `full` where `coarse` cannot run (self-collision,
+// handles its grid cannot hold apart).
+Method rolloutMethod(const std::string& name, const GridParams& grid, SimulationParams params)
 {
+  if (name.empty())
+  {
+    params.method = Method::Coarse;
+    try
+    {
+      validateParameters(grid, params);
+      return Method::Coarse;
+    }
+    catch (const std::invalid_argument&)
+    {
+      return Method::Full;
+    }
+  }
   try
   {
-    return name.empty() ? Method::Coarse : parseMethod(name);
+    return parseMethod(name);
   }
   catch (const std::invalid_argument&)
   {
-    throw std::invalid_argument("method '" + name + "': must be one of " + methodList() + " (empty: coarse)");
+    throw std::invalid_argument("method '" + name + "': must be one of " + methodList() +
+                                " (empty: coarse, or full where coarse cannot run)");
   }
 }
 
@@ -198,7 +213,7 @@ SimulationNode::RolloutSetup SimulationNode::rolloutSetup(const RolloutGoal& goa
     if (goal.use_state)
       placeHandleFrames(goal.state, request.frames);
   }
-  request.method = rolloutMethod(goal.method);
+  request.method = rolloutMethod(goal.method, setup.grid, setup.params);
   request.time_step = goal.time_step == 0.0 ? setup.params.time_step : goal.time_step;
   request.horizon = goal.horizon;
   request.sample_times = goal.sample_times;

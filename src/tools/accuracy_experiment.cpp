@@ -228,7 +228,9 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
   std::vector<AccuracyRun> runs = accuracyRuns(setup, options, divisor, check, result.not_built);
   const Grid& grid = runs[0].sim->grid();
 
-  const Simulation& modal = *runs.back().sim;  // every run of the setup has the same basis
+  // Every modal run of the setup has the same basis (`full` and `coarse` build none).
+  auto last_modal = std::find_if(runs.rbegin(), runs.rend(), [](const AccuracyRun& run) { return isModal(run.sim->method()); });
+  const Simulation& modal = last_modal != runs.rend() ? *last_modal->sim : *runs.back().sim;
   result.frequencies = modal.basis().frequencies;
   result.num_zero_modes = modal.basis().num_zero_modes;
   result.basis = setup.sim.basis;

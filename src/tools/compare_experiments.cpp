@@ -181,7 +181,7 @@ void printAccuracyHeader(const Options& o, const ExperimentSetup& setup, const A
               << "smallest kept " << fmt(d.smallest_kept_singular_value) << ", largest dropped "
               << fmt(d.largest_dropped_singular_value) << "\n";
   }
-  if (result.basis == BasisKind::Skinning)
+  if (result.basis == BasisKind::Skinning && result.physical_frequencies.size() > 0)
     std::cout << "physical basis (" << setup.variant << "): " << describeSkinning(result.skinning)
               << ", omega up to " << fmt(result.physical_frequencies.maxCoeff()) << " rad/s\n";
   if (o.accuracy.reference_time_step > 0.0)

@@ -30,6 +30,18 @@ Eigen::VectorXd gather(const Eigen::VectorXd& values, const std::vector<int>& so
   return out;
 }
 
+// `all` (every dof of `grid`) plus values on the free dofs and on the handle dofs (empty: none).
+Eigen::VectorXd plusFreeAndHandles(const Grid& grid, Eigen::VectorXd all, const Eigen::VectorXd& free,
+                                   const Eigen::VectorXd& handles)
+{
+  grid.addFree(free, all);
+  const std::vector<int>& dofs = grid.handleDofs();
+  if (handles.size() > 0)
+    for (size_t k = 0; k < dofs.size(); ++k)
+      all[dofs[k]] += handles[static_cast<Eigen::Index>(k)];
+  return all;
+}
+
 }  // namespace
 
 CoarseMethod::CoarseMethod(const LinearizedGrid& fine, const IntegratorSettings& settings)
@@ -44,35 +56,25 @@ CoarseMethod::CoarseMethod(const LinearizedGrid& fine, const IntegratorSettings&
 
 Eigen::VectorXd CoarseMethod::coarsePositions(const Eigen::VectorXd& q) const
 {
-  Eigen::VectorXd x = coarse_.x_ref;
-  coarse_.grid.addFree(q, x);
-  const std::vector<int>& dofs = coarse_.grid.handleDofs();
-  if (coarse_motion_.displacement.size() > 0)
-    for (size_t k = 0; k < dofs.size(); ++k)
-      x[dofs[k]] += coarse_motion_.displacement[static_cast<Eigen::Index>(k)];
-  return x;
+  return plusFreeAndHandles(coarse_.grid, coarse_.x_ref, q, coarse_motion_.displacement);
 }
 
 Eigen::VectorXd CoarseMethod::coarseVelocities(const Eigen::VectorXd& v) const
 {
-  Eigen::VectorXd x = Eigen::VectorXd::Zero(coarse_.grid.numDofs());
-  coarse_.grid.addFree(v, x);
-  const std::vector<int>& dofs = coarse_.grid.handleDofs();
-  if (coarse_motion_.velocity.size() > 0)
-    for (size_t k = 0; k < dofs.size(); ++k)
-      x[dofs[k]] = coarse_motion_.velocity[static_cast<Eigen::Index>(k)];
-  return x;
+  return plusFreeAndHandles(coarse_.grid, Eigen::VectorXd::Zero(coarse_.grid.numDofs()), v, coarse_motion_.velocity);
 }
 
-Eigen::VectorXd CoarseMethod::sampleFree(const Eigen::VectorXd& fine_free, const Eigen::VectorXd& fine_handles) const
+Eigen::VectorXd CoarseMethod::sampleVelocity(const Eigen::VectorXd& fine_free, const Eigen::VectorXd& fine_handles) const
 {
-  Eigen::VectorXd all = Eigen::VectorXd::Zero(fine_.grid.numDofs());
-  fine_.grid.addFree(fine_free, all);
-  const std::vector<int>& dofs = fine_.grid.handleDofs();
-  if (fine_handles.size() > 0)
-    for (size_t k = 0; k < dofs.size(); ++k)
-      all[dofs[k]] = fine_handles[static_cast<Eigen::Index>(k)];
-  return coarse_.grid.gatherFree(coarse_.sampling * all);
+  return coarse_.grid.gatherFree(
+      coarse_.sampling * plusFreeAndHandles(fine_.grid, Eigen::VectorXd::Zero(fine_.grid.numDofs()), fine_free, fine_handles));
+}
+
+Eigen::VectorXd CoarseMethod::sampleDisplacement(const Eigen::VectorXd& u, const Eigen::VectorXd& handles) const
+{
+  // The coarse rest equals the sampled fine rest unless the grid is linearized elsewhere (its equilibrium).
+  return coarse_.grid.gatherFree(coarse_.sampling * plusFreeAndHandles(fine_.grid, fine_.x_ref, u, handles) -
+                                 coarse_.x_ref);
 }
 
 HandleMotion CoarseMethod::coarseMotion(const HandleMotion& fine) const
@@ -83,17 +85,9 @@ HandleMotion CoarseMethod::coarseMotion(const HandleMotion& fine) const
 
 double CoarseMethod::assign(const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder)
 {
-  // The fine positions sampled at the coarse particles, less the coarse rest (which the sampled fine
-  // rest equals unless the fine grid is linearized elsewhere, at its equilibrium).
-  Eigen::VectorXd x_ref = fine_.x_ref;
-  fine_.grid.addFree(u, x_ref);
-  const std::vector<int>& dofs = fine_.grid.handleDofs();
-  if (fine_motion_.displacement.size() > 0)
-    for (size_t k = 0; k < dofs.size(); ++k)
-      x_ref[dofs[k]] += fine_motion_.displacement[static_cast<Eigen::Index>(k)];
-  const Eigen::VectorXd q = coarse_.grid.gatherFree(coarse_.sampling * x_ref - coarse_.x_ref);
+  const Eigen::VectorXd q = sampleDisplacement(u, fine_motion_.displacement);
   offset_.resize(0);
-  FullMethod::assign(q, sampleFree(v, fine_motion_.velocity), remainder);
+  FullMethod::assign(q, sampleVelocity(v, fine_motion_.velocity), remainder);
   const Eigen::VectorXd missed = u - displacement(state());
   if (remainder == Remainder::Keep)
   {
@@ -147,14 +141,7 @@ double CoarseMethod::velocityAt(const State& s, int k) const
 
 void CoarseMethod::setAnchor(const Eigen::VectorXd& u_anchor, const Eigen::VectorXd& handles_anchor)
 {
-  Eigen::VectorXd x = fine_.x_ref;
-  fine_.grid.addFree(u_anchor, x);
-  const std::vector<int>& dofs = fine_.grid.handleDofs();
-  if (handles_anchor.size() > 0)
-    for (size_t k = 0; k < dofs.size(); ++k)
-      x[dofs[k]] += handles_anchor[static_cast<Eigen::Index>(k)];
-  FullMethod::setAnchor(coarse_.grid.gatherFree(coarse_.sampling * x - coarse_.x_ref),
-                        gather(handles_anchor, coarse_.handle_source));
+  FullMethod::setAnchor(sampleDisplacement(u_anchor, handles_anchor), gather(handles_anchor, coarse_.handle_source));
 }
 
 void CoarseMethod::setHandleMotion(const HandleMotion& motion)

@@ -352,16 +352,19 @@ public:
   // particle touches what the heaviest of its stencil touched.
   void correctContacts(Contact& contact) override;
   std::vector<int> touchedBy(const Contact& contact) const override;
+  // The coarse grid's every dof: its rest plus q on the free dofs and the handles' displacement.
+  Eigen::VectorXd coarsePositions(const Eigen::VectorXd& q) const;
+  // The coarse handle particles' motion (copied from the grid's handle particles).
+  const HandleMotion& coarseHandleMotion() const { return coarse_motion_; }
 
 private:
   // P^T f: a fine free-dof force on the coarse free dofs.
   Eigen::VectorXd generalizedForce(const Eigen::VectorXd& f_free) const override;
-  // The coarse grid's every dof: its rest plus q on the free dofs and the handles' displacement.
-  Eigen::VectorXd coarsePositions(const Eigen::VectorXd& q) const;
   Eigen::VectorXd coarseVelocities(const Eigen::VectorXd& v) const;
-  // A fine free-dof vector with the fine handle dofs' values (empty: zero), sampled at the coarse
-  // free dofs.
-  Eigen::VectorXd sampleFree(const Eigen::VectorXd& fine_free, const Eigen::VectorXd& fine_handles) const;
+  // A fine free-dof displacement (velocity) with the fine handle dofs' (empty: zero) sampled at the
+  // coarse free dofs: their displacement from the coarse rest (their velocity).
+  Eigen::VectorXd sampleDisplacement(const Eigen::VectorXd& u, const Eigen::VectorXd& handles) const;
+  Eigen::VectorXd sampleVelocity(const Eigen::VectorXd& v, const Eigen::VectorXd& handles) const;
   HandleMotion coarseMotion(const HandleMotion& fine) const;
   // Fine free dof k interpolated from the coarse free dofs' values, the handle dofs' and a rest
   // (every coarse dof; empty: zero).

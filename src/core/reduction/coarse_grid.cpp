@@ -113,6 +113,10 @@ GridParams coarseGridParams(const GridParams& f, int coarse_cols)
       g.fixed.push_back(p);
     else if (holder[p] >= 0)
       g.handles[holder[p]].push_back(p);
+  if (countFreeDofs(g) == 0)
+    rejectParameter("coarse_cols", cols,
+                    "holds every particle of its " + std::to_string(rows) + " x " + std::to_string(cols) +
+                        " grid by the fixed particles and handles: use more coarse columns");
   return g;
 }
 

@@ -279,22 +279,25 @@ std::vector<Eigen::Vector3d> Simulation::handleForces() const
   return forces;
 }
 
-std::vector<Simulation::Wrench> Simulation::handleWrenches(const std::vector<Eigen::Vector3d>& origins) const
+namespace
 {
-  if (origins.size() != grid_.handles().size())
-    rejectParameter("origins", origins.size(),
-                    "must hold one point per handle (" + std::to_string(grid_.handles().size()) + ")");
-  const int dim = grid_.dimension();
-  const Eigen::VectorXd x = positions();
-  std::vector<int> handle_of(grid_.numParticles(), -1);
-  for (size_t h = 0; h < grid_.handles().size(); ++h)
-    for (int p : grid_.handles()[h])
+
+// The wrenches of grid's handles (Simulation::handleWrenches) at positions x (every dof), with the
+// external force (every dof) and the handles' prescribed acceleration (handle dofs; empty: none).
+std::vector<Simulation::Wrench> wrenchesOn(const Grid& grid, const Eigen::VectorXd& x, const Eigen::VectorXd& external,
+                                           const Eigen::VectorXd& acceleration,
+                                           const std::vector<Eigen::Vector3d>& origins)
+{
+  const int dim = grid.dimension();
+  std::vector<int> handle_of(grid.numParticles(), -1);
+  for (size_t h = 0; h < grid.handles().size(); ++h)
+    for (int p : grid.handles()[h])
       handle_of[p] = static_cast<int>(h);
   auto point = [&](const Eigen::VectorXd& v, int particle) {
     return dim == 3 ? Eigen::Vector3d(v.segment<3>(3 * particle))
                     : Eigen::Vector3d(v[2 * particle], 0.0, v[2 * particle + 1]);
   };
-  std::vector<Wrench> wrenches(grid_.handles().size());
+  std::vector<Simulation::Wrench> wrenches(grid.handles().size());
   auto add = [&](int particle, const Eigen::VectorXd& f) {
     const int h = handle_of[particle];
     if (h < 0)
@@ -304,7 +307,7 @@ std::vector<Simulation::Wrench> Simulation::handleWrenches(const std::vector<Eig
     wrenches[h].torque += (point(x, particle) - origins[h]).cross(f3);
   };
   // Only the springs that touch a handle particle.
-  for (const Spring& s : grid_.springs())
+  for (const Spring& s : grid.springs())
   {
     if (handle_of[s.i] < 0 && handle_of[s.j] < 0)
       continue;
@@ -316,15 +319,45 @@ std::vector<Simulation::Wrench> Simulation::handleWrenches(const std::vector<Eig
     add(s.i, f);
     add(s.j, -f);
   }
-  const std::vector<int>& dofs = grid_.handleDofs();
+  const std::vector<int>& dofs = grid.handleDofs();
   for (size_t k = 0; k < dofs.size(); k += dim)
   {
-    const int particle = dofs[k] / dim;
-    Eigen::VectorXd f = grid_.gravityForce().segment(dofs[k], dim) + external_force_.segment(dofs[k], dim);
-    if (handle_current_.acceleration.size() > 0)
-      f -= grid_.particleMass() * handle_current_.acceleration.segment(k, dim);
-    add(particle, f);
+    Eigen::VectorXd f = grid.gravityForce().segment(dofs[k], dim) + external.segment(dofs[k], dim);
+    if (acceleration.size() > 0)
+      f -= grid.particleMass() * acceleration.segment(k, dim);
+    add(dofs[k] / dim, f);
   }
+  return wrenches;
+}
+
+}  // namespace
+
+std::vector<Simulation::Wrench> Simulation::handleWrenches(const std::vector<Eigen::Vector3d>& origins) const
+{
+  if (origins.size() != grid_.handles().size())
+    rejectParameter("origins", origins.size(),
+                    "must hold one point per handle (" + std::to_string(grid_.handles().size()) + ")");
+  if (params_.method != Method::Coarse)
+    return wrenchesOn(grid_, positions(), external_force_, handle_current_.acceleration, origins);
+  // `coarse`: what its grid's springs pull on its handle particles (the grid's springs at the
+  // interpolated positions would pull by a spring's share of a coarse cell's stretch), plus the
+  // external force on the grid's handle particles themselves.
+  const auto& coarse = static_cast<const CoarseMethod&>(*model_);
+  const Grid& coarse_grid = coarse_->grid;
+  const Eigen::VectorXd coarse_external = coarse_->interpolation.transpose() * grid_.gatherFree(external_force_);
+  std::vector<Wrench> wrenches = wrenchesOn(coarse_grid, worldPositions(coarse.coarsePositions(model_->state().q)),
+                                            coarse_external, coarse.coarseHandleMotion().acceleration, origins);
+  const int dim = grid_.dimension();
+  const Eigen::VectorXd x = positions();
+  for (size_t h = 0; h < grid_.handles().size(); ++h)
+    for (int p : grid_.handles()[h])
+    {
+      Eigen::Vector3d f = Eigen::Vector3d::Zero(), at = Eigen::Vector3d::Zero();
+      for (int d = 0; d < dim; ++d)
+        f[dim == 3 ? d : 2 * d] = external_force_[dim * p + d], at[dim == 3 ? d : 2 * d] = x[dim * p + d];
+      wrenches[h].force += f;
+      wrenches[h].torque += (at - origins[h]).cross(f);
+    }
   return wrenches;
 }
 

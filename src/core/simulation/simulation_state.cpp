@@ -205,6 +205,11 @@ Eigen::VectorXd Simulation::positions() const
     for (int k = 0; k < grid_.numHandleDofs(); ++k)
       x[grid_.handleDofs()[k]] += handle_current_.displacement[k];
   grid_.addFree(bodyDisplacement(), x);
+  return worldPositions(std::move(x));
+}
+
+Eigen::VectorXd Simulation::worldPositions(Eigen::VectorXd x) const
+{
   if (frameMoved())
   {
     // x = p + R y, every particle (the handles' with them).

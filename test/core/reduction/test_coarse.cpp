@@ -95,6 +95,10 @@ TEST(CoarseGrid, RefusesByNameWhatCannotSpanOrHoldTheCloth)
   EXPECT_TRUE(contains(clash, "handles[0] and handles[1]")) << clash;
   SimulationParams s = coarseParams(4);
   EXPECT_TRUE(contains(refusal([&] { Simulation(held, s); }), "coarse_cols")) << "refused before the build";
+  // Held by its top and bottom rows, a 2 x 2 coarse grid has no particle left to move.
+  const std::string all_held = refusal([&] { Simulation(heldCloth({{0, 1, 2, 3}, {12, 13, 14, 15}}, 4), coarseParams(2)); });
+  EXPECT_TRUE(contains(all_held, "'coarse_cols' = 2")) << all_held;
+  EXPECT_TRUE(contains(all_held, "every particle")) << all_held;
 }
 
 TEST(CoarseGrid, HandlesHoldTheNearestCoarseParticles)
@@ -261,4 +265,29 @@ TEST(Coarse, RefusedWhereItHasNoMeaning)
   row.fixed = {0};
   const std::string one_row = refusal([&] { Simulation(row, coarseParams(0)); });
   EXPECT_TRUE(contains(one_row, "2 x 2")) << one_row;
+}
+
+// A cloth hanging at rest from two corner grips: each carries half its weight under `coarse` as under
+// `full` (the grid's springs at the interpolated positions would report a third of it).
+TEST(Coarse, GripsCarryTheClothsWeight)
+{
+  const GridParams g = heldCloth({{0}, {9}}, 10);
+  SimulationParams s = coarseParams(4, 5e-4);
+  s.alpha = 5.0;
+  Simulation coarse(g, s);
+  s.method = Method::Full;
+  Simulation full(g, s);
+  ASSERT_FALSE(coarse.step(6000).diverged);
+  ASSERT_FALSE(full.step(6000).diverged);
+  const double weight = g.mass * g.rows * g.cols * 9.81;
+  const std::vector<Eigen::Vector3d> by_coarse = coarse.handleForces(), by_full = full.handleForces();
+  ASSERT_EQ(by_coarse.size(), 2u);
+  EXPECT_NEAR((by_coarse[0] + by_coarse[1]).z(), -weight, 0.02 * weight);
+  for (int h = 0; h < 2; ++h)
+    EXPECT_NEAR(by_coarse[h].z(), by_full[h].z(), 0.05 * weight) << h;
+  // A force on a grip's own particle is the grip's.
+  Eigen::VectorXd force = Eigen::VectorXd::Zero(3 * g.rows * g.cols);
+  force[3 * 9 + 2] = -1.0;
+  coarse.setExternalForce(force);
+  EXPECT_NEAR(coarse.handleForces()[1].z() - by_coarse[1].z(), -1.0, 1e-12);
 }
