@@ -53,7 +53,7 @@ def main():
     times = [args.horizon * (k + 1) / args.samples for k in range(args.samples)]
 
     def run(method, time_step=args.time_step):
-        goal = RolloutGoal(method=method, time_step=time_step, horizon=args.horizon, sample_times=times,
+        goal = RolloutGoal(use_state=True, state=state, method=method, time_step=time_step, horizon=args.horizon, sample_times=times,
                            candidates=candidates)
         start = time.monotonic()
         client.send_goal(goal)

@@ -7,7 +7,7 @@ deviation) of the particles' heights at the horizon. Nothing moves the live clot
 the node's own copies of the simulation.
 
 rosrun modal_mass_spring rollout_planner.py --candidates 64 --horizon 2 [--node /modal_mass_spring]
-    [--seed 1] [--method full] [--time_step 0.001] [--max_lower 1.0] [--max_carry 1.0]
+    [--seed 1] [--method coarse|full|...] [--time_step 0.001] [--max_lower 1.0] [--max_carry 1.0]
 Its last line: rollouts: N candidates x S s simulated in W s wall (R times real time); best candidate K"""
 import argparse
 import math

@@ -52,7 +52,7 @@ int resolveCoarseCols(const GridParams& fine, int coarse_cols)
   if (coarse_cols == 0)
   {
     // About a third of the columns: the coarse step is then about 3 times larger on 9 times fewer
-    // particles (docs/benchmarks.md, "A coarse grid as the reduced model").
+    // particles (docs/benchmarks.md, "The coarse grid (`method: coarse`)").
     const double target = std::ceil((fine.cols - 1) / 3.0) + 1;
     int best = allowed.back();
     for (int c : allowed)
