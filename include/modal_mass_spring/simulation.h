@@ -435,6 +435,8 @@ private:
   void adoptBasis(Precomputed&& data);
   // Loads, or trains and stores, the cubature on the physical basis.
   void prepareCubature(const IterationFn& on_iteration = {});
+  // What `method` steps on, unless built: the bases for a modal method, the coarse grid for `coarse`.
+  void buildFor(Method method);
   // The grid is simulated in a moving frame that has left its start: B's coordinates are not the world's.
   bool frameMoved() const { return formulation_ == HandleFormulation::MovingFrame && !frame_current_.atRest(); }
   // In a moving frame: a world free-dof displacement and velocity in B and back (identity else).

@@ -348,14 +348,19 @@ void Simulation::prepareConstraintModes(Method method)
   }
 }
 
-void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder)
+void Simulation::buildFor(Method method)
 {
-  // `linear` needs the eigenbasis (F = -Lambda X); every other modal method uses the physical basis,
-  // and the cubature is trained on it. `coarse` needs its grid.
   if (isModal(method))
     buildBasis();
   if (method == Method::Coarse && !coarse_)
     coarse_ = std::make_unique<CoarseGrid>(grid_, params_.coarse_cols);
+}
+
+void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder)
+{
+  // `linear` needs the eigenbasis (F = -Lambda X); every other modal method uses the physical basis,
+  // and the cubature is trained on it.
+  buildFor(method);
   const ModalBasis& basis = method == Method::Linear ? basis_ : physical_basis_;
   // Before a cubature's training: a held set the method cannot follow is refused at once.
   prepareConstraintModes(method);

@@ -282,53 +282,69 @@ std::vector<Eigen::Vector3d> Simulation::handleForces() const
 namespace
 {
 
-// The wrenches of grid's handles (Simulation::handleWrenches) at positions x (every dof), with the
-// external force (every dof) and the handles' prescribed acceleration (handle dofs; empty: none).
-std::vector<Simulation::Wrench> wrenchesOn(const Grid& grid, const Eigen::VectorXd& x, const Eigen::VectorXd& external,
-                                           const Eigen::VectorXd& acceleration,
-                                           const std::vector<Eigen::Vector3d>& origins)
+// The wrenches on a grid's handles, summed force by force at the particles' positions x (every dof).
+class HandleWrenches
 {
-  const int dim = grid.dimension();
-  std::vector<int> handle_of(grid.numParticles(), -1);
-  for (size_t h = 0; h < grid.handles().size(); ++h)
-    for (int p : grid.handles()[h])
-      handle_of[p] = static_cast<int>(h);
-  auto point = [&](const Eigen::VectorXd& v, int particle) {
-    return dim == 3 ? Eigen::Vector3d(v.segment<3>(3 * particle))
-                    : Eigen::Vector3d(v[2 * particle], 0.0, v[2 * particle + 1]);
-  };
-  std::vector<Simulation::Wrench> wrenches(grid.handles().size());
-  auto add = [&](int particle, const Eigen::VectorXd& f) {
-    const int h = handle_of[particle];
+public:
+  HandleWrenches(const Grid& grid, const Eigen::VectorXd& x, const std::vector<Eigen::Vector3d>& origins)
+    : wrenches(origins.size()), grid_(grid), x_(x), origins_(origins), handle_of_(grid.numParticles(), -1)
+  {
+    for (size_t h = 0; h < grid.handles().size(); ++h)
+      for (int p : grid.handles()[h])
+        handle_of_[p] = static_cast<int>(h);
+  }
+  bool held(int particle) const { return handle_of_[particle] >= 0; }
+  // A force (dimension values) on `particle`: nothing unless a handle holds it.
+  void add(int particle, const Eigen::VectorXd& f)
+  {
+    const int h = handle_of_[particle];
     if (h < 0)
       return;
-    const Eigen::Vector3d f3 = dim == 3 ? Eigen::Vector3d(f.head<3>()) : Eigen::Vector3d(f[0], 0.0, f[1]);
+    const Eigen::Vector3d f3 = point(f, 0), at = point(x_, particle);
     wrenches[h].force += f3;
-    wrenches[h].torque += (point(x, particle) - origins[h]).cross(f3);
-  };
-  // Only the springs that touch a handle particle.
-  for (const Spring& s : grid.springs())
-  {
-    if (handle_of[s.i] < 0 && handle_of[s.j] < 0)
-      continue;
-    const Eigen::VectorXd d = x.segment(dim * s.j, dim) - x.segment(dim * s.i, dim);
-    const double length = d.norm();
-    if (length <= 0.0)
-      continue;
-    const Eigen::VectorXd f = springForce(s.stiffness, s.rest_length, d);  // on i, towards j
-    add(s.i, f);
-    add(s.j, -f);
+    wrenches[h].torque += (at - origins_[h]).cross(f3);
   }
-  const std::vector<int>& dofs = grid.handleDofs();
-  for (size_t k = 0; k < dofs.size(); k += dim)
+  // The springs' pull on the handle particles, and on them the forces `loads` (every dof) less their
+  // mass times the handles' prescribed acceleration (handle dofs; empty: none).
+  void addSpringsAndLoads(const Eigen::VectorXd& loads, const Eigen::VectorXd& acceleration)
   {
-    Eigen::VectorXd f = grid.gravityForce().segment(dofs[k], dim) + external.segment(dofs[k], dim);
-    if (acceleration.size() > 0)
-      f -= grid.particleMass() * acceleration.segment(k, dim);
-    add(dofs[k] / dim, f);
+    const int dim = grid_.dimension();
+    // Only the springs that touch a handle particle.
+    for (const Spring& s : grid_.springs())
+    {
+      if (!held(s.i) && !held(s.j))
+        continue;
+      const Eigen::VectorXd d = x_.segment(dim * s.j, dim) - x_.segment(dim * s.i, dim);
+      if (d.norm() <= 0.0)
+        continue;
+      const Eigen::VectorXd f = springForce(s.stiffness, s.rest_length, d);  // on i, towards j
+      add(s.i, f);
+      add(s.j, -f);
+    }
+    const std::vector<int>& dofs = grid_.handleDofs();
+    for (size_t k = 0; k < dofs.size(); k += dim)
+    {
+      Eigen::VectorXd f = loads.segment(dofs[k], dim);
+      if (acceleration.size() > 0)
+        f -= grid_.particleMass() * acceleration.segment(k, dim);
+      add(dofs[k] / dim, f);
+    }
   }
-  return wrenches;
-}
+
+  std::vector<Simulation::Wrench> wrenches;
+
+private:
+  // Particle p's entries of v in 3D (a 2D grid's x-z plane is y = 0).
+  Eigen::Vector3d point(const Eigen::VectorXd& v, int p) const
+  {
+    return grid_.dimension() == 3 ? Eigen::Vector3d(v.segment<3>(3 * p)) : Eigen::Vector3d(v[2 * p], 0.0, v[2 * p + 1]);
+  }
+
+  const Grid& grid_;
+  const Eigen::VectorXd& x_;
+  const std::vector<Eigen::Vector3d>& origins_;
+  std::vector<int> handle_of_;  // per particle: its handle, -1 none
+};
 
 }  // namespace
 
@@ -337,28 +353,28 @@ std::vector<Simulation::Wrench> Simulation::handleWrenches(const std::vector<Eig
   if (origins.size() != grid_.handles().size())
     rejectParameter("origins", origins.size(),
                     "must hold one point per handle (" + std::to_string(grid_.handles().size()) + ")");
+  const Eigen::VectorXd x = positions();
+  HandleWrenches own(grid_, x, origins);
   if (params_.method != Method::Coarse)
-    return wrenchesOn(grid_, positions(), external_force_, handle_current_.acceleration, origins);
+  {
+    own.addSpringsAndLoads(grid_.gravityForce() + external_force_, handle_current_.acceleration);
+    return own.wrenches;
+  }
   // `coarse`: what its grid's springs pull on its handle particles (the grid's springs at the
   // interpolated positions would pull by a spring's share of a coarse cell's stretch), plus the
   // external force on the grid's handle particles themselves.
-  const auto& coarse = static_cast<const CoarseMethod&>(*model_);
-  const Grid& coarse_grid = coarse_->grid;
-  const Eigen::VectorXd coarse_external = coarse_->interpolation.transpose() * grid_.gatherFree(external_force_);
-  std::vector<Wrench> wrenches = wrenchesOn(coarse_grid, worldPositions(coarse.coarsePositions(model_->state().q)),
-                                            coarse_external, coarse.coarseHandleMotion().acceleration, origins);
+  const auto& method = static_cast<const CoarseMethod&>(*model_);
+  const Eigen::VectorXd x_coarse = worldPositions(method.coarsePositions(model_->state().q));
+  HandleWrenches coarse(coarse_->grid, x_coarse, origins);
+  coarse.addSpringsAndLoads(coarse_->grid.gravityForce() +
+                                coarse_->interpolation.transpose() * grid_.gatherFree(external_force_),
+                            method.coarseHandleMotion().acceleration);
+  own.wrenches = coarse.wrenches;
   const int dim = grid_.dimension();
-  const Eigen::VectorXd x = positions();
-  for (size_t h = 0; h < grid_.handles().size(); ++h)
-    for (int p : grid_.handles()[h])
-    {
-      Eigen::Vector3d f = Eigen::Vector3d::Zero(), at = Eigen::Vector3d::Zero();
-      for (int d = 0; d < dim; ++d)
-        f[dim == 3 ? d : 2 * d] = external_force_[dim * p + d], at[dim == 3 ? d : 2 * d] = x[dim * p + d];
-      wrenches[h].force += f;
-      wrenches[h].torque += (at - origins[h]).cross(f);
-    }
-  return wrenches;
+  for (int dof : grid_.handleDofs())
+    if (dof % dim == 0)
+      own.add(dof / dim, external_force_.segment(dof, dim));
+  return own.wrenches;
 }
 
 }  // namespace modal_mass_spring

@@ -55,10 +55,7 @@ void Simulation::restoreState(const SimulationState& s)
   validateParameters(grid_.params(), changed);
   if (self_collision_ && s.method != Method::Full)
     rejectParameter("state.method", toString(s.method), kSelfCollisionMethods);
-  if (isModal(s.method))
-    buildBasis();
-  if (s.method == Method::Coarse && !coarse_)
-    coarse_ = std::make_unique<CoarseGrid>(grid_, params_.coarse_cols);
+  buildFor(s.method);
   const Eigen::Index free_dofs = u_start_.size();
   const Eigen::Index coordinates = s.method == Method::Full     ? free_dofs
                                    : s.method == Method::Coarse ? coarse_->grid.numFreeDofs()
