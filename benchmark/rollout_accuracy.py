@@ -10,6 +10,7 @@ import argparse
 import importlib.util
 import math
 import os
+import random
 import time
 
 import actionlib
@@ -44,7 +45,6 @@ def main():
     client = actionlib.SimpleActionClient(args.node + "/rollout", RolloutAction)
     client.wait_for_server(rospy.Duration(60.0))
 
-    import random
     rng = random.Random(args.seed)
     frames = list(dict.fromkeys(state.handle_frames))
     poses = [state.handle_frame_poses[state.handle_frames.index(f)] for f in frames]

@@ -34,6 +34,7 @@ const std::vector<std::string>& methodNames()
   static const std::vector<std::string> names{"full", "linear", "physical", "cubature", "coarse"};
   return names;
 }
+
 std::string methodList()
 {
   std::string list;

@@ -1,8 +1,9 @@
 // Method `coarse`'s reduced model: the same cloth on a coarser grid. The coarse grid keeps the fine
 // one's width, height, total mass and spring constants (a square grid's stiffness in tension does
 // not depend on its spacing; docs/design.md has what softening the bending springs did), so its
-// particles are heavier and further apart and it is stable at a larger explicit step. The fine particles follow it by bilinear interpolation in material
-// coordinates; the fine grid's fixed and handle particles hold the coarse particles nearest them.
+// particles are heavier and further apart and it is stable at a larger explicit step. The fine
+// particles follow it by bilinear interpolation in material coordinates; the fine grid's fixed and
+// handle particles hold the coarse particles nearest them.
 #pragma once
 
 #include "modal_mass_spring/grid.h"
