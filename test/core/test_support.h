@@ -1,6 +1,7 @@
 // Helpers shared by the core's gtests.
 #pragma once
 
+#include "modal_mass_spring/contact.h"
 #include "modal_mass_spring/grid.h"
 #include "modal_mass_spring/simulation.h"
 
@@ -84,6 +85,30 @@ inline modal_mass_spring::SimulationParams methodParams(
   s.time_step = dt;
   s.integrator = integrator;
   return s;
+}
+
+// A horizontal plane (the default friction) `gap` m below the lowest particle of the grid's initial positions.
+inline modal_mass_spring::Collider tableBelow(const modal_mass_spring::GridParams& g, double gap)
+{
+  const modal_mass_spring::Grid grid(g);
+  modal_mass_spring::Collider table;
+  table.type = modal_mass_spring::ColliderType::Plane;
+  table.point = Eigen::Vector3d(0.0, 0.0, grid.toPoints(grid.initialPositions()).row(2).minCoeff() - gap);
+  return table;
+}
+
+// Prescribes a 3D grid's handles for the end of step k from their positions `start`: a rigid slide
+// along x from rest at `acceleration` (m/s^2) and down at 0.1 m/s, the same for every run.
+inline void slideHandles(modal_mass_spring::Simulation& sim, const Eigen::VectorXd& start, long k, double acceleration)
+{
+  const double t = (k + 1) * sim.params().time_step;
+  Eigen::VectorXd x = start, v = Eigen::VectorXd::Zero(start.size()), a = v;
+  for (Eigen::Index d = 0; d < x.size(); d += 3)
+  {
+    x[d] += 0.5 * acceleration * t * t, v[d] = acceleration * t, a[d] = acceleration;
+    x[d + 2] -= 0.1 * t, v[d + 2] = -0.1;
+  }
+  sim.setHandleMotion(x, v, a);
 }
 
 // The largest distance (m) of a particle from where `positions` (a flat vector, as positions()) put it.

@@ -36,19 +36,6 @@ SimulationParams coarseParams(int coarse_cols, double dt = 1e-3)
   return s;
 }
 
-// The handles' rigid motion at step k: a slide along x and down.
-void driveHandles(Simulation& sim, const Eigen::VectorXd& start, long k)
-{
-  const double t = (k + 1) * sim.params().time_step;
-  Eigen::VectorXd x = start, v = Eigen::VectorXd::Zero(start.size()), a = v;
-  for (Eigen::Index d = 0; d < x.size(); d += 3)
-  {
-    x[d] += 0.2 * t * t, v[d] = 0.4 * t, a[d] = 0.4;
-    x[d + 2] -= 0.1 * t, v[d + 2] = -0.1;
-  }
-  sim.setHandleMotion(x, v, a);
-}
-
 }  // namespace
 
 TEST(CoarseGrid, SpansTheSameClothWithItsMass)
@@ -120,10 +107,7 @@ TEST(Coarse, OnTheGridItselfIsFull)
   const GridParams g = heldCloth({{0}, {7}}, 8);
   SimulationParams s = coarseParams(8);
   s.alpha = 0.5;
-  Collider table;
-  table.type = ColliderType::Plane;
-  table.point = Eigen::Vector3d(0.0, 0.0, Grid(g).toPoints(Grid(g).initialPositions()).row(2).minCoeff() - 0.02);
-  s.colliders = {table};
+  s.colliders = {tableBelow(g, 0.02)};
   Simulation coarse(g, s);
   s.method = Method::Full;
   Simulation full(g, s);
@@ -131,8 +115,8 @@ TEST(Coarse, OnTheGridItselfIsFull)
   double largest = 0.0;
   for (long k = 0; k < 300; ++k)
   {
-    driveHandles(full, start, k);
-    driveHandles(coarse, start, k);
+    slideHandles(full, start, k, 0.4);
+    slideHandles(coarse, start, k, 0.4);
     ASSERT_FALSE(full.step().diverged);
     ASSERT_FALSE(coarse.step().diverged);
     largest = std::max(largest, (full.positions() - coarse.positions()).cwiseAbs().maxCoeff());

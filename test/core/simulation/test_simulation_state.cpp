@@ -13,19 +13,6 @@ using namespace modal_mass_spring;
 namespace
 {
 
-// The handles' rigid motion at step k: a slow slide along x and down, the same for every run.
-void driveHandles(Simulation& sim, const Eigen::VectorXd& start, long k)
-{
-  const double t = (k + 1) * sim.params().time_step;
-  Eigen::VectorXd x = start, v = Eigen::VectorXd::Zero(start.size()), a = v;
-  for (Eigen::Index d = 0; d < x.size(); d += 3)
-  {
-    x[d] += 0.05 * t * t, v[d] = 0.1 * t, a[d] = 0.1;
-    x[d + 2] -= 0.1 * t, v[d + 2] = -0.1;
-  }
-  sim.setHandleMotion(x, v, a);
-}
-
 // Positions after each of `steps` steps from the simulation's current state.
 std::vector<Eigen::VectorXd> trajectory(Simulation& sim, int steps, const Eigen::VectorXd& handle_start)
 {
@@ -33,7 +20,7 @@ std::vector<Eigen::VectorXd> trajectory(Simulation& sim, int steps, const Eigen:
   for (int k = 0; k < steps; ++k)
   {
     if (handle_start.size() > 0)
-      driveHandles(sim, handle_start, sim.stepCount());
+      slideHandles(sim, handle_start, sim.stepCount(), 0.1);
     EXPECT_FALSE(sim.step().diverged);
     path.push_back(sim.positions());
   }
@@ -58,10 +45,7 @@ TEST(SimulationState, RestoredStateReplaysHeldClothOnTable)
   const GridParams g = heldCloth({{0}, {5}}, 6);
   SimulationParams s = methodParams(Method::Full, 4, 1e-3);
   s.alpha = 0.5;
-  Collider table;
-  table.type = ColliderType::Plane;
-  table.point = Eigen::Vector3d(0.0, 0.0, Grid(g).toPoints(Grid(g).initialPositions()).row(2).minCoeff() - 0.02);
-  s.colliders = {table};
+  s.colliders = {tableBelow(g, 0.02)};
   Simulation live(g, s);
   const Eigen::VectorXd handle_start = live.handlePositions();
   trajectory(live, 150, handle_start);
