@@ -117,6 +117,12 @@ void checkStartOutsideColliders(const Grid& grid, const Eigen::VectorXd& positio
 double signedDistance(const Collider& collider, const Eigen::Isometry3d& pose, const Eigen::Vector3d& x,
                       Eigen::Vector3d& normal);
 
+class Contact;
+
+// How deep the free particle (neither fixed nor held) of `points` (3 x particles, grid coordinates)
+// deepest inside an active collider of `contact`, at its pose, is inside it (m; 0: none is inside).
+double deepestInside(const Grid& grid, const Eigen::Matrix3Xd& points, const Contact& contact);
+
 // What the last step's contact did.
 struct ContactReport
 {

@@ -120,6 +120,14 @@ HandleFormulation resolveHandleFormulation(const GridParams& grid, const Simulat
 // The cubature training parameters of a simulation's.
 CubatureParams cubatureParams(const SimulationParams& params);
 
+// The whole number of time steps one step of `coarse` can span with the margin to its explicit
+// stability limit that time_step has on the grid: the square root of the fine particles per coarse
+// one, rounded down (the springs keep their constants, so the limit grows as the square root of the
+// particle mass), and under the explicit integrator at most 2 / (alpha time_step), the damping's own
+// limit. Where the caller picks the step (~rollout's time_step 0, modal_compare) `coarse` steps
+// time_step times it. Throws as coarse_cols does.
+int coarseStepMultiple(const GridParams& grid, const SimulationParams& params);
+
 // What building the linearization point found.
 struct LinearizationInfo
 {

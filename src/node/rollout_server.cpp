@@ -214,7 +214,8 @@ SimulationNode::RolloutSetup SimulationNode::rolloutSetup(const RolloutGoal& goa
       placeHandleFrames(goal.state, request.frames);
   }
   request.method = rolloutMethod(goal.method, setup.grid, setup.params);
-  request.time_step = goal.time_step == 0.0 ? setup.params.time_step : goal.time_step;
+  request.time_step =
+      goal.time_step == 0.0 ? defaultRolloutTimeStep(request.method, goal.horizon, setup.grid, setup.params) : goal.time_step;
   request.horizon = goal.horizon;
   request.sample_times = goal.sample_times;
   request.candidates = candidateMotions(goal);

@@ -161,6 +161,15 @@ void checkRolloutRequest(const RolloutRequest& request, const RolloutLimits& lim
                         number(limits.memory_limit_gb) + " GB: fewer candidates, sample times or rollout_threads");
 }
 
+double defaultRolloutTimeStep(Method method, double horizon, const GridParams& grid, SimulationParams params)
+{
+  if (method != Method::Coarse)
+    return params.time_step;
+  params.method = method;
+  const double fits = std::floor(horizon / params.time_step + 1e-9);  // a horizon out of range is refused later
+  return params.time_step * std::max(1.0, std::min<double>(coarseStepMultiple(grid, params), fits));
+}
+
 SimulationState rolloutStart(Simulation& simulation, const RolloutRequest& request)
 {
   simulation.restoreState(request.state);

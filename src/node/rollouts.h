@@ -68,6 +68,10 @@ struct CandidateOutcome
   std::vector<GridSample> samples;
 };
 
+// A request's time step when its goal gives none: the live simulation's (params.time_step), which
+// `coarse` spans a whole number of (coarseStepMultiple), as many as fit in the horizon.
+double defaultRolloutTimeStep(Method method, double horizon, const GridParams& grid, SimulationParams params);
+
 // Refuses a request before any work: no candidate, more than max_candidates, a horizon not in
 // (0, max_horizon], a time step validateParameters refuses, sample times not increasing in
 // (0, horizon], a frame that is no handle's (or was never looked up), waypoint times not increasing

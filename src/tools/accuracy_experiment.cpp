@@ -133,6 +133,16 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
                                 std::make_unique<Simulation>(setup.grid, referenceParams(2 * divisor), StageFn{}, options.cache),
                                 2 * options.sample * divisor, false});
   }
+  // `coarse` spans several of the setup's steps at the margin to stability the setup's step has
+  // (coarseStepMultiple), a number that divides the steps between samples.
+  auto coarseMultiple = [&] {
+    if (options.coarse_step_multiple > 0)
+      return options.coarse_step_multiple;
+    int multiple = coarseStepMultiple(setup.grid, withMethod(setup.sim, Method::Coarse));
+    while (options.sample % multiple != 0)
+      --multiple;
+    return multiple;
+  };
   std::vector<Method> compared;
   for (Method m : options.methods)
     if ((divisor > 0 || m != Method::Full) && std::find(compared.begin(), compared.end(), m) == compared.end())
@@ -142,8 +152,11 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
   for (Method m : compared)
     try
     {
-      runs.push_back({toString(m), std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, m), StageFn{}, options.cache),
-                      options.sample, true});
+      SimulationParams p = withMethod(setup.sim, m);
+      const int multiple = m == Method::Coarse ? coarseMultiple() : 1;
+      p.time_step *= multiple;
+      runs.push_back({toString(m), std::make_unique<Simulation>(setup.grid, p, StageFn{}, options.cache),
+                      options.sample / multiple, true});
     }
     catch (const std::bad_alloc&)
     {
@@ -191,17 +204,22 @@ ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, const Accurac
   e.step = step;
   e.time = step * setup.sim.time_step;
   e.diverged = run.diverged || reference_diverged;
+  e.time_step = run.sim->params().time_step;
   e.step_seconds = run.timed && step > 0 ? run.step_seconds : 0.0;
   e.step_cpu_seconds = run.timed && step > 0 ? run.step_cpu_seconds : 0.0;
   if (e.diverged)
   {
-    e.max_distance = e.rms_distance = e.max_displacement = e.energy = e.center_y = std::numeric_limits<double>::quiet_NaN();
+    e.max_distance = e.rms_distance = e.max_displacement = e.energy = e.center_y = e.depth =
+        std::numeric_limits<double>::quiet_NaN();
     return e;
   }
-  distances(grid, run.sim->points(), reference, e.max_distance, e.rms_distance);
-  e.max_displacement = maxDisplacement(grid, run.sim->points());
+  const Eigen::Matrix3Xd points = run.sim->points();
+  distances(grid, points, reference, e.max_distance, e.rms_distance);
+  e.max_displacement = maxDisplacement(grid, points);
   e.energy = run.sim->totalEnergy();
-  e.center_y = run.sim->points().row(1).mean();
+  e.center_y = points.row(1).mean();
+  if (const Contact* contact = run.sim->contact())
+    e.depth = deepestInside(grid, points, *contact);
   if (run.adaptive)
   {
     e.reduced_share = run.adaptive->reducedShare();
@@ -312,7 +330,7 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
   std::vector<AccuracySummary> out;
   std::vector<std::vector<double>> times, cpu_times, indicators, distances;
   std::vector<int> counts;
-  std::vector<double> time_steps;  // of each summary's samples: time / step
+  std::vector<double> time_steps;  // of each summary's method
   for (const ErrorSample& e : rows)
   {
     auto it = std::find_if(out.begin(), out.end(), [&](const AccuracySummary& s) {
@@ -335,7 +353,7 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
     AccuracySummary& s = *it;
     if (e.step == 0)
       continue;
-    time_steps[k] = e.time / static_cast<double>(e.step);
+    time_steps[k] = e.time_step;
     if (e.diverged)
     {
       s.diverged = true;
@@ -345,6 +363,7 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
     s.mean_max += e.max_distance;
     s.max_rms = std::max(s.max_rms, e.rms_distance);
     s.final_rms = e.rms_distance;
+    s.deepest = std::isnan(s.deepest) ? e.depth : std::max(s.deepest, e.depth);
     if (e.step_seconds > 0.0)
       times[k].push_back(e.step_seconds);
     if (e.step_cpu_seconds > 0.0)
@@ -373,6 +392,7 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
     }
     if (s.diverged)
       s.final_rms = std::numeric_limits<double>::quiet_NaN();
+    s.time_step = time_steps[k];
     s.step_seconds_median = median(times[k]);
     s.step_cpu_seconds_median = median(cpu_times[k]);
     s.indicator_rank_correlation = rankCorrelation(indicators[k], distances[k]);

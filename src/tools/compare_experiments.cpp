@@ -203,16 +203,19 @@ void printAccuracySummary(const Options& o, const std::string& reference, const 
 {
   std::vector<std::vector<std::string>> summary{{"variant", "method", "mean RMS m", "largest RMS m", "mean largest m",
                                                  "RMS at the end m", "step us (median)", "step us (mean)",
-                                                 "CPU us (median)", "CPU s per simulated s", "real-time factor"}};
+                                                 "CPU us (median)", "CPU s per simulated s", "real-time factor",
+                                                 "time step s", "deepest m"}};
   for (const AccuracySummary& s : summarizeAccuracy(errors))
     if (s.method != reference && s.method != "reference_half_step")
       summary.push_back({s.variant, s.method, fmt(s.mean_rms), fmt(s.max_rms), fmt(s.mean_max),
                          s.diverged ? "diverged" : fmt(s.final_rms), fmt(1e6 * s.step_seconds_median),
                          fmt(1e6 * s.step_seconds_mean), fmt(1e6 * s.step_cpu_seconds_median),
-                         fmt(s.cpu_per_simulated_second), fmt(s.real_time_factor)});
+                         fmt(s.cpu_per_simulated_second), fmt(s.real_time_factor), fmt(s.time_step),
+                         fmt(s.deepest)});
   printTable("accuracy (" + o.tag + "): over every sample after step 0, against " + reference +
                  "; wall and this thread's CPU time per step while running, the CPU time per simulated second "
-                 "and the real-time factor it allows (time_step / CPU per step)",
+                 "and the real-time factor it allows (time_step / CPU per step); each method's time step; how "
+                 "deep its deepest free particle went inside a collider over the samples",
              summary);
   printAdaptive(summarizeAccuracy(errors));
 }
@@ -386,10 +389,10 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
   const std::vector<AccuracySummary> summaries = summaries_of();
   std::vector<std::vector<std::string>> table{
       {"scenario", "method", "mean RMS m", "largest RMS m", "RMS at the end m", "step us (median)", "CPU us (median)",
-       "CPU s per simulated s", "real-time factor", "indicator rank corr."}};
+       "CPU s per simulated s", "real-time factor", "indicator rank corr.", "time step s", "deepest m"}};
   for (const AccuracySummary& s : summaries)
     if (!s.not_built.empty())
-      table.push_back({s.variant, s.method, "did not build: " + s.not_built, "", "", "", "", "", "", ""});
+      table.push_back({s.variant, s.method, "did not build: " + s.not_built, "", "", "", "", "", "", "", "", ""});
     else if (s.method != "reference_half_step" && (s.method != reference || s.step_seconds_median > 0.0))
       // The reference's own row when it is timed (`full` at the methods' step): the step times to compare.
       table.push_back({s.variant, s.method, s.method == reference ? "(reference)" : fmt(s.mean_rms),
@@ -397,11 +400,12 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
                        s.method == reference ? "" : s.diverged ? "diverged" : fmt(s.final_rms),
                        fmt(1e6 * s.step_seconds_median), fmt(1e6 * s.step_cpu_seconds_median),
                        fmt(s.cpu_per_simulated_second), fmt(s.real_time_factor),
-                       fmt(s.indicator_rank_correlation)});
+                       fmt(s.indicator_rank_correlation), fmt(s.time_step), fmt(s.deepest)});
   printTable("handles (" + o.tag + "): distance of the free particles to " + reference +
                  " over every sample after step 0; wall and this thread's CPU time per step while running, the "
                  "CPU time per simulated second and the real-time factor it allows (time_step / CPU per step); "
-                 "the rank correlation of the method's error indicator with that distance",
+                 "the rank correlation of the method's error indicator with that distance; each method's time "
+                 "step; how deep its deepest free particle went inside a collider over the samples",
              table);
   printAdaptive(summaries);
   for (const std::string& m : messages)

@@ -54,6 +54,10 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
                 `full` too, measured against it, with its wall time per step; DT must divide time_step,
                 at most 100000 times)
               --no-snapshots (no particle positions file)
+              --coarse-step-multiple K (0, the default: `coarse` steps time_step times the square root of
+                the fine particles per coarse one, rounded down (explicit: at most 2 / (alpha time_step)),
+                or the largest smaller number that divides --sample; K >= 1: K time steps, K dividing
+                --sample)
   stability:  --stability-steps S (10000)  --tolerance T (1e-3, relative, in [1e-12, 0.5])
               --max-time-step DT (10 s; above time_step; no divergence up to DT counts as unbounded)
               --scan-ratio R (1.02, in [1.001, 2]: the upward scan's step ratio)
@@ -253,6 +257,10 @@ const std::map<std::string, Setter>& valueOptions()
       {"--interval",
        [](Options& o, const std::string& v) { o.accuracy.interval = parseInt("--interval", v, 1, 100000000); }},
       {"--sample", [](Options& o, const std::string& v) { o.accuracy.sample = parseInt("--sample", v, 1, 100000000); }},
+      {"--coarse-step-multiple",
+       [](Options& o, const std::string& v) {
+         o.accuracy.coarse_step_multiple = parseInt("--coarse-step-multiple", v, 0, 100000000);
+       }},
       {"--reference-time-step",
        [](Options& o, const std::string& v) {
          o.accuracy.reference_time_step = parseNumber("--reference-time-step", v, 0.0, 1e6, true);
@@ -299,6 +307,9 @@ void finishOptions(Options& o)
     rejectParameter("--sample", o.accuracy.sample, "must divide --interval " + std::to_string(o.accuracy.interval));
   if (o.accuracy.sample > o.accuracy.steps)
     rejectParameter("--sample", o.accuracy.sample, "must be at most --steps " + std::to_string(o.accuracy.steps));
+  if (o.accuracy.coarse_step_multiple > 0 && o.accuracy.sample % o.accuracy.coarse_step_multiple != 0)
+    rejectParameter("--coarse-step-multiple", o.accuracy.coarse_step_multiple,
+                    "must be 0 (automatic) or divide --sample " + std::to_string(o.accuracy.sample));
   if (o.check_factor > 0.0 && !o.runs("stability"))
     rejectParameter("--check-factor", o.check_factor, "needs the stability experiment");
   checkStabilityOptions(o.stability);

@@ -500,7 +500,7 @@ std::vector<AccuracySummary> notBuiltSummaries(const std::string& variant, const
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::vector<AccuracySummary> out;
   for (const auto& [method, reason] : result.not_built)
-    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, nan, nan, nan, false, reason, nan, nan, -1});
+    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, nan, nan, nan, false, reason, nan, nan, -1, nan, nan});
   return out;
 }
 
@@ -508,7 +508,7 @@ void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummar
 {
   precise(out) << "variant,method,mean_rms,max_rms,mean_max,final_rms,step_seconds_median,step_seconds_mean,"
                   "step_cpu_seconds_median,cpu_per_simulated_second,real_time_factor,diverged,not_built,"
-                  "indicator_rank_correlation,reduced_share,switches\n";
+                  "indicator_rank_correlation,reduced_share,switches,time_step,deepest\n";
   for (const AccuracySummary& s : rows)
   {
     // The reason is free text: quoted, its quotes doubled.
@@ -520,7 +520,8 @@ void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummar
         << Field{s.step_seconds_mean} << ',' << Field{s.step_cpu_seconds_median} << ','
         << Field{s.cpu_per_simulated_second} << ',' << Field{s.real_time_factor} << ',' << (s.diverged ? 1 : 0) << ",\"" << reason << "\","
         << Field{s.indicator_rank_correlation} << ',' << Field{s.reduced_share} << ','
-        << (s.switches >= 0 ? std::to_string(s.switches) : std::string()) << '\n';
+        << (s.switches >= 0 ? std::to_string(s.switches) : std::string()) << ',' << Field{s.time_step} << ','
+        << Field{s.deepest} << '\n';
   }
 }
 

@@ -96,6 +96,9 @@ struct AccuracyOptions
   // converged (`reference_check`).
   double reference_time_step = 0.0;
   bool adaptive = false;  // also run method "adaptive" (AdaptiveStepper, the setup's adaptive settings)
+  // How many of the setup's time steps one step of `coarse` spans (0: coarseStepMultiple, or the
+  // largest smaller number that divides `sample`); it must divide `sample`.
+  int coarse_step_multiple = 0;
   bool snapshots = true;  // keep the particle positions every `interval` steps
   // Where the bases and cubatures are cached between runs (directory empty: off). The cost
   // experiment never uses it: it measures the build.
@@ -125,6 +128,8 @@ struct ErrorSample
   // Method "adaptive": the share of its steps so far taken reduced and its switches (else NaN, -1).
   double reduced_share = std::numeric_limits<double>::quiet_NaN();
   int switches = -1;
+  double time_step = 0.0;  // this method's own (s): `coarse` may span several of the setup's
+  double depth = 0.0;      // how deep its deepest free particle is inside a collider (m; 0: none is)
 };
 
 struct Snapshot
@@ -275,6 +280,8 @@ struct AccuracySummary
   // Method "adaptive": its share of reduced steps and its switches over the run (else NaN, -1).
   double reduced_share = std::numeric_limits<double>::quiet_NaN();
   int switches = -1;
+  double time_step = std::numeric_limits<double>::quiet_NaN();  // s, the method's own
+  double deepest = std::numeric_limits<double>::quiet_NaN();    // m, over the samples: inside a collider
 };
 // Spearman's rank correlation of a and b (equal sizes; ties take their mean rank); NaN below three
 // pairs or where either is constant.

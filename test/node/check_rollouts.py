@@ -106,12 +106,19 @@ class Rollouts(unittest.TestCase):
             stepped = self.get_state().state
             self.assertGreater(largest_distance(saved.positions, stepped.positions), 1e-4, "the cloth must move")
             horizon = STEPS * saved.time_step
-            goal = RolloutGoal(use_state=True, state=saved, horizon=horizon, sample_times=[horizon],
-                               candidates=[RolloutCandidate()])
+            goal = RolloutGoal(use_state=True, state=saved, time_step=saved.time_step, horizon=horizon,
+                               sample_times=[horizon], candidates=[RolloutCandidate()])
             status, result, _ = self.rollout(goal)
             self.assertEqual(status, GoalStatus.SUCCEEDED, result.message)
             self.assertIn("with coarse", result.message)
             self.assertLess(largest_distance(result.outcomes[0].samples[-1].positions, stepped.positions), 1e-9)
+            # Without a time step `coarse` spans two of the live ones (4 x 4 on 2 x 2: the square root of
+            # 4 fine particles a coarse one), and ends near the live steps.
+            goal.time_step = 0.0
+            status, result, _ = self.rollout(goal)
+            self.assertEqual(status, GoalStatus.SUCCEEDED, result.message)
+            self.assertIn("with coarse at time_step %g s" % (2 * saved.time_step), result.message)
+            self.assertLess(largest_distance(result.outcomes[0].samples[-1].positions, stepped.positions), 2e-3)
         finally:
             self.assertTrue(self.set_state(original).success)
 

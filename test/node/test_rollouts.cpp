@@ -186,6 +186,24 @@ bool contains(const std::string& text, const std::string& part) { return text.fi
 
 }  // namespace
 
+// With no time step in the goal: the live one, which `coarse` spans coarseStepMultiple times, as many
+// as fit in the horizon.
+TEST(Rollouts, DefaultTimeStepIsTheLiveOneCoarseSpansAMultipleOfIt)
+{
+  GridParams grid = HeldCloth().grid;
+  grid.rows = grid.cols = 16;  // 16 x 16 on 6 x 6: 7.1 fine particles a coarse one
+  grid.handles = {{0}, {15}};
+  SimulationParams params = HeldCloth().params;
+  params.coarse_cols = 6;
+  EXPECT_DOUBLE_EQ(defaultRolloutTimeStep(Method::Full, 1.0, grid, params), 1e-3);
+  EXPECT_DOUBLE_EQ(defaultRolloutTimeStep(Method::Cubature, 1.0, grid, params), 1e-3);
+  EXPECT_DOUBLE_EQ(defaultRolloutTimeStep(Method::Coarse, 1.0, grid, params), 2e-3);
+  EXPECT_DOUBLE_EQ(defaultRolloutTimeStep(Method::Coarse, 1.5e-3, grid, params), 1e-3);
+  params.coarse_cols = 4;  // 16 fine particles a coarse one
+  EXPECT_DOUBLE_EQ(defaultRolloutTimeStep(Method::Coarse, 1.0, grid, params), 4e-3);
+  EXPECT_DOUBLE_EQ(defaultRolloutTimeStep(Method::Coarse, 3.5e-3, grid, params), 3e-3);
+}
+
 TEST(Rollouts, BadGoalsRefusedByNameWithTheirRange)
 {
   EXPECT_EQ(ValidRequest().refusal(), "");

@@ -540,7 +540,17 @@ TEST(HandleScenarios, CoarseRunsBesideTheMethodsAndOnTheGridItselfIsFull)
       EXPECT_TRUE(e.method != "coarse" || std::isnan(e.error_indicator));
     std::map<std::string, double> mean;
     for (const AccuracySummary& s : summarizeAccuracy(result.errors))
+    {
       mean[s.method] = s.mean_rms;
+      // `coarse` on 2 x 2 spans two steps (the square root of 4 fine particles a coarse one), on the
+      // grid itself one; the CPU per simulated second is over its own step.
+      const double time_step = setup.sim.time_step * (s.method == "coarse" && coarse_cols == 2 ? 2 : 1);
+      if (s.method != "reference")
+      {
+        EXPECT_DOUBLE_EQ(s.time_step, time_step) << s.method;
+        EXPECT_DOUBLE_EQ(s.cpu_per_simulated_second, s.step_cpu_seconds_median / time_step) << s.method;
+      }
+    }
     EXPECT_EQ(mean.count("full") + mean.count("coarse"), 2u);
     return std::make_pair(mean["full"], mean["coarse"]);
   };

@@ -291,6 +291,15 @@ DeepestParticle deepestFreeParticle(const Grid& grid, const Eigen::Matrix3Xd& po
   return deepest;
 }
 
+double deepestInside(const Grid& grid, const Eigen::Matrix3Xd& points, const Contact& contact)
+{
+  double deepest = 0.0;
+  for (int i = 0; i < static_cast<int>(contact.colliders().size()); ++i)
+    if (contact.active(i))
+      deepest = std::max(deepest, deepestFreeParticle(grid, points, contact.colliders()[i], contact.pose(i)).depth);
+  return deepest;
+}
+
 void checkStartOutsideColliders(const Grid& grid, const Eigen::VectorXd& positions,
                                 const std::vector<Collider>& colliders, double thickness, const std::string& start)
 {

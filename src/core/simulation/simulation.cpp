@@ -7,9 +7,11 @@
 #include "modal_mass_spring/validation.h"
 #include "contact/collider_shapes.h"
 #include "dynamics/method_model.h"
+#include "reduction/coarse_grid.h"
 #include "reduction/error_indicator.h"
 #include "solvers/equilibrium.h"
 
+#include <algorithm>
 #include <chrono>
 #include <time.h>
 #include <cmath>
@@ -26,12 +28,7 @@ namespace
 // pose, deeper than round-off (as checkStartOutsideColliders counts it).
 bool insideCollider(const Grid& grid, const Contact& contact, const Eigen::VectorXd& positions)
 {
-  const Eigen::Matrix3Xd points = grid.toPoints(positions);
-  for (int i = 0; i < static_cast<int>(contact.colliders().size()); ++i)
-    if (contact.active(i) && deepestFreeParticle(grid, points, contact.colliders()[i], contact.pose(i)).depth >
-                                 kSurfaceRoundOffFraction * contact.thickness())
-      return true;
-  return false;
+  return deepestInside(grid, grid.toPoints(positions), contact) > kSurfaceRoundOffFraction * contact.thickness();
 }
 
 }  // namespace
@@ -57,6 +54,22 @@ CubatureParams cubatureParams(const SimulationParams& p)
   c.pose_size = p.cubature_pose_size;
   c.seed = p.cubature_seed;
   return c;
+}
+
+int coarseStepMultiple(const GridParams& grid, const SimulationParams& params)
+{
+  // The springs keep their constants, so the highest frequency goes as one over the square root of
+  // the particle mass: the fine particles per coarse one.
+  const GridParams coarse = coarseGridParams(grid, params.coarse_cols);
+  const double mass_ratio = (static_cast<double>(grid.rows) * grid.cols) / (static_cast<double>(coarse.rows) * coarse.cols);
+  int multiple = std::max(1, static_cast<int>(std::floor(std::sqrt(mass_ratio) + 1e-9)));
+  if (params.integrator == IntegratorKind::Explicit && params.alpha > 0.0)
+  {
+    const double damping_limit = std::floor(2.0 / (params.alpha * params.time_step));  // may exceed int
+    if (damping_limit < multiple)
+      multiple = std::max(1, static_cast<int>(damping_limit));
+  }
+  return multiple;
 }
 
 Simulation::Simulation(const GridParams& grid_params, const SimulationParams& params, const StageFn& on_stage,

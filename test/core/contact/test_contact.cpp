@@ -258,6 +258,21 @@ TEST(Contact, PassFindsEveryTouchAndTheDepthAfterItAsABruteForceCheckDoes)
 // the general pass (the same collider with a second one that touches nothing) over a few steps, each
 // shape turned and moving, the positions, velocities, touches, depths and forces are the same to the
 // bit, and the touches and the depth after are a brute-force count's.
+// How deep the deepest free particle is inside an active collider at its pose: fixed particles and
+// particles outside do not count.
+TEST(Contact, DeepestInsideIsTheDeepestFreeParticleAtTheCollidersPose)
+{
+  const Grid grid(flatSheet());
+  Contact contact(grid, {plane(0.01)}, 0.005);
+  Eigen::Matrix3Xd points = grid.toPoints(grid.initialPositions());
+  EXPECT_NEAR(deepestInside(grid, points, contact), 0.01, 1e-12);
+  points(2, 55) = -0.03;
+  points(2, 3) = -0.2;  // row 0: fixed
+  EXPECT_NEAR(deepestInside(grid, points, contact), 0.04, 1e-12);
+  contact.place(0, Eigen::Isometry3d(Eigen::Translation3d(0.0, 0.0, -0.05)));
+  EXPECT_EQ(deepestInside(grid, points, contact), 0.0);
+}
+
 TEST(Contact, OneColliderPassIsTheGeneralPassToTheBit)
 {
   const Grid grid(flatSheet());

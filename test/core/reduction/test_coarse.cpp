@@ -6,6 +6,8 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
+
 #include <cmath>
 #include <iostream>
 
@@ -34,6 +36,16 @@ SimulationParams coarseParams(int coarse_cols, double dt = 1e-3)
   SimulationParams s = methodParams(Method::Coarse, 4, dt);
   s.coarse_cols = coarse_cols;
   return s;
+}
+
+// The highest angular frequency of M^-1 K on a coarse grid's free dofs at rest (rad/s; dense: small
+// grids only).
+double highestFrequency(const CoarseGrid& g)
+{
+  const Eigen::MatrixXd stiffness(g.stiffness);
+  const Eigen::MatrixXd mass = g.mass.asDiagonal();
+  Eigen::GeneralizedSelfAdjointEigenSolver<Eigen::MatrixXd> eig(stiffness, mass, Eigen::EigenvaluesOnly);
+  return std::sqrt(eig.eigenvalues().maxCoeff());
 }
 
 }  // namespace
@@ -66,6 +78,44 @@ TEST(CoarseGrid, AboutAThirdOfTheColumnsByDefault)
   g.rows = 30, g.cols = 40;
   const int cols = resolveCoarseCols(g, 0);
   EXPECT_EQ(29 * (cols - 1) % 39, 0) << cols;
+}
+
+// The explicit step's limit, 2 / omega_max, grows on the coarse grid as the square root of its
+// particles' mass; coarseStepMultiple spans that many fine steps, rounded down, and `coarse` is stable
+// there and unstable well beyond its own limit.
+TEST(CoarseGrid, StepMultipleKeepsTheMarginToTheExplicitLimit)
+{
+  const GridParams fine = swingingSheet(19);
+  const Grid grid(fine);
+  const CoarseGrid itself(grid, 19), coarse(grid, 0);
+  ASSERT_EQ(coarse.grid.params().cols, 7);
+  const double omega = highestFrequency(itself);
+  const double ratio = omega / highestFrequency(coarse);
+  const double mass_ratio = 19.0 * 19.0 / (7.0 * 7.0);
+  EXPECT_NEAR(ratio, std::sqrt(mass_ratio), 0.1 * std::sqrt(mass_ratio));
+
+  SimulationParams p = coarseParams(0, 0.9 * 2.0 / omega);  // 90% of the fine grid's limit
+  p.alpha = p.beta = 0.0;
+  const int multiple = coarseStepMultiple(fine, p);
+  EXPECT_EQ(multiple, 2);
+  EXPECT_LE(multiple, ratio);
+  p.time_step *= multiple;
+  Simulation stable(fine, p);
+  EXPECT_FALSE(stable.step(4000).diverged);
+  p.time_step = 1.3 * 2.0 * ratio / omega;  // past the coarse grid's own limit
+  Simulation unstable(fine, p);
+  EXPECT_TRUE(unstable.step(4000).diverged);
+
+  // The damping's limit bounds it under the explicit integrator only.
+  const GridParams large = clothSheet(100);
+  SimulationParams q = coarseParams(12, 1e-3);  // 100 x 100 on 12 x 12: 69 fine particles a coarse one
+  EXPECT_EQ(coarseStepMultiple(large, q), 8);
+  q.alpha = 500.0;  // alpha time_step = 0.5
+  EXPECT_EQ(coarseStepMultiple(large, q), 4);
+  q.integrator = IntegratorKind::Implicit;
+  EXPECT_EQ(coarseStepMultiple(large, q), 8);
+  q.coarse_cols = 100;
+  EXPECT_EQ(coarseStepMultiple(large, q), 1);
 }
 
 TEST(CoarseGrid, RefusesByNameWhatCannotSpanOrHoldTheCloth)
