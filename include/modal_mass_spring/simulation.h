@@ -87,8 +87,8 @@ struct SimulationParams
   int cubature_max_training_poses = 0;
   double cubature_pose_size = 0.4;
   int cubature_seed = 1;
-  // `coarse`'s grid: its columns, its rows following from the spacing (0: about a third of cols; see
-  // reduction/coarse_grid.h).
+  // `coarse`'s grid: its columns, its rows following from the spacing (0: about a third of cols, at
+  // most 20; see reduction/coarse_grid.h).
   int coarse_cols = 0;
   // How the modal methods follow moving handles. constraint_modes: Craig-Bampton (see
   // setHandleMotion), linear in the handles' displacement, so large turns distort it. moving_frame:

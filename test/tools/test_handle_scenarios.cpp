@@ -447,7 +447,7 @@ TEST(HandleScenarios, AMethodThatCannotBeBuiltIsReportedAndTheOthersRun)
   EXPECT_TRUE(std::isnan(rows[1].mean_rms));
   std::ostringstream csv;
   writeAccuracySummaryCsv(csv, rows);
-  EXPECT_NE(csv.str().find(",not_built,indicator_rank_correlation,reduced_share,switches\n"), std::string::npos) << csv.str();
+  EXPECT_NE(csv.str().find(",not_built,indicator_rank_correlation,reduced_share,switches,time_step,deepest\n"), std::string::npos) << csv.str();
   EXPECT_NE(csv.str().find("grips,linear,,,,,,,,,,0,\"handles: "), std::string::npos) << csv.str();
 }
 

@@ -48,12 +48,13 @@ int resolveCoarseCols(const GridParams& fine, int coarse_cols)
                                             std::to_string(fine.rows) + ", cols " + std::to_string(fine.cols));
   const std::vector<int> allowed = allowedCoarseCols(fine);  // never empty: cols itself
   if (coarse_cols < 0)
-    rejectParameter("coarse_cols", coarse_cols, "must be 0 (about a third of cols) or a number of columns >= 2");
+    rejectParameter("coarse_cols", coarse_cols, "must be 0 (about a third of cols, at most " + std::to_string(kMaxDefaultCoarseCols) + ") or a number of columns >= 2");
   if (coarse_cols == 0)
   {
-    // About a third of the columns: the coarse step is then about 3 times larger on 9 times fewer
-    // particles (docs/benchmarks.md, "The coarse grid (`method: coarse`)").
-    const double target = std::ceil((fine.cols - 1) / 3.0) + 1;
+    // About a third of the columns, at most kMaxDefaultCoarseCols: a step about 3 times larger on 9
+    // times fewer particles, and on a large grid a coarse step whose cost no longer grows with the
+    // grid (docs/benchmarks.md, "The coarse grid (`method: coarse`)").
+    const double target = std::min<double>(std::ceil((fine.cols - 1) / 3.0) + 1, kMaxDefaultCoarseCols);
     int best = allowed.back();
     for (int c : allowed)
       if (std::abs(c - target) < std::abs(best - target) ||
@@ -69,7 +70,8 @@ int resolveCoarseCols(const GridParams& fine, int coarse_cols)
   if (allowed.size() > 16)
     list << ", ...";
   rejectParameter("coarse_cols", coarse_cols,
-                  "must be 0 (about a third of cols) or a number of columns in [2, cols " + std::to_string(fine.cols) +
+                  "must be 0 (about a third of cols, at most " + std::to_string(kMaxDefaultCoarseCols) +
+                      ") or a number of columns in [2, cols " + std::to_string(fine.cols) +
                       "] for which (rows - 1) (coarse_cols - 1) / (cols - 1) is whole, so that the coarse grid "
                       "spans the same cloth: " +
                       list.str());

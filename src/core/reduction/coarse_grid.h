@@ -48,7 +48,12 @@ struct CoarseGrid
   std::vector<int> handle_source;
 };
 
-// The coarse grid's columns for `coarse_cols` (0: about a third of the fine grid's columns): its rows
+// The most columns the default coarse grid has: on a cloth a metre wide that is 5 cm apart, within 5
+// mm of `full` on a 60 degree turn (docs/benchmarks.md).
+constexpr int kMaxDefaultCoarseCols = 20;
+
+// The coarse grid's columns for `coarse_cols` (0: about a third of the fine grid's columns, at most
+// kMaxDefaultCoarseCols, the nearest allowed): its rows
 // follow from the spacing, (rows - 1) (coarse_cols - 1) / (cols - 1), which must be whole so that both
 // grids span the same cloth. Throws std::invalid_argument naming coarse_cols, with the allowed values.
 int resolveCoarseCols(const GridParams& fine, int coarse_cols);

@@ -68,10 +68,12 @@ TEST(CoarseGrid, SpansTheSameClothWithItsMass)
   EXPECT_EQ(coarse.grid.fixedParticles(), (std::vector<int>{0, 1, 2, 3, 4}));
 }
 
-TEST(CoarseGrid, AboutAThirdOfTheColumnsByDefault)
+TEST(CoarseGrid, AboutAThirdOfTheColumnsAtMostTwentyByDefault)
 {
   GridParams g = clothSheet(100);
-  EXPECT_EQ(resolveCoarseCols(g, 0), 34);
+  EXPECT_EQ(resolveCoarseCols(g, 0), 20);
+  g = clothSheet(200);
+  EXPECT_EQ(resolveCoarseCols(g, 0), 20);
   g = clothSheet(50);
   EXPECT_EQ(resolveCoarseCols(g, 0), 18);
   // 30 rows, 40 columns: only columns whose rows come out whole.
