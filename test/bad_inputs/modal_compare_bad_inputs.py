@@ -70,6 +70,8 @@ def cases(configs):
         tool("sample_zero", "--sample", "--sample", "0"),
         tool("sample_not_dividing_interval", "--sample", "--sample", "300"),
         tool("sample_above_steps", "--sample", "--steps", "500", "--interval", "1000", "--sample", "1000"),
+        tool("coarse_step_multiple_negative", "--coarse-step-multiple", "--coarse-step-multiple", "-1"),
+        tool("coarse_step_multiple_not_dividing_sample", "--coarse-step-multiple", "--coarse-step-multiple", "3"),
         tool("reference_time_step_tiny", "--reference-time-step", "--experiment", "accuracy",
              "--reference-time-step", "1e-300"),
         tool("reference_time_step_not_dividing", "--reference-time-step", "--experiment", "accuracy",

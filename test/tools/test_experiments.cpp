@@ -348,6 +348,7 @@ TEST(Accuracy, SummaryGivesCpuPerSimulatedSecondAndTheRealTimeFactor)
     e.method = "cubature";
     e.step = 10L * k;
     e.time = e.step * time_step;
+    e.time_step = time_step;
     e.step_cpu_seconds = cpu[k];
     e.step_seconds = 2.0 * cpu[k];
     rows.push_back(e);
