@@ -8,7 +8,8 @@ the node's own copies of the simulation.
 
 rosrun modal_mass_spring rollout_planner.py --candidates 64 --horizon 2 [--node /modal_mass_spring]
     [--seed 1] [--method coarse|full|...] [--time_step 0.001] [--max_lower 1.0] [--max_carry 1.0]
-Its last line: rollouts: N candidates x S s simulated in W s wall (R times real time); best candidate K"""
+Its last line: rollouts: N candidates x S s simulated in W s wall (R times real time); best candidate K
+(when every candidate diverged it says so and exits with 1)"""
 import argparse
 import math
 import random
@@ -60,7 +61,8 @@ def main():
     parser.add_argument("--node", default="/modal_mass_spring")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--method", default="", help="empty: the node's default for rollouts")
-    parser.add_argument("--time_step", type=float, default=0.0, help="s; 0: the live simulation's")
+    parser.add_argument("--time_step", type=float, default=0.0,
+                        help="s; 0: the goal's default (the live step; coarse: a whole multiple of it)")
     parser.add_argument("--max_lower", type=float, default=1.0, help="m: the deepest the grippers go down")
     parser.add_argument("--max_carry", type=float, default=1.0, help="m: the farthest they go along +y")
     args = parser.parse_args(rospy.myargv()[1:])
@@ -102,6 +104,8 @@ def main():
         if s < best_spread:
             best, best_spread = outcome.candidate, s
     print(result.message)
+    if best < 0:
+        sys.exit("rollouts: every candidate diverged: no best candidate (a smaller --time_step or --method full may help)")
     print("rollouts: %d candidates x %g s simulated in %.2f s wall (%.1f times real time); best candidate %d"
           % (args.candidates, args.horizon, wall, args.candidates * args.horizon / wall, best))
 

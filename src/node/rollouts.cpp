@@ -261,8 +261,9 @@ CandidateOutcome runCandidate(Simulation& simulation, const SimulationState& sta
         if (result.diverged)
         {
           outcome.diverged = true;
-          outcome.message = result.message;
           outcome.simulated_time = (simulation.stepCount() - first_step) * dt;
+          // The core counts the steps from the live run's start: say where in the rollout it was.
+          outcome.message = "at " + number(outcome.simulated_time + dt) + " s of the rollout: " + result.message;
           return outcome;
         }
       }

@@ -267,13 +267,16 @@ std::unique_ptr<Simulation> SimulationNode::buildSimulation(const GridParams& gr
   const double total_seconds = secondsSince(start);
   const NodeParams& params = config_.node;
   const Grid& grid = simulation->grid();
+  const Grid* coarse = simulation->method() == Method::Coarse ? simulation->coarseGrid() : nullptr;
+  const std::string reduced =
+      coarse ? describeCoarseGrid(grid, *coarse, coarseStepMultiple(grid.params(), sim_params))
+      : simulation->basisBuilt()
+          ? describeModes(simulation->basis().frequencies, simulation->basis().num_zero_modes)
+          : "no modal basis yet (full needs none; it is built at the first switch to a modal method)";
   ROS_INFO("%d x %d grid (%dD, %d particles, %zu springs, %zu fixed), method %s: %s; %s; time_step %g s, "
            "%.4g steps per tick at %g Hz, real_time_factor %g",
            grid.params().rows, grid.params().cols, grid.dimension(), grid.numParticles(), grid.springs().size(),
-           grid.fixedParticles().size(), toString(simulation->method()).c_str(),
-           simulation->basisBuilt()
-               ? describeModes(simulation->basis().frequencies, simulation->basis().num_zero_modes).c_str()
-               : "no modal basis yet (full needs none; it is built at the first switch to a modal method)",
+           grid.fixedParticles().size(), toString(simulation->method()).c_str(), reduced.c_str(),
            describeStartupTimes(simulation->linearization(), simulation->basis(), total_seconds,
                                 simulation->derivativeInfo(),
                                 simulation->cacheReport().cubature_loaded ? nullptr : simulation->cubature())

@@ -28,6 +28,15 @@ std::string number(double value)
 
 }  // namespace
 
+std::string describeCoarseGrid(const Grid& grid, const Grid& coarse, int step_multiple)
+{
+  std::ostringstream out;
+  out << "coarse grid " << coarse.params().rows << " x " << coarse.params().cols << " (" << coarse.numParticles()
+      << " particles, " << number(static_cast<double>(grid.numParticles()) / coarse.numParticles())
+      << " of the grid's a coarse one), stable to about " << step_multiple << " x time_step";
+  return out.str();
+}
+
 std::string describeModes(const Eigen::VectorXd& frequencies, int num_zero_modes)
 {
   const int r = static_cast<int>(frequencies.size());

@@ -19,6 +19,11 @@ namespace modal_mass_spring
 // "30 modes, all zero (no stiffness along any of them: ...)".
 std::string describeModes(const Eigen::VectorXd& frequencies, int num_zero_modes);
 
+// Method `coarse`'s grid beside the grid, and how many time steps a step of it can span
+// (coarseStepMultiple): "coarse grid 20 x 20 (400 particles, 25 of the grid's a coarse one), stable
+// to about 5 x time_step".
+std::string describeCoarseGrid(const Grid& grid, const Grid& coarse, int step_multiple);
+
 // "start-up 3.1 s: equilibrium 3.02 s, stiffness 2.1 ms, factorisation 4.9 ms, eigensolver 28.9 ms"
 // (equilibrium only when it was solved); `total_seconds` is the whole Simulation construction.
 // With modal derivatives, ", modal derivatives 12.3 ms" at the end; with a cubature trained at

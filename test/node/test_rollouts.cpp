@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <limits>
+#include <string>
 
 using namespace modal_mass_spring;
 
@@ -142,6 +143,36 @@ TEST(Rollouts, RolloutFromLiveStateIsTheLiveTrajectory)
   ASSERT_EQ(outcome.samples.back().handle_forces.size(), 2u);
   ASSERT_EQ(outcome.samples.back().contact_forces.size(), 1u);
   EXPECT_GT(outcome.samples.back().contact_forces[0].norm(), 0.0);
+}
+
+// A rollout that diverges says where in the rollout, not only at which step of the live run.
+TEST(Rollouts, ADivergedCandidateSaysWhenInTheRollout)
+{
+  const HeldCloth cloth;
+  Simulation live(cloth.grid, cloth.params);
+  ASSERT_FALSE(live.step(100).diverged);
+  RolloutRequest request;
+  request.state = live.saveState();
+  request.frames = HandleFrames(cloth.handles, live.grid(), live.linearizationPositions(), cloth.offset);
+  const Eigen::Matrix3Xd points = live.points();
+  FramePose left, right;
+  left.translation = points.col(0) + cloth.offset;
+  right.translation = points.col(5) + cloth.offset;
+  request.frames.setTargets({left, right});
+  request.frames.finishTick(cloth.params.time_step, 1.0);
+  request.method = Method::Full;
+  request.time_step = 0.05;  // far above this cloth's explicit limit (about 7 ms)
+  request.horizon = 1.0;
+  request.candidates = {CandidateMotion{}};
+  Simulation worker(cloth.grid, cloth.params);
+  std::atomic<bool> cancel{false};
+  const CandidateOutcome outcome = runCandidate(worker, rolloutStart(worker, request), request, 0, cancel);
+  ASSERT_TRUE(outcome.diverged);
+  EXPECT_LT(outcome.simulated_time, request.horizon);
+  ASSERT_EQ(outcome.message.rfind("at ", 0), 0u) << outcome.message;
+  EXPECT_NEAR(std::stod(outcome.message.substr(3)), outcome.simulated_time + request.time_step, 1e-9);
+  EXPECT_NE(outcome.message.find(" s of the rollout: method 'full' diverged at step "), std::string::npos)
+      << outcome.message;
 }
 
 namespace

@@ -30,6 +30,17 @@ TEST(StartupReport, ModesWithAndWithoutZeroOnes)
   EXPECT_EQ(describeModes(g, 2), "4 modes, 2 zero, the non-zero ones 0.5 to 9 rad/s");
 }
 
+TEST(StartupReport, CoarseGridWithItsSizeAndStep)
+{
+  GridParams g;
+  g.rows = g.cols = 100;
+  g.dimension = 3;
+  const Grid grid(g);
+  g.rows = g.cols = 20;
+  EXPECT_EQ(describeCoarseGrid(grid, Grid(g), 5),
+            "coarse grid 20 x 20 (400 particles, 25 of the grid's a coarse one), stable to about 5 x time_step");
+}
+
 TEST(StartupReport, EveryStageHasItsTime)
 {
   LinearizationInfo lin;
