@@ -163,11 +163,20 @@ void checkRolloutRequest(const RolloutRequest& request, const RolloutLimits& lim
 
 double defaultRolloutTimeStep(Method method, double horizon, const GridParams& grid, SimulationParams params)
 {
-  if (method != Method::Coarse)
+  // A live `coarse` steps at its own step already.
+  if (method != Method::Coarse || params.method == Method::Coarse)
     return params.time_step;
   params.method = method;
-  const double fits = std::floor(horizon / params.time_step + 1e-9);  // a horizon out of range is refused later
-  return params.time_step * std::max(1.0, std::min<double>(coarseStepMultiple(grid, params), fits));
+  // A whole number of steps to the horizon (one out of range is refused later): the multiple divides
+  // the live steps in it, and a step is never past it.
+  const double steps = std::floor(horizon / params.time_step + 1e-9);
+  if (!(steps >= 1.0 && steps < 1e9))
+    return params.time_step;
+  const long live_steps = static_cast<long>(steps);
+  long multiple = std::min<long>(coarseStepMultiple(grid, params), live_steps);
+  while (live_steps % multiple != 0)
+    --multiple;
+  return std::min(params.time_step * multiple, horizon);
 }
 
 SimulationState rolloutStart(Simulation& simulation, const RolloutRequest& request)

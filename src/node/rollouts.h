@@ -69,7 +69,8 @@ struct CandidateOutcome
 };
 
 // A request's time step when its goal gives none: the live simulation's (params.time_step), which
-// `coarse` spans a whole number of (coarseStepMultiple), as many as fit in the horizon.
+// `coarse` (unless it is the live method already) spans a whole number of: coarseStepMultiple, or
+// the largest smaller number that divides the live steps in the horizon.
 double defaultRolloutTimeStep(Method method, double horizon, const GridParams& grid, SimulationParams params);
 
 // Refuses a request before any work: no candidate, more than max_candidates, a horizon not in

@@ -218,8 +218,8 @@ ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, const Accurac
   e.max_displacement = maxDisplacement(grid, points);
   e.energy = run.sim->totalEnergy();
   e.center_y = points.row(1).mean();
-  if (const Contact* contact = run.sim->contact())
-    e.depth = deepestInside(grid, points, *contact);
+  const Contact* contact = run.sim->contact();
+  e.depth = contact ? deepestInside(grid, points, *contact) : std::numeric_limits<double>::quiet_NaN();
   if (run.adaptive)
   {
     e.reduced_share = run.adaptive->reducedShare();
@@ -237,6 +237,9 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
 {
   if (options.steps < 1 || options.interval < 1 || options.sample < 1 || options.interval % options.sample != 0)
     throw std::invalid_argument("accuracy: steps, interval and sample must be >= 1 and sample must divide interval");
+  if (options.coarse_step_multiple < 0 ||
+      (options.coarse_step_multiple > 0 && options.sample % options.coarse_step_multiple != 0))
+    throw std::invalid_argument("accuracy: coarse_step_multiple must be 0 (automatic) or divide sample");
   if (options.reference_time_step < 0.0)
     throw std::invalid_argument("accuracy: reference_time_step must be >= 0");
   const int divisor =

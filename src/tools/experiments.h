@@ -129,7 +129,7 @@ struct ErrorSample
   double reduced_share = std::numeric_limits<double>::quiet_NaN();
   int switches = -1;
   double time_step = 0.0;  // this method's own (s): `coarse` may span several of the setup's
-  double depth = 0.0;      // how deep its deepest free particle is inside a collider (m; 0: none is)
+  double depth = 0.0;      // how deep its deepest free particle is inside a collider (m; 0: none; NaN: no colliders)
 };
 
 struct Snapshot
@@ -281,7 +281,7 @@ struct AccuracySummary
   double reduced_share = std::numeric_limits<double>::quiet_NaN();
   int switches = -1;
   double time_step = std::numeric_limits<double>::quiet_NaN();  // s, the method's own
-  double deepest = std::numeric_limits<double>::quiet_NaN();    // m, over the samples: inside a collider
+  double deepest = std::numeric_limits<double>::quiet_NaN();    // m, over the samples (NaN: no colliders)
 };
 // Spearman's rank correlation of a and b (equal sizes; ties take their mean rank); NaN below three
 // pairs or where either is constant.

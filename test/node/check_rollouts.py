@@ -106,21 +106,32 @@ class Rollouts(unittest.TestCase):
             stepped = self.get_state().state
             self.assertGreater(largest_distance(saved.positions, stepped.positions), 1e-4, "the cloth must move")
             horizon = STEPS * saved.time_step
-            goal = RolloutGoal(use_state=True, state=saved, time_step=saved.time_step, horizon=horizon,
-                               sample_times=[horizon], candidates=[RolloutCandidate()])
+            goal = RolloutGoal(use_state=True, state=saved, horizon=horizon, sample_times=[horizon],
+                               candidates=[RolloutCandidate()])
             status, result, _ = self.rollout(goal)
             self.assertEqual(status, GoalStatus.SUCCEEDED, result.message)
-            self.assertIn("with coarse", result.message)
+            self.assertIn("with coarse at time_step %g s" % saved.time_step, result.message)
             self.assertLess(largest_distance(result.outcomes[0].samples[-1].positions, stepped.positions), 1e-9)
-            # Without a time step `coarse` spans two of the live ones (4 x 4 on 2 x 2: the square root of
-            # 4 fine particles a coarse one), and ends near the live steps.
-            goal.time_step = 0.0
-            status, result, _ = self.rollout(goal)
-            self.assertEqual(status, GoalStatus.SUCCEEDED, result.message)
-            self.assertIn("with coarse at time_step %g s" % (2 * saved.time_step), result.message)
-            self.assertLess(largest_distance(result.outcomes[0].samples[-1].positions, stepped.positions), 2e-3)
         finally:
             self.assertTrue(self.set_state(original).success)
+
+    def test_default_coarse_from_full_takes_its_own_step(self):
+        # The live method is full: the default coarse spans two live steps (4 x 4 on 2 x 2, the square
+        # root of 4 particles a coarse one), and ends near full's steps.
+        saved = self.get_state().state
+        self.assertEqual(saved.method, "full")
+        horizon = STEPS * saved.time_step
+        goal = RolloutGoal(use_state=True, state=saved, method="full", horizon=horizon, sample_times=[horizon],
+                           candidates=[RolloutCandidate()])
+        status, result, _ = self.rollout(goal)
+        self.assertEqual(status, GoalStatus.SUCCEEDED, result.message)
+        full = result.outcomes[0].samples[-1].positions
+        goal.method = ""
+        status, result, _ = self.rollout(goal)
+        self.assertEqual(status, GoalStatus.SUCCEEDED, result.message)
+        self.assertIn("with coarse at time_step %g s" % (2 * saved.time_step), result.message)
+        self.assertGreater(largest_distance(result.outcomes[0].samples[-1].positions, saved.positions), 1e-4)
+        self.assertLess(largest_distance(result.outcomes[0].samples[-1].positions, full), 0.05)
 
     def test_bad_goals_refused_by_name(self):
         state = self.get_state().state

@@ -233,6 +233,10 @@ TEST(Rollouts, DefaultTimeStepIsTheLiveOneCoarseSpansAMultipleOfIt)
   params.coarse_cols = 4;  // 16 fine particles a coarse one
   EXPECT_DOUBLE_EQ(defaultRolloutTimeStep(Method::Coarse, 1.0, grid, params), 4e-3);
   EXPECT_DOUBLE_EQ(defaultRolloutTimeStep(Method::Coarse, 3.5e-3, grid, params), 3e-3);
+  EXPECT_DOUBLE_EQ(defaultRolloutTimeStep(Method::Coarse, 9e-3, grid, params), 3e-3);  // 4 does not divide 9
+  // A live `coarse` steps at its own step already.
+  params.method = Method::Coarse;
+  EXPECT_DOUBLE_EQ(defaultRolloutTimeStep(Method::Coarse, 1.0, grid, params), 1e-3);
 }
 
 TEST(Rollouts, BadGoalsRefusedByNameWithTheirRange)

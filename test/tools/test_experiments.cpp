@@ -347,7 +347,7 @@ TEST(Accuracy, SummaryGivesCpuPerSimulatedSecondAndTheRealTimeFactor)
     e.variant = "base";
     e.method = "cubature";
     e.step = 10L * k;
-    e.time = e.step * time_step;
+    e.time = e.step * time_step / 2;  // a method that steps twice the samples' step, as `coarse` may
     e.time_step = time_step;
     e.step_cpu_seconds = cpu[k];
     e.step_seconds = 2.0 * cpu[k];
@@ -356,6 +356,7 @@ TEST(Accuracy, SummaryGivesCpuPerSimulatedSecondAndTheRealTimeFactor)
   const std::vector<AccuracySummary> summary = summarizeAccuracy(rows);
   ASSERT_EQ(summary.size(), 1u);
   EXPECT_DOUBLE_EQ(summary[0].step_cpu_seconds_median, 2e-4);
+  EXPECT_DOUBLE_EQ(summary[0].time_step, time_step);
   EXPECT_DOUBLE_EQ(summary[0].cpu_per_simulated_second, 2e-4 / time_step);
   EXPECT_DOUBLE_EQ(summary[0].real_time_factor, time_step / 2e-4);
 

@@ -52,13 +52,16 @@ int resolveCoarseCols(const GridParams& fine, int coarse_cols)
   if (coarse_cols == 0)
   {
     // About a third of the columns, at most kMaxDefaultCoarseCols: a step about 3 times larger on 9
-    // times fewer particles, and on a large grid a coarse step whose cost no longer grows with the
-    // grid (docs/benchmarks.md, "The coarse grid (`method: coarse`)").
-    const double target = std::min<double>(std::ceil((fine.cols - 1) / 3.0) + 1, kMaxDefaultCoarseCols);
-    int best = allowed.back();
+    // times fewer particles, and on a large grid a coarse step whose particles no longer grow with
+    // the grid's (docs/benchmarks.md, "The coarse grid (`method: coarse`)").
+    const double third = std::ceil((fine.cols - 1) / 3.0) + 1;
+    const bool capped = third > kMaxDefaultCoarseCols && allowed.front() <= kMaxDefaultCoarseCols;
+    const double target = capped ? kMaxDefaultCoarseCols : third;
+    int best = capped ? allowed.front() : allowed.back();
     for (int c : allowed)
-      if (std::abs(c - target) < std::abs(best - target) ||
-          (std::abs(c - target) == std::abs(best - target) && c > best))
+      if ((!capped || c <= kMaxDefaultCoarseCols) &&
+          (std::abs(c - target) < std::abs(best - target) ||
+           (std::abs(c - target) == std::abs(best - target) && c > best)))
         best = c;
     return best;
   }

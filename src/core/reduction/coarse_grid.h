@@ -48,8 +48,8 @@ struct CoarseGrid
   std::vector<int> handle_source;
 };
 
-// The most columns the default coarse grid has: on a cloth a metre wide that is 5 cm apart, within 5
-// mm of `full` on a 60 degree turn (docs/benchmarks.md).
+// The most columns the default coarse grid has: on a cloth a metre wide, 5 cm apart, 4-5 mm mean RMS
+// from `full` on a 60 degree turn (docs/benchmarks.md).
 constexpr int kMaxDefaultCoarseCols = 20;
 
 // The coarse grid's columns for `coarse_cols` (0: about a third of the fine grid's columns, at most

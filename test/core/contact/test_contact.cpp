@@ -254,10 +254,6 @@ TEST(Contact, PassFindsEveryTouchAndTheDepthAfterItAsABruteForceCheckDoes)
   EXPECT_GT(deepest_after, 0.0);  // the overlapping touches push particles into each other's colliders
 }
 
-// With one active collider on a 3D grid the pass takes a path of its own (a table, a floor): against
-// the general pass (the same collider with a second one that touches nothing) over a few steps, each
-// shape turned and moving, the positions, velocities, touches, depths and forces are the same to the
-// bit, and the touches and the depth after are a brute-force count's.
 // How deep the deepest free particle is inside an active collider at its pose: fixed particles and
 // particles outside do not count.
 TEST(Contact, DeepestInsideIsTheDeepestFreeParticleAtTheCollidersPose)
@@ -271,8 +267,16 @@ TEST(Contact, DeepestInsideIsTheDeepestFreeParticleAtTheCollidersPose)
   EXPECT_NEAR(deepestInside(grid, points, contact), 0.04, 1e-12);
   contact.place(0, Eigen::Isometry3d(Eigen::Translation3d(0.0, 0.0, -0.05)));
   EXPECT_EQ(deepestInside(grid, points, contact), 0.0);
+  // A collider on a frame touches nothing before its first pose.
+  Collider framed = plane(0.01);
+  framed.frame = "table";
+  EXPECT_EQ(deepestInside(grid, points, Contact(grid, {framed}, 0.005)), 0.0);
 }
 
+// With one active collider on a 3D grid the pass takes a path of its own (a table, a floor): against
+// the general pass (the same collider with a second one that touches nothing) over a few steps, each
+// shape turned and moving, the positions, velocities, touches, depths and forces are the same to the
+// bit, and the touches and the depth after are a brute-force count's.
 TEST(Contact, OneColliderPassIsTheGeneralPassToTheBit)
 {
   const Grid grid(flatSheet());

@@ -76,6 +76,9 @@ TEST(CoarseGrid, AboutAThirdOfTheColumnsAtMostTwentyByDefault)
   EXPECT_EQ(resolveCoarseCols(g, 0), 20);
   g = clothSheet(50);
   EXPECT_EQ(resolveCoarseCols(g, 0), 18);
+  // 100 rows, 199 columns: only odd counts allowed; 19 and 21 are as near 20, and 21 is above it.
+  g.rows = 100, g.cols = 199;
+  EXPECT_EQ(resolveCoarseCols(g, 0), 19);
   // 30 rows, 40 columns: only columns whose rows come out whole.
   g.rows = 30, g.cols = 40;
   const int cols = resolveCoarseCols(g, 0);
