@@ -15,6 +15,7 @@
 
 #include <cmath>
 #include <map>
+#include <numeric>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -513,6 +514,73 @@ void BM_SpringForces(benchmark::State& state)
   state.counters["springs"] = static_cast<double>(grid.springs().size());
 }
 BENCHMARK(BM_SpringForces)->ArgsProduct({kSizes})->Unit(benchmark::kMicrosecond);
+
+
+// `coarse` on the held cloth turned 60 degrees about the vertical in 1 s and back (config/compare/large_motion_100.yaml
+// on N x N: the cloth of config/cloth_large.yaml held by a clamp of its top two rows, nothing fixed),
+// explicit at its own step (coarseStepMultiple times `full`'s largest stable one, 0.8 ms x 100 / N), the
+// clamp's motion handed over every step as the node and modal_compare hand it: range(1) = 0, every
+// clamp particle's motion (setHandleMotion); 1, the clamp's frame (setHandleFrameMotion). Counter: CPU
+// seconds per simulated second, which compares the sizes' different steps.
+void BM_CoarseTurn(benchmark::State& state)
+{
+  const int size = static_cast<int>(state.range(0));
+  GridParams g = swingingCloth(size);
+  g.rotation_deg = 0.0;
+  std::vector<int> clamp(2 * size);
+  std::iota(clamp.begin(), clamp.end(), 0);
+  g.handles = {clamp};
+  SimulationParams s;
+  s.method = Method::Coarse;
+  s.alpha = 0.5;
+  s.handle_formulation = HandleFormulation::ConstraintModes;
+  s.linearization = Linearization::Equilibrium;
+  s.initial_state = InitialState::Equilibrium;
+  s.time_step = 0.0008 * 100.0 / size;
+  s.time_step *= coarseStepMultiple(g, s);
+  Simulation sim(g, s);
+  const std::vector<int>& dofs = sim.grid().handleDofs();
+  Eigen::Matrix3Xd points(3, static_cast<Eigen::Index>(dofs.size()) / 3);
+  for (Eigen::Index p = 0; p < points.cols(); ++p)
+    points.col(p) = sim.linearizationPositions().segment<3>(dofs[3 * p]);
+  const Eigen::Vector3d pivot = points.rowwise().mean(), axis = Eigen::Vector3d::UnitZ();
+  const double duration = 1.0, angle = EIGEN_PI / 3.0;
+  const double start_cpu = threadCpuSeconds();
+  const double start_time = sim.time();
+  for (auto _ : state)
+  {
+    // Turned to 60 degrees and back, smoothly, every 2 s: angle (1 - cos(pi t / duration)) / 2.
+    const double t = sim.time() + s.time_step, w = EIGEN_PI / duration;
+    const double turn = 0.5 * angle * (1.0 - std::cos(w * t)), rate = 0.5 * angle * w * std::sin(w * t);
+    const double spin = 0.5 * angle * w * w * std::cos(w * t);
+    FrameMotion m;
+    m.rotation = Eigen::AngleAxisd(turn, axis).toRotationMatrix();
+    m.angular_velocity = rate * axis;
+    m.angular_acceleration = spin * axis;
+    const Eigen::Vector3d turned = m.rotation * pivot;
+    m.translation = pivot - turned;
+    m.velocity = -m.angular_velocity.cross(turned);
+    m.acceleration = -m.angular_acceleration.cross(turned) - m.angular_velocity.cross(m.angular_velocity.cross(turned));
+    if (state.range(1) == 1)
+      sim.setHandleFrameMotion(m);
+    else
+    {
+      const RigidPointMotion motion = pointMotion(m, points);
+      sim.setHandleMotion(motion.position.reshaped(), motion.velocity.reshaped(), motion.acceleration.reshaped());
+    }
+    const StepResult r = sim.step(1);
+    if (r.diverged)
+    {
+      static std::string message;
+      message = r.message;
+      state.SkipWithError(message.c_str());
+      break;
+    }
+  }
+  state.counters["cpu_per_simulated_s"] = (threadCpuSeconds() - start_cpu) / (sim.time() - start_time);
+  state.counters["time_step_ms"] = 1e3 * s.time_step;
+}
+BENCHMARK(BM_CoarseTurn)->ArgsProduct({{50, 100, 200}, {0, 1}})->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 

@@ -8,7 +8,10 @@ particles, its handles the same rows of the grid:
 
 Each size steps the methods at the same margin to `full`'s explicit limit as the scene's own step
 (the limit goes as one over N at a fixed width and mass: 0.8 ms on the 100 x 100 turn, 2.5 ms on the
-50 x 50 drag), the reference at --reference-divisor times less.
+50 x 50 drag), the reference at --reference-divisor times less. Every size is sampled at the same
+simulated times (every 16 ms on the turn, 25 ms on the drag): reading the whole grid between two steps evicts a small
+method's data from the cache, so sampling every few steps of a fine grid would time a method slower
+there than on a coarse grid sampled less often.
 
   python3 benchmark/size_sweep.py --scene turn --sizes 30,50,100,200 --methods full,coarse \\
       [--reference-divisor 8] [--set KEY=VALUE ...] [--binary PATH] [--output DIR]
@@ -21,10 +24,11 @@ import sys
 import tempfile
 
 _configs = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "config", "compare")
-# The scene's config, its size, and its explicit `full` step there.
+# The scene's config, its size, its explicit `full` step there, and the sample period (s): a whole
+# number of the step on 30, 50, 100 and 200, and of `coarse`'s step there.
 SCENES = {
-    "turn": (os.path.join(_configs, "large_motion_100.yaml"), 100, 0.0008),
-    "drag": (os.path.join(_configs, "cloth_drag_50.yaml"), 50, 0.0025),
+    "turn": (os.path.join(_configs, "large_motion_100.yaml"), 100, 0.0008, 0.016),
+    "drag": (os.path.join(_configs, "cloth_drag_50.yaml"), 50, 0.0025, 0.025),
 }
 
 
@@ -73,7 +77,7 @@ def main():
         sys.exit("--reference-divisor %d: must be >= 1" % args.reference_divisor)
     if not os.access(args.binary, os.X_OK):
         sys.exit("--binary %s: not an executable modal_compare (build the package, or set MODAL_WS)" % args.binary)
-    base, base_size, base_step = SCENES[args.scene]
+    base, base_size, base_step, sample_period = SCENES[args.scene]
     output = args.output or tempfile.mkdtemp(prefix="size_sweep_")
     os.makedirs(output, exist_ok=True)
     for size in sizes:
@@ -82,7 +86,11 @@ def main():
         with open(config, "w") as f:
             f.write(config_for(base, base_size, size))
         time_step = base_step * base_size / size
+        sample = round(sample_period / time_step)
+        if sample < 1 or abs(sample * time_step - sample_period) > 1e-9:
+            sys.exit("--sizes: %d x %d's step %r s does not divide the sample period %r s" % (size, size, time_step, sample_period))
         command = [args.binary, "--config", config, "--experiment", "handles", "--methods", args.methods,
+                   "--sample", str(sample), "--interval", str(100 * sample),
                    "--set", "integrator=explicit", "--set", "time_step=%r" % time_step,
                    "--reference-time-step", "%r" % (time_step / args.reference_divisor),
                    "--no-snapshots", "--quiet", "--output", output]

@@ -8,6 +8,7 @@
 #include <limits>
 #include <memory>
 #include <sstream>
+#include <tuple>
 #include <stdexcept>
 
 namespace modal_mass_spring
@@ -266,18 +267,22 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
                                     c->training_seconds, c->validation_error,
                                     run.sim->cacheReport().cubature_loaded};
 
-  auto record = [&](long step) {
-    const Eigen::Matrix3Xd reference = runs[0].sim->points();
+  // Each run steps a block of samples alone, after the reference has stepped them (see
+  // reference_block_bytes).
+  const long samples = options.steps / options.sample;
+  const long block = std::max<long>(
+      1, static_cast<long>(options.reference_block_bytes / (sizeof(Eigen::Vector3d) * grid.numParticles())));
+  std::vector<std::vector<ErrorSample>> errors(runs.size());
+  std::vector<std::pair<size_t, Snapshot>> snapshots;  // with the run's index, for the order below
+  auto record = [&](size_t k, long step, const Eigen::Matrix3Xd& reference, bool reference_diverged) {
+    const AccuracyRun& run = runs[k];
+    errors[k].push_back(sample(setup, grid, run, run.name, step, reference, reference_diverged));
     const bool snapshot = options.snapshots && (step % options.interval == 0 || step == options.steps);
-    for (const AccuracyRun& run : runs)
-    {
-      result.errors.push_back(sample(setup, grid, run, run.name, step, reference, runs[0].diverged));
-      if (snapshot && !result.errors.back().diverged)
-        result.snapshots.push_back({setup.variant, run.name, step, result.errors.back().time, run.sim->points()});
-    }
-    if (!check)
-      return;
-    const ErrorSample e = sample(setup, grid, *check, "reference_half_step", step, reference, runs[0].diverged);
+    if (snapshot && !errors[k].back().diverged)
+      snapshots.push_back({k, {setup.variant, run.name, step, errors[k].back().time, run.sim->points()}});
+  };
+  auto recordCheck = [&](long step, const Eigen::Matrix3Xd& reference, bool reference_diverged) {
+    const ErrorSample e = sample(setup, grid, *check, "reference_half_step", step, reference, reference_diverged);
     if (!e.diverged)
     {
       result.reference_check_max_rms = std::max(result.reference_check_max_rms, e.rms_distance);
@@ -286,16 +291,50 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
     result.reference_check.push_back(e);
   };
 
-  record(0);
-  for (long step = options.sample; step <= options.steps; step += options.sample)
+  // The reference's points and whether it had diverged, at samples base, base + 1, ...
+  std::vector<Eigen::Matrix3Xd> reference{runs[0].sim->points()};
+  std::vector<bool> reference_diverged{false};
+  long base = 0;
+  for (long first = 0; first <= samples; first += block)
   {
-    for (AccuracyRun& run : runs)
-      run.advance(setup.variant, result.messages);
-    if (check)
-      check->advance(setup.variant, result.messages);
-    record(step);
-    report(progress, "accuracy " + setup.variant, static_cast<double>(step) / options.steps);
+    const long last = std::min(samples, first + block - 1);  // samples first..last, each i at step i * sample
+    for (long i = first; i <= last; ++i)
+    {
+      if (i > 0)
+      {
+        runs[0].advance(setup.variant, result.messages);
+        reference.push_back(runs[0].sim->points());
+        reference_diverged.push_back(runs[0].diverged);
+      }
+      record(0, i * options.sample, reference[i - base], reference_diverged[i - base]);
+    }
+    for (size_t k = 1; k < runs.size(); ++k)
+      for (long i = first; i <= last; ++i)
+      {
+        if (i > 0)
+          runs[k].advance(setup.variant, result.messages);
+        record(k, i * options.sample, reference[i - base], reference_diverged[i - base]);
+      }
+    for (long i = first; check && i <= last; ++i)
+    {
+      if (i > 0)
+        check->advance(setup.variant, result.messages);
+      recordCheck(i * options.sample, reference[i - base], reference_diverged[i - base]);
+    }
+    reference.erase(reference.begin(), reference.end() - 1);
+    reference_diverged.erase(reference_diverged.begin(), reference_diverged.end() - 1);
+    base = last;
+    report(progress, "accuracy " + setup.variant, static_cast<double>(last) / std::max<long>(samples, 1));
   }
+  // Samples in the order of time, then of the runs.
+  for (long i = 0; i <= samples; ++i)
+    for (const std::vector<ErrorSample>& run_errors : errors)
+      result.errors.push_back(run_errors[i]);
+  std::stable_sort(snapshots.begin(), snapshots.end(), [](const auto& a, const auto& b) {
+    return std::tie(a.second.step, a.first) < std::tie(b.second.step, b.first);
+  });
+  for (auto& [k, snapshot] : snapshots)
+    result.snapshots.push_back(std::move(snapshot));
   if (check && check->diverged)
     result.reference_check_max_rms = result.reference_check_max_distance = std::numeric_limits<double>::infinity();
   return result;
