@@ -172,11 +172,7 @@ double defaultRolloutTimeStep(Method method, double horizon, const GridParams& g
   const double steps = std::floor(horizon / params.time_step + 1e-9);
   if (!(steps >= 1.0 && steps < 1e9))
     return params.time_step;
-  const long live_steps = static_cast<long>(steps);
-  long multiple = std::min<long>(coarseStepMultiple(grid, params), live_steps);
-  while (live_steps % multiple != 0)
-    --multiple;
-  return std::min(params.time_step * multiple, horizon);
+  return std::min(params.time_step * coarseStepMultiple(grid, params, static_cast<long>(steps)), horizon);
 }
 
 SimulationState rolloutStart(Simulation& simulation, const RolloutRequest& request)

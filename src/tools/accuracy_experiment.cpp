@@ -139,10 +139,7 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
   auto coarseMultiple = [&] {
     if (options.coarse_step_multiple > 0)
       return options.coarse_step_multiple;
-    int multiple = coarseStepMultiple(setup.grid, withMethod(setup.sim, Method::Coarse));
-    while (options.sample % multiple != 0)
-      --multiple;
-    return multiple;
+    return coarseStepMultiple(setup.grid, withMethod(setup.sim, Method::Coarse), options.sample);
   };
   std::vector<Method> compared;
   for (Method m : options.methods)

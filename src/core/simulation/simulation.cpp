@@ -56,7 +56,7 @@ CubatureParams cubatureParams(const SimulationParams& p)
   return c;
 }
 
-int coarseStepMultiple(const GridParams& grid, const SimulationParams& params)
+int coarseStepMultiple(const GridParams& grid, const SimulationParams& params, long divides)
 {
   // The springs keep their constants, so the highest frequency goes as one over the square root of
   // the particle mass: the fine particles per coarse one.
@@ -68,6 +68,12 @@ int coarseStepMultiple(const GridParams& grid, const SimulationParams& params)
     const double damping_limit = std::floor(2.0 / (params.alpha * params.time_step));  // may exceed int
     if (damping_limit < multiple)
       multiple = std::max(1, static_cast<int>(damping_limit));
+  }
+  if (divides > 0)
+  {
+    multiple = static_cast<int>(std::min<long>(multiple, divides));
+    while (divides % multiple != 0)
+      --multiple;
   }
   return multiple;
 }

@@ -125,10 +125,10 @@ void Simulation::setHandleFrameMotion(const FrameMotion& m)
   const std::vector<int> rows = gridAxes(dim);
   const std::vector<int>& dofs = grid_.handleDofs();
   const Eigen::Index n = static_cast<Eigen::Index>(dofs.size()) / dim;
-  const Eigen::Matrix3Xd all = grid_.toPoints(x_ref_);
-  Eigen::Matrix3Xd points(3, n);
+  Eigen::Matrix3Xd points = Eigen::Matrix3Xd::Zero(3, n);  // the handle particles alone: no pass over the grid
   for (Eigen::Index p = 0; p < n; ++p)
-    points.col(p) = all.col(dofs[dim * p] / dim);
+    for (int c = 0; c < dim; ++c)
+      points(rows[c], p) = x_ref_[dofs[dim * p + c]];
   const RigidPointMotion motion = pointMotion(m, points);
   Eigen::VectorXd x(dofs.size()), v(dofs.size()), a(dofs.size());
   for (Eigen::Index p = 0; p < n; ++p)

@@ -119,6 +119,12 @@ TEST(CoarseGrid, StepMultipleKeepsTheMarginToTheExplicitLimit)
   EXPECT_EQ(coarseStepMultiple(large, q), 4);
   q.integrator = IntegratorKind::Implicit;
   EXPECT_EQ(coarseStepMultiple(large, q), 8);
+  // Dividing a number of steps (between samples, to a horizon): the largest such at most the limit's.
+  EXPECT_EQ(coarseStepMultiple(large, q, 12), 6);
+  EXPECT_EQ(coarseStepMultiple(large, q, 7), 7);
+  EXPECT_EQ(coarseStepMultiple(large, q, 5), 5);
+  EXPECT_EQ(coarseStepMultiple(large, q, 11), 1);
+  EXPECT_EQ(coarseStepMultiple(large, q, 64), 8);
   q.coarse_cols = 100;
   EXPECT_EQ(coarseStepMultiple(large, q), 1);
 }
