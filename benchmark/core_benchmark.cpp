@@ -15,8 +15,8 @@
 
 #include <cmath>
 #include <map>
-#include <numeric>
 #include <memory>
+#include <numeric>
 #include <stdexcept>
 #include <string>
 #include <tuple>
@@ -577,7 +577,8 @@ void BM_CoarseTurn(benchmark::State& state)
       break;
     }
   }
-  state.counters["cpu_per_simulated_s"] = (threadCpuSeconds() - start_cpu) / (sim.time() - start_time);
+  if (sim.time() > start_time)
+    state.counters["cpu_per_simulated_s"] = (threadCpuSeconds() - start_cpu) / (sim.time() - start_time);
   state.counters["time_step_ms"] = 1e3 * s.time_step;
 }
 BENCHMARK(BM_CoarseTurn)->ArgsProduct({{50, 100, 200}, {0, 1}})->Unit(benchmark::kMicrosecond);

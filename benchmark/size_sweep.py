@@ -11,7 +11,8 @@ Each size steps the methods at the same margin to `full`'s explicit limit as the
 50 x 50 drag), the reference at --reference-divisor times less. Every size is sampled at the same
 simulated times (every 16 ms on the turn, 25 ms on the drag): reading the whole grid between two steps evicts a small
 method's data from the cache, so sampling every few steps of a fine grid would time a method slower
-there than on a coarse grid sampled less often.
+there than on a coarse grid sampled less often. (16 ms does not divide the turn's 1 s move: its end
+is sampled at 1.008 s.)
 
   python3 benchmark/size_sweep.py --scene turn --sizes 30,50,100,200 --methods full,coarse \\
       [--reference-divisor 8] [--set KEY=VALUE ...] [--binary PATH] [--output DIR]
@@ -88,8 +89,10 @@ def main():
         time_step = base_step * base_size / size
         sample = round(sample_period / time_step)
         if sample < 1 or abs(sample * time_step - sample_period) > 1e-9:
-            sys.exit("--sizes: %d x %d's step %r s does not divide the sample period %r s" % (size, size, time_step, sample_period))
+            sys.exit("--sizes: %d x %d's step %r s does not divide the sample period %r s"
+                     % (size, size, time_step, sample_period))
         command = [args.binary, "--config", config, "--experiment", "handles", "--methods", args.methods,
+                   # --interval only has to be a multiple of --sample: the handles experiment samples its own
                    "--sample", str(sample), "--interval", str(100 * sample),
                    "--set", "integrator=explicit", "--set", "time_step=%r" % time_step,
                    "--reference-time-step", "%r" % (time_step / args.reference_divisor),

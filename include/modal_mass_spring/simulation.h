@@ -125,8 +125,8 @@ CubatureParams cubatureParams(const SimulationParams& params);
 // one, rounded down (the springs keep their constants, so the limit grows as the square root of the
 // particle mass), and under the explicit integrator at most 2 / (alpha time_step), the damping's own
 // limit. Where the caller picks the step (~rollout's time_step 0, modal_compare) `coarse` steps
-// time_step times it; with `divides` > 0, the largest number at most that which divides `divides` (the
-// steps between samples, or to a horizon). Throws as coarse_cols does.
+// time_step times it; with `divides` > 0, the largest such number that divides `divides` (the steps
+// between samples, or to a horizon). Throws as coarse_cols does.
 int coarseStepMultiple(const GridParams& grid, const SimulationParams& params, long divides = 0);
 
 // What building the linearization point found.

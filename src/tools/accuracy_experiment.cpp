@@ -1,5 +1,5 @@
-// The accuracy experiment: every method stepped beside the reference, sampled against it, and its
-// summary per variant and method.
+// The accuracy experiment: every method stepped to the same samples as the reference, measured
+// against it there, and its summary per variant and method.
 #include "experiment_support.h"
 #include "experiments.h"
 
@@ -8,8 +8,8 @@
 #include <limits>
 #include <memory>
 #include <sstream>
-#include <tuple>
 #include <stdexcept>
+#include <tuple>
 
 namespace modal_mass_spring
 {
@@ -292,14 +292,21 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
   std::vector<Eigen::Matrix3Xd> reference{runs[0].sim->points()};
   std::vector<bool> reference_diverged{false};
   long base = 0;
+  const double total = static_cast<double>(samples + 1) * (runs.size() + (check ? 1 : 0));
+  double done = 0.0;
+  auto advance = [&](AccuracyRun& run, long i) {
+    if (i > 0)
+      run.advance(setup.variant, result.messages);
+    report(progress, "accuracy " + setup.variant, ++done / total);
+  };
   for (long first = 0; first <= samples; first += block)
   {
     const long last = std::min(samples, first + block - 1);  // samples first..last, each i at step i * sample
     for (long i = first; i <= last; ++i)
     {
+      advance(runs[0], i);
       if (i > 0)
       {
-        runs[0].advance(setup.variant, result.messages);
         reference.push_back(runs[0].sim->points());
         reference_diverged.push_back(runs[0].diverged);
       }
@@ -308,25 +315,22 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
     for (size_t k = 1; k < runs.size(); ++k)
       for (long i = first; i <= last; ++i)
       {
-        if (i > 0)
-          runs[k].advance(setup.variant, result.messages);
+        advance(runs[k], i);
         record(k, i * options.sample, reference[i - base], reference_diverged[i - base]);
       }
     for (long i = first; check && i <= last; ++i)
     {
-      if (i > 0)
-        check->advance(setup.variant, result.messages);
+      advance(*check, i);
       recordCheck(i * options.sample, reference[i - base], reference_diverged[i - base]);
     }
     reference.erase(reference.begin(), reference.end() - 1);
     reference_diverged.erase(reference_diverged.begin(), reference_diverged.end() - 1);
     base = last;
-    report(progress, "accuracy " + setup.variant, static_cast<double>(last) / std::max<long>(samples, 1));
   }
   // Samples in the order of time, then of the runs.
   for (long i = 0; i <= samples; ++i)
-    for (const std::vector<ErrorSample>& run_errors : errors)
-      result.errors.push_back(run_errors[i]);
+    for (std::vector<ErrorSample>& run_errors : errors)
+      result.errors.push_back(std::move(run_errors[i]));
   std::stable_sort(snapshots.begin(), snapshots.end(), [](const auto& a, const auto& b) {
     return std::tie(a.second.step, a.first) < std::tie(b.second.step, b.first);
   });

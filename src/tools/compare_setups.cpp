@@ -220,13 +220,16 @@ void checkReferenceSteps(const Options& o, const ExperimentSetup& setup)
 }
 
 // What the accuracy or handles experiment keeps of one setup until its files are written: an error
-// sample per run every `sample` steps, every particle of every run every `interval` steps.
+// sample per run every `sample` steps, every particle of every run every `interval` steps; and while
+// it runs, the reference's points for a block of samples.
 double resultBytes(const Options& o, const ExperimentSetup& setup, long steps, long interval)
 {
   const double runs = o.methods.size() + 1.0 + (o.accuracy.reference_time_step > 0.0 ? 1.0 : 0.0);
   const double samples = static_cast<double>(steps) / o.accuracy.sample + 1.0;
   const double sample_bytes = sizeof(ErrorSample) + 2.0 * setup.variant.size() + 64.0;
-  double bytes = runs * samples * sample_bytes;
+  const double points_bytes = 24.0 * setup.grid.rows * setup.grid.cols;
+  double bytes = runs * samples * sample_bytes +
+                 std::min(static_cast<double>(o.accuracy.reference_block_bytes) + points_bytes, samples * points_bytes);
   if (o.accuracy.snapshots)
   {
     const double particles = static_cast<double>(setup.grid.rows) * setup.grid.cols;

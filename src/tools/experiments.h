@@ -100,9 +100,10 @@ struct AccuracyOptions
   // largest smaller number that divides `sample`); it must divide `sample`.
   int coarse_step_multiple = 0;
   bool snapshots = true;  // keep the particle positions every `interval` steps
-  // Each run steps a block of samples alone, against the reference's points kept for the block (at
-  // most this many bytes of them, at least one sample): a run stepped between the others' steps would
-  // find its data evicted from the cache by theirs, and be timed slower than it runs alone.
+  // Each run steps a block of samples alone, against the reference's points kept for the block (this
+  // many bytes of them, at least one sample, and the block's start): a run stepped between the
+  // others' steps would find its data evicted from the cache by theirs, and be timed slower than it
+  // runs alone. The results are in the same order (the divergence messages grouped by run).
   size_t reference_block_bytes = size_t{256} << 20;
   // Where the bases and cubatures are cached between runs (directory empty: off). The cost
   // experiment never uses it: it measures the build.
