@@ -205,6 +205,21 @@ BENCHMARK(BM_HandlesFull)->ArgsProduct({{20, 100}, {-1, 1, -4, 4}})->Unit(benchm
 BENCHMARK(BM_HandlesLinear)->ArgsProduct({{20, 100}, {-1, 1, -4, 4}})->Unit(benchmark::kMicrosecond);
 BENCHMARK(BM_HandlesPhysical)->ArgsProduct({{20, 100}, {-1, 1, -4, 4}})->Unit(benchmark::kMicrosecond);
 
+// A frame turned about a fixed pivot by `angle` about `axis` (rad, rad/s, rad/s^2): the pivot stays put.
+FrameMotion turnAbout(const Eigen::Vector3d& pivot, const Eigen::Vector3d& axis, double angle, double rate,
+                      double spin)
+{
+  FrameMotion m;
+  m.rotation = Eigen::AngleAxisd(angle, axis).toRotationMatrix();
+  m.angular_velocity = rate * axis;
+  m.angular_acceleration = spin * axis;
+  const Eigen::Vector3d turned = m.rotation * pivot;
+  m.translation = pivot - turned;
+  m.velocity = -m.angular_velocity.cross(turned);
+  m.acceleration = -m.angular_acceleration.cross(turned) - m.angular_velocity.cross(m.angular_velocity.cross(turned));
+  return m;
+}
+
 // The moving frame: a 2D sheet hanging from one handle that holds its top row (nothing fixed),
 // simulated in the handle's frame while it sways about y through the top row's middle, 0.1 rad at
 // 1 Hz (setHandleFrameMotion, then step): every frame term acts, the Coriolis one through the
@@ -239,15 +254,8 @@ void frameBenchmark(benchmark::State& state, Method method, IntegratorKind integ
     if (moving)
     {
       const double t = sim.time() + s.time_step;
-      FrameMotion m;
-      m.rotation = Eigen::AngleAxisd(amplitude * std::sin(w * t), axis).toRotationMatrix();
-      m.angular_velocity = amplitude * w * std::cos(w * t) * axis;
-      m.angular_acceleration = -amplitude * w * w * std::sin(w * t) * axis;
-      const Eigen::Vector3d turned = m.rotation * pivot;
-      m.translation = pivot - turned;
-      m.velocity = -m.angular_velocity.cross(turned);
-      m.acceleration = -m.angular_acceleration.cross(turned) - m.angular_velocity.cross(m.angular_velocity.cross(turned));
-      sim.setHandleFrameMotion(m);
+      sim.setHandleFrameMotion(turnAbout(pivot, axis, amplitude * std::sin(w * t), amplitude * w * std::cos(w * t),
+                                         -amplitude * w * w * std::sin(w * t)));
     }
     benchmark::DoNotOptimize(sim.step(1));
   }
@@ -515,13 +523,13 @@ void BM_SpringForces(benchmark::State& state)
 }
 BENCHMARK(BM_SpringForces)->ArgsProduct({kSizes})->Unit(benchmark::kMicrosecond);
 
-
-// `coarse` on the held cloth turned 60 degrees about the vertical in 1 s and back (config/compare/large_motion_100.yaml
-// on N x N: the cloth of config/cloth_large.yaml held by a clamp of its top two rows, nothing fixed),
-// explicit at its own step (coarseStepMultiple times `full`'s largest stable one, 0.8 ms x 100 / N), the
-// clamp's motion handed over every step as the node and modal_compare hand it: range(1) = 0, every
-// clamp particle's motion (setHandleMotion); 1, the clamp's frame (setHandleFrameMotion). Counter: CPU
-// seconds per simulated second, which compares the sizes' different steps.
+// `coarse` on the held cloth turned 60 degrees about the vertical in 1 s and back
+// (config/compare/large_motion_100.yaml on N x N: the cloth of config/cloth_large.yaml held by a clamp
+// of its top two rows, nothing fixed), explicit at its own step (coarseStepMultiple times `full`'s
+// largest stable one, 0.8 ms x 100 / N), the clamp's motion handed over every step as the node and
+// modal_compare hand it: range(1) = 0, every clamp particle's motion (setHandleMotion); 1, the clamp's
+// frame (setHandleFrameMotion). Counter: CPU seconds per simulated second, which compares the sizes'
+// different steps.
 void BM_CoarseTurn(benchmark::State& state)
 {
   const int size = static_cast<int>(state.range(0));
@@ -553,14 +561,7 @@ void BM_CoarseTurn(benchmark::State& state)
     const double t = sim.time() + s.time_step, w = EIGEN_PI / duration;
     const double turn = 0.5 * angle * (1.0 - std::cos(w * t)), rate = 0.5 * angle * w * std::sin(w * t);
     const double spin = 0.5 * angle * w * w * std::cos(w * t);
-    FrameMotion m;
-    m.rotation = Eigen::AngleAxisd(turn, axis).toRotationMatrix();
-    m.angular_velocity = rate * axis;
-    m.angular_acceleration = spin * axis;
-    const Eigen::Vector3d turned = m.rotation * pivot;
-    m.translation = pivot - turned;
-    m.velocity = -m.angular_velocity.cross(turned);
-    m.acceleration = -m.angular_acceleration.cross(turned) - m.angular_velocity.cross(m.angular_velocity.cross(turned));
+    const FrameMotion m = turnAbout(pivot, axis, turn, rate, spin);
     if (state.range(1) == 1)
       sim.setHandleFrameMotion(m);
     else

@@ -9,10 +9,10 @@ particles, its handles the same rows of the grid:
 Each size steps the methods at the same margin to `full`'s explicit limit as the scene's own step
 (the limit goes as one over N at a fixed width and mass: 0.8 ms on the 100 x 100 turn, 2.5 ms on the
 50 x 50 drag), the reference at --reference-divisor times less. Every size is sampled at the same
-simulated times (every 16 ms on the turn, 25 ms on the drag): reading the whole grid between two steps evicts a small
-method's data from the cache, so sampling every few steps of a fine grid would time a method slower
-there than on a coarse grid sampled less often. (16 ms does not divide the turn's 1 s move: its end
-is sampled at 1.008 s.)
+simulated times (every 16 ms on the turn, 25 ms on the drag): reading the whole grid between two
+steps evicts a small method's data from the cache, so sampling every few steps of a fine grid would
+time a method slower there than on a coarse grid sampled less often. (16 ms does not divide the
+turn's 1 s move: its end is sampled at 1.008 s.)
 
   python3 benchmark/size_sweep.py --scene turn --sizes 30,50,100,200 --methods full,coarse \\
       [--reference-divisor 8] [--set KEY=VALUE ...] [--binary PATH] [--output DIR]

@@ -288,9 +288,13 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
     result.reference_check.push_back(e);
   };
 
-  // The reference's points and whether it had diverged, at samples base, base + 1, ...
-  std::vector<Eigen::Matrix3Xd> reference{runs[0].sim->points()};
-  std::vector<bool> reference_diverged{false};
+  // The reference at samples base, base + 1, ...: its points, and whether it had diverged.
+  struct ReferenceSample
+  {
+    Eigen::Matrix3Xd points;
+    bool diverged = false;
+  };
+  std::vector<ReferenceSample> reference{{runs[0].sim->points(), false}};
   long base = 0;
   const double total = static_cast<double>(samples + 1) * (runs.size() + (check ? 1 : 0));
   double done = 0.0;
@@ -306,25 +310,21 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
     {
       advance(runs[0], i);
       if (i > 0)
-      {
-        reference.push_back(runs[0].sim->points());
-        reference_diverged.push_back(runs[0].diverged);
-      }
-      record(0, i * options.sample, reference[i - base], reference_diverged[i - base]);
+        reference.push_back({runs[0].sim->points(), runs[0].diverged});
+      record(0, i * options.sample, reference[i - base].points, reference[i - base].diverged);
     }
     for (size_t k = 1; k < runs.size(); ++k)
       for (long i = first; i <= last; ++i)
       {
         advance(runs[k], i);
-        record(k, i * options.sample, reference[i - base], reference_diverged[i - base]);
+        record(k, i * options.sample, reference[i - base].points, reference[i - base].diverged);
       }
     for (long i = first; check && i <= last; ++i)
     {
       advance(*check, i);
-      recordCheck(i * options.sample, reference[i - base], reference_diverged[i - base]);
+      recordCheck(i * options.sample, reference[i - base].points, reference[i - base].diverged);
     }
     reference.erase(reference.begin(), reference.end() - 1);
-    reference_diverged.erase(reference_diverged.begin(), reference_diverged.end() - 1);
     base = last;
   }
   // Samples in the order of time, then of the runs.

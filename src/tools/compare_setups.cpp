@@ -231,10 +231,7 @@ double resultBytes(const Options& o, const ExperimentSetup& setup, long steps, l
   double bytes = runs * samples * sample_bytes +
                  std::min(static_cast<double>(o.accuracy.reference_block_bytes) + points_bytes, samples * points_bytes);
   if (o.accuracy.snapshots)
-  {
-    const double particles = static_cast<double>(setup.grid.rows) * setup.grid.cols;
-    bytes += runs * (static_cast<double>(steps) / interval + 2.0) * (sizeof(Snapshot) + 24.0 * particles);
-  }
+    bytes += runs * (static_cast<double>(steps) / interval + 2.0) * (sizeof(Snapshot) + points_bytes);
   return bytes;
 }
 
