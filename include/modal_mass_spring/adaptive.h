@@ -20,12 +20,13 @@
 namespace modal_mass_spring
 {
 
+// Its defaults are SimulationParams's: adaptiveSettings(SimulationParams{}).
 struct AdaptiveSettings
 {
-  Method reduced = Method::Cubature;  // the reduced method it steps where it may
-  double tolerance = 0.015;           // m, the RMS distance to `full` it accepts
-  double dwell = 0.2;                 // s within tolerance of the span before it goes back
-  int check_steps = 10;               // steps between two checks
+  Method reduced;    // the reduced method it steps where it may
+  double tolerance;  // m, the RMS distance to `full` it accepts
+  double dwell;      // s within tolerance of the span before it goes back
+  int check_steps;   // steps between two checks
   // The median ratio of the distance to `full` to the error indicator over the shipped scenarios
   // (docs/results.md, "The reduced models' error indicator"): the indicator times this is the
   // distance it stands for.

@@ -56,7 +56,7 @@ struct SimulationParams
   bool adaptive = false;
   double error_tolerance = 0.015;
   double adaptive_dwell = 0.2;
-  int adaptive_check_steps = 10;
+  int adaptive_check_steps = 20;
   // Newton iterations of the static equilibrium before it is refused (linearization or
   // initial_state 'equilibrium'): a 100 x 100 cloth hanging from its flat vertical sheet takes 3 to
   // 20; config/cloth.yaml, released at 30 degrees and buckling as it hangs, 60 to 400 (its path hangs

@@ -15,6 +15,7 @@
 #include <functional>
 #include <iomanip>
 #include <iostream>
+#include <limits>
 #include <new>
 #include <set>
 #include <sstream>
@@ -99,6 +100,13 @@ void runEachSetup(const Options& o, const std::string& experiment, const std::ve
 }
 
 // Prints a table with columns padded to their widest cell.
+// The reference against itself at half its step, as surfaces: the mean over the samples.
+double referenceCheckSurface(const AccuracyResult& result)
+{
+  const std::vector<AccuracySummary> check = summarizeAccuracy(result.reference_check);
+  return check.empty() ? std::numeric_limits<double>::quiet_NaN() : check.front().mean_surface;
+}
+
 void printTable(const std::string& title, const std::vector<std::vector<std::string>>& table)
 {
   std::vector<size_t> width;
@@ -187,7 +195,8 @@ void printAccuracyHeader(const Options& o, const ExperimentSetup& setup, const A
   if (o.accuracy.reference_time_step > 0.0)
     std::cout << "reference (" << setup.variant << "): full, explicit, dt = " << fmt(o.accuracy.reference_time_step)
               << " s; against dt / 2: largest RMS distance " << fmt(result.reference_check_max_rms)
-              << " m, largest particle distance " << fmt(result.reference_check_max_distance) << " m\n";
+              << " m, largest particle distance " << fmt(result.reference_check_max_distance)
+              << " m, mean surface distance " << fmt(referenceCheckSurface(result)) << " m\n";
 }
 
 // For method "adaptive": its share of reduced steps and its switches, one line per variant.
@@ -204,18 +213,19 @@ void printAccuracySummary(const Options& o, const std::string& reference, const 
   std::vector<std::vector<std::string>> summary{{"variant", "method", "mean RMS m", "largest RMS m", "mean largest m",
                                                  "RMS at the end m", "step us (median)", "step us (mean)",
                                                  "CPU us (median)", "CPU s per simulated s", "real-time factor",
-                                                 "time step s", "deepest m"}};
+                                                 "time step s", "deepest m", "mean surface distance m"}};
   for (const AccuracySummary& s : summarizeAccuracy(errors))
     if (s.method != reference && s.method != "reference_half_step")
       summary.push_back({s.variant, s.method, fmt(s.mean_rms), fmt(s.max_rms), fmt(s.mean_max),
                          s.diverged ? "diverged" : fmt(s.final_rms), fmt(1e6 * s.step_seconds_median),
                          fmt(1e6 * s.step_seconds_mean), fmt(1e6 * s.step_cpu_seconds_median),
                          fmt(s.cpu_per_simulated_second), fmt(s.real_time_factor), fmt(s.time_step),
-                         fmt(s.deepest)});
+                         fmt(s.deepest), fmt(s.mean_surface)});
   printTable("accuracy (" + o.tag + "): over every sample after step 0, against " + reference +
                  "; wall and this thread's CPU time per step while running, the CPU time per simulated second "
                  "and the real-time factor it allows (time_step / CPU per step); each method's time step; how "
-                 "deep its deepest free particle went inside a collider over the samples",
+                 "deep its deepest free particle went inside a collider over the samples; the distance as surfaces "
+                 "(each free particle to the other's triangles and back)",
              summary);
   printAdaptive(summarizeAccuracy(errors));
 }
@@ -382,17 +392,19 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
               << fmt(setup.sim.time_step) << " s";
     if (o.accuracy.reference_time_step > 0.0)
       std::cout << "; reference full, explicit, dt = " << fmt(o.accuracy.reference_time_step)
-                << " s, against dt / 2: largest RMS distance " << fmt(result.reference_check_max_rms) << " m";
+                << " s, against dt / 2: largest RMS distance " << fmt(result.reference_check_max_rms)
+                << " m, mean surface distance " << fmt(referenceCheckSurface(result)) << " m";
     std::cout << "\n";
   };
   runEachSetup(o, "handles", setups, run, write);
   const std::vector<AccuracySummary> summaries = summaries_of();
   std::vector<std::vector<std::string>> table{
       {"scenario", "method", "mean RMS m", "largest RMS m", "RMS at the end m", "step us (median)", "CPU us (median)",
-       "CPU s per simulated s", "real-time factor", "indicator rank corr.", "time step s", "deepest m"}};
+       "CPU s per simulated s", "real-time factor", "indicator rank corr.", "time step s", "deepest m",
+       "mean surface distance m"}};
   for (const AccuracySummary& s : summaries)
     if (!s.not_built.empty())
-      table.push_back({s.variant, s.method, "did not build: " + s.not_built, "", "", "", "", "", "", "", "", ""});
+      table.push_back({s.variant, s.method, "did not build: " + s.not_built, "", "", "", "", "", "", "", "", "", ""});
     else if (s.method != "reference_half_step" && (s.method != reference || s.step_seconds_median > 0.0))
       // The reference's own row when it is timed (`full` at the methods' step): the step times to compare.
       table.push_back({s.variant, s.method, s.method == reference ? "(reference)" : fmt(s.mean_rms),
@@ -400,12 +412,14 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
                        s.method == reference ? "" : s.diverged ? "diverged" : fmt(s.final_rms),
                        fmt(1e6 * s.step_seconds_median), fmt(1e6 * s.step_cpu_seconds_median),
                        fmt(s.cpu_per_simulated_second), fmt(s.real_time_factor),
-                       fmt(s.indicator_rank_correlation), fmt(s.time_step), fmt(s.deepest)});
+                       fmt(s.indicator_rank_correlation), fmt(s.time_step), fmt(s.deepest),
+                       s.method == reference ? "" : fmt(s.mean_surface)});
   printTable("handles (" + o.tag + "): distance of the free particles to " + reference +
                  " over every sample after step 0; wall and this thread's CPU time per step while running, the "
                  "CPU time per simulated second and the real-time factor it allows (time_step / CPU per step); "
                  "the rank correlation of the method's error indicator with that distance; each method's time "
-                 "step; how deep its deepest free particle went inside a collider over the samples",
+                 "step; how deep its deepest free particle went inside a collider over the samples; the distance as "
+                 "surfaces (each free particle to the other's triangles and back)",
              table);
   printAdaptive(summaries);
   for (const std::string& m : messages)

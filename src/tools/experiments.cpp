@@ -478,12 +478,12 @@ void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows)
 void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows)
 {
   precise(out) << "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds,"
-                  "center_y,error_indicator\n";
+                  "center_y,error_indicator,surface_distance\n";
   for (const ErrorSample& e : rows)
     out << e.variant << ',' << e.method << ',' << e.step << ',' << Field{e.time} << ',' << Field{e.max_distance}
         << ',' << Field{e.rms_distance} << ',' << Field{e.max_displacement} << ',' << Field{e.energy} << ','
         << (e.diverged ? 1 : 0) << ',' << Field{e.step_seconds} << ',' << Field{e.center_y} << ','
-        << Field{e.error_indicator} << '\n';
+        << Field{e.error_indicator} << ',' << Field{e.surface_distance} << '\n';
 }
 
 void writeCubatureCsv(std::ostream& out, const std::vector<CubatureRow>& rows)
@@ -500,7 +500,7 @@ std::vector<AccuracySummary> notBuiltSummaries(const std::string& variant, const
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::vector<AccuracySummary> out;
   for (const auto& [method, reason] : result.not_built)
-    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, nan, nan, nan, false, reason, nan, nan, -1, nan, nan});
+    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, nan, nan, nan, false, reason, nan, nan, -1, nan, nan, nan});
   return out;
 }
 
@@ -508,7 +508,7 @@ void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummar
 {
   precise(out) << "variant,method,mean_rms,max_rms,mean_max,final_rms,step_seconds_median,step_seconds_mean,"
                   "step_cpu_seconds_median,cpu_per_simulated_second,real_time_factor,diverged,not_built,"
-                  "indicator_rank_correlation,reduced_share,switches,time_step,deepest\n";
+                  "indicator_rank_correlation,reduced_share,switches,time_step,deepest,mean_surface\n";
   for (const AccuracySummary& s : rows)
   {
     // The reason is free text: quoted, its quotes doubled.
@@ -521,7 +521,7 @@ void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummar
         << Field{s.cpu_per_simulated_second} << ',' << Field{s.real_time_factor} << ',' << (s.diverged ? 1 : 0) << ",\"" << reason << "\","
         << Field{s.indicator_rank_correlation} << ',' << Field{s.reduced_share} << ','
         << (s.switches >= 0 ? std::to_string(s.switches) : std::string()) << ',' << Field{s.time_step} << ','
-        << Field{s.deepest} << '\n';
+        << Field{s.deepest} << ',' << Field{s.mean_surface} << '\n';
   }
 }
 

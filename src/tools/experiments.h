@@ -135,6 +135,9 @@ struct ErrorSample
   int switches = -1;
   double time_step = 0.0;  // this method's own (s): `coarse` may span several of the setup's
   double depth = 0.0;      // how deep its deepest free particle is inside a collider (m; 0: none; NaN: no colliders)
+  // The distance to `full` as surfaces (surfaceDistance, m): where the cloth crumples, how alike the
+  // folds are, which the per-particle distance does not tell.
+  double surface_distance = 0.0;
 };
 
 struct Snapshot
@@ -287,6 +290,7 @@ struct AccuracySummary
   int switches = -1;
   double time_step = std::numeric_limits<double>::quiet_NaN();  // s, the method's own
   double deepest = std::numeric_limits<double>::quiet_NaN();    // m, over the samples (NaN: no colliders)
+  double mean_surface = 0.0;  // m, the mean surface distance (ErrorSample::surface_distance)
 };
 // Spearman's rank correlation of a and b (equal sizes; ties take their mean rank); NaN below three
 // pairs or where either is constant.

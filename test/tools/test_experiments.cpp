@@ -469,10 +469,10 @@ TEST(Csv, NonFiniteNumbersAreEmptyFields)
   diverged.step = 10;
   diverged.diverged = true;
   diverged.max_distance = diverged.rms_distance = diverged.max_displacement = diverged.energy = diverged.center_y =
-      std::numeric_limits<double>::quiet_NaN();
+      diverged.surface_distance = std::numeric_limits<double>::quiet_NaN();
   std::ostringstream errors;
   writeErrorCsv(errors, {diverged});
-  EXPECT_EQ(errors.str().substr(errors.str().find('\n') + 1), "base,linear,10,0,,,,,1,0,,\n");
+  EXPECT_EQ(errors.str().substr(errors.str().find('\n') + 1), "base,linear,10,0,,,,,1,0,,,\n");
 
   StabilityRow row;
   row.variant = "base";

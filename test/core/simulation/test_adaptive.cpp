@@ -79,7 +79,7 @@ TEST(Adaptive, BadSettingsAreRefusedByName)
 {
   Simulation sim(topRowHeld(), heldParams(Method::Full, BasisKind::Skinning));
   auto refusedSetting = [&](const std::function<void(AdaptiveSettings&)>& change) {
-    AdaptiveSettings s;
+    AdaptiveSettings s = adaptiveSettings(SimulationParams{});
     change(s);
     return refusal([&] { AdaptiveStepper stepper(sim, s); });
   };
@@ -99,7 +99,7 @@ TEST(Adaptive, FallsBackToFullWhereTheSpanCannotTurnTheCloth)
   Simulation full(topRowHeld(), heldParams(Method::Full, BasisKind::LinearModes));
   Simulation modes(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
   Simulation adaptive_sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
-  AdaptiveSettings settings;
+  AdaptiveSettings settings = adaptiveSettings(SimulationParams{});
   settings.reduced = Method::Physical;
   settings.tolerance = 0.01;
   AdaptiveStepper adaptive(adaptive_sim, settings);
@@ -125,7 +125,7 @@ TEST(Adaptive, StaysReducedWhereTheSpanFollows)
   // `physical` alone to the bit.
   Simulation physical(topRowHeld(), heldParams(Method::Physical, BasisKind::Skinning));
   Simulation adaptive_sim(topRowHeld(), heldParams(Method::Physical, BasisKind::Skinning));
-  AdaptiveSettings settings;
+  AdaptiveSettings settings = adaptiveSettings(SimulationParams{});
   settings.reduced = Method::Physical;
   AdaptiveStepper adaptive(adaptive_sim, settings);
   run(physical, translate, 200);
@@ -142,7 +142,7 @@ TEST(Adaptive, GoesBackToTheSpanOnceTheStateIsWithinToleranceForTheDwell)
   // state's distance to their span: after the dwell it is reduced again, the state carried over (no
   // particle jumps at the switch).
   Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
-  AdaptiveSettings settings;
+  AdaptiveSettings settings = adaptiveSettings(SimulationParams{});
   settings.reduced = Method::Physical;
   settings.tolerance = 0.01;
   AdaptiveStepper first(sim, settings);
@@ -179,7 +179,7 @@ TEST(Adaptive, AFallBackRetakesEachStepWithItsExternalForce)
   Simulation full(topRowHeld(), heldParams(Method::Full, BasisKind::LinearModes));
   Simulation unpushed(topRowHeld(), heldParams(Method::Full, BasisKind::LinearModes));
   Simulation adaptive_sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
-  AdaptiveSettings settings;
+  AdaptiveSettings settings = adaptiveSettings(SimulationParams{});
   settings.reduced = Method::Physical;
   settings.tolerance = 1e-15;  // its first check fails: `full` from the start
   AdaptiveStepper adaptive(adaptive_sim, settings);
