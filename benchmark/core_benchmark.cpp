@@ -13,6 +13,7 @@
 #include <Eigen/Geometry>
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <memory>
@@ -583,6 +584,87 @@ void BM_CoarseTurn(benchmark::State& state)
   state.counters["time_step_ms"] = 1e3 * s.time_step;
 }
 BENCHMARK(BM_CoarseTurn)->ArgsProduct({{50, 100, 200}, {0, 1}})->Unit(benchmark::kMicrosecond);
+
+// The drag's 9 s (config/compare/cloth_drag_50.yaml on N x N, as benchmark/size_sweep.py makes it):
+// the top row lowered 0.35 m in 4 s onto the table, dragged 0.5 m along y in 4 s, held 1 s, each leg
+// from rest to rest. Its own function, for callgrind's --toggle-collect='*driveDrag*'.
+void driveDrag(Simulation& sim, double time_step)
+{
+  const long steps = std::lround(9.0 / time_step);
+  for (long k = 1; k <= steps && !sim.diverged(); ++k)
+  {
+    const double t = k * time_step, w = EIGEN_PI / 4.0;
+    FrameMotion m;
+    // (1 - cos(w t)) / 2 of each leg, and its rates.
+    auto leg = [&](double start, double length, int axis) {
+      const double s = std::clamp(t - start, 0.0, 4.0);
+      m.translation[axis] += 0.5 * length * (1.0 - std::cos(w * s));
+      if (t - start > 0.0 && t - start < 4.0)
+      {
+        m.velocity[axis] += 0.5 * length * w * std::sin(w * s);
+        m.acceleration[axis] += 0.5 * length * w * w * std::cos(w * s);
+      }
+    };
+    leg(0.0, -0.35, 2);
+    leg(4.0, 0.5, 1);
+    sim.setHandleFrameMotion(m);
+    sim.step(1);
+  }
+}
+
+// `coarse` on the drag at its own step, the whole scene once a repeat (the landing is in it): CPU
+// seconds per simulated second, the counter that compares the sizes' different steps, with the table.
+void BM_CoarseDrag(benchmark::State& state)
+{
+  const int size = static_cast<int>(state.range(0));
+  GridParams g;
+  g.rows = g.cols = size;
+  g.dimension = 3;
+  g.spacing = 0.98 / (size - 1);
+  g.mass = 2.0 / (size * size);
+  g.structural_stiffness = 50.0;
+  g.shear_stiffness = 20.0;
+  g.bending = true;
+  g.bending_stiffness = 5.0;
+  std::vector<int> top(size);
+  std::iota(top.begin(), top.end(), 0);
+  g.handles = {top};
+  SimulationParams s;
+  s.method = Method::Coarse;
+  s.alpha = 0.5;
+  s.linearization = Linearization::Equilibrium;
+  s.initial_state = InitialState::Equilibrium;
+  Collider table;
+  table.type = ColliderType::Box;
+  table.center = Eigen::Vector3d(0.475, 0.5, -1.4);
+  table.half_extents = Eigen::Vector3d(0.8, 1.0, 0.25);
+  s.colliders = {table};
+  s.time_step = 0.0025 * 50.0 / size;
+  s.time_step *= coarseStepMultiple(g, s);
+  double cpu = 0.0, simulated = 0.0;
+  long touching = 0;
+  for (auto _ : state)
+  {
+    state.PauseTiming();
+    Simulation sim(g, s);
+    state.ResumeTiming();
+    const double start = threadCpuSeconds();
+    driveDrag(sim, s.time_step);
+    cpu += threadCpuSeconds() - start;
+    simulated += sim.time();
+    if (sim.diverged())
+    {
+      state.SkipWithError("diverged");
+      break;
+    }
+    const std::vector<int> contacts = sim.particleContacts();
+    touching = std::count_if(contacts.begin(), contacts.end(), [](int c) { return c >= 0; });
+  }
+  state.counters["cpu_per_simulated_s"] = simulated > 0.0 ? cpu / simulated : 0.0;
+  state.counters["on_the_table_at_the_end"] = static_cast<double>(touching);
+  state.counters["time_step_ms"] = 1e3 * s.time_step;
+}
+BENCHMARK(BM_CoarseDrag)->Arg(50)->Arg(100)->Arg(200)->Unit(benchmark::kMillisecond)->Iterations(1);
 
 }  // namespace
 
