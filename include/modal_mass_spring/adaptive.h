@@ -1,9 +1,10 @@
 // A reduced method that falls back to `full` where its span cannot follow the motion (after Kim and
 // James 2009): every check_steps steps, a reduced step's error indicator (Simulation::errorIndicator)
 // times its calibration decides whether the motion is still within `tolerance` of `full`; if not,
-// the steps since the last check that passed are taken again under `full` from the state saved there
-// (with the handle and collider motions they had), so that the error the check found is not carried
-// into `full`. Under `full`, it switches back once the state has stayed within `tolerance` of the
+// the steps since the last check that was safely within it (a third of `tolerance`, at most
+// max_rollback_checks checks back) are taken again under `full` from the state saved there (with the
+// handle and collider motions they had), so that the error that grew before the check found it is not
+// carried into `full`. Under `full`, it switches back once the state has stayed within `tolerance` of the
 // reduced span (Simulation::spanDistance) for `dwell` seconds; the part outside the span is then kept
 // frozen, as every switch does (Simulation::setMethod).
 #pragma once
@@ -31,6 +32,10 @@ struct AdaptiveSettings
   // (docs/results.md, "The reduced models' error indicator"): the indicator times this is the
   // distance it stands for.
   double indicator_scale = 30.0;
+  // A fallback goes back to the last check whose estimate was within this share of the tolerance:
+  // the distance grows before the indicator shows it (docs/results.md, "The adaptive method").
+  double safe_share = 1.0 / 3.0;
+  int max_rollback_checks = 10;  // and never more checks back than this: the motions kept are bounded
 };
 
 // The settings a simulation's parameters give (adaptive_method, error_tolerance, adaptive_dwell,
@@ -39,7 +44,8 @@ AdaptiveSettings adaptiveSettings(const SimulationParams& params);
 
 // Throws std::invalid_argument naming a setting out of its range: a tolerance not positive and
 // finite, a dwell negative or not finite, check_steps < 1, a reduced method that is `full` or
-// `linear` (whose forces do not see the span's error), an indicator_scale not positive.
+// `linear` (whose forces do not see the span's error), an indicator_scale not positive, a safe_share
+// outside (0, 1], max_rollback_checks < 1.
 void validateAdaptiveSettings(const AdaptiveSettings& settings);
 
 class AdaptiveStepper
@@ -70,7 +76,7 @@ private:
   };
   Motion motion() const;
   void apply(const Motion& m);
-  // Back to the last check that passed, then its steps again under `full`.
+  // Back to the checkpoint, then the steps since again under `full`.
   StepResult fallBack(std::ostringstream& why);
   StepResult check();
 
@@ -81,8 +87,9 @@ private:
   double last_estimate_ = 0.0;
   double within_since_ = -1.0;  // under full: the time the state came within tolerance of the span (-1: not)
   std::string last_switch_;
-  SimulationState checkpoint_;       // the reduced state at the last check that passed
+  SimulationState checkpoint_;       // the reduced state at the last safe check
   std::vector<Motion> since_check_;  // the motions of the reduced steps since
+  int checks_since_ = 0;             // checks passed since it
   Eigen::VectorXd handle_reference_;  // the handle dofs' positions at zero displacement
 };
 

@@ -30,6 +30,10 @@ void validateAdaptiveSettings(const AdaptiveSettings& s)
     rejectParameter("adaptive_method", "'" + toString(s.reduced) + "'", "must be one of physical, cubature");
   if (!std::isfinite(s.indicator_scale) || s.indicator_scale <= 0.0)
     rejectParameter("indicator_scale", s.indicator_scale, "must be a finite number > 0");
+  if (!(s.safe_share > 0.0 && s.safe_share <= 1.0))
+    rejectParameter("safe_share", s.safe_share, "must be in (0, 1]");
+  if (s.max_rollback_checks < 1)
+    rejectParameter("max_rollback_checks", s.max_rollback_checks, "must be an integer >= 1");
 }
 
 AdaptiveStepper::AdaptiveStepper(Simulation& sim, const AdaptiveSettings& settings) : sim_(sim), settings_(settings)
@@ -104,6 +108,7 @@ StepResult AdaptiveStepper::fallBack(std::ostringstream& why)
   }
   why << "; its last " << since_check_.size() << " steps taken again under full";
   since_check_.clear();
+  checks_since_ = 0;
   return result;
 }
 
@@ -116,8 +121,13 @@ StepResult AdaptiveStepper::check()
     last_estimate_ = settings_.indicator_scale * sim_.errorIndicator();
     if (last_estimate_ <= settings_.tolerance)
     {
-      checkpoint_ = sim_.saveState();
-      since_check_.clear();
+      if (last_estimate_ <= settings_.safe_share * settings_.tolerance ||
+          ++checks_since_ >= settings_.max_rollback_checks)
+      {
+        checkpoint_ = sim_.saveState();
+        since_check_.clear();
+        checks_since_ = 0;
+      }
       return result;
     }
     why << "to full at t = " << sim_.time() << " s: estimated distance " << last_estimate_
@@ -142,6 +152,7 @@ StepResult AdaptiveStepper::check()
     sim_.setMethod(settings_.reduced);
     checkpoint_ = sim_.saveState();
     since_check_.clear();
+    checks_since_ = 0;
   }
   ++switches_;
   last_switch_ = why.str();

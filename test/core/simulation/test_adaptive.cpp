@@ -87,6 +87,8 @@ TEST(Adaptive, BadSettingsAreRefusedByName)
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.tolerance = NAN; }), "'error_tolerance'"));
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.dwell = -1.0; }), "'adaptive_dwell' = -1"));
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.check_steps = 0; }), "'adaptive_check_steps' = 0"));
+  EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.safe_share = 0.0; }), "'safe_share' = 0"));
+  EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.max_rollback_checks = 0; }), "'max_rollback_checks' = 0"));
   EXPECT_TRUE(
       contains(refusedSetting([](AdaptiveSettings& s) { s.reduced = Method::Linear; }), "must be one of physical, cubature"));
   EXPECT_EQ(sim.method(), Method::Full);  // nothing changed
@@ -117,6 +119,41 @@ TEST(Adaptive, FallsBackToFullWhereTheSpanCannotTurnTheCloth)
   EXPECT_TRUE(contains(adaptive.lastSwitch(), "steps taken again under full")) << adaptive.lastSwitch();
   EXPECT_GT(modes_distance, 0.05);
   EXPECT_LT(adaptive_distance, 0.2 * modes_distance);
+}
+
+namespace
+{
+// The steps a fallback took again, from its message ("its last N steps taken again under full").
+int stepsTakenAgain(const std::string& message)
+{
+  const std::string key = "its last ";
+  const size_t at = message.find(key);
+  return at == std::string::npos ? -1 : std::stoi(message.substr(at + key.size()));
+}
+}  // namespace
+
+TEST(Adaptive, AFallBackGoesBackToTheLastCheckSafelyWithinTheTolerance)
+{
+  // The turn that six linear modes cannot follow: the estimate rises over several checks before it
+  // crosses the tolerance, so how far back a fallback goes depends on the safe share.
+  auto stepsAgain = [](double safe_share, int max_rollback_checks) {
+    Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
+    AdaptiveSettings settings = adaptiveSettings(SimulationParams{});
+    settings.reduced = Method::Physical;
+    settings.tolerance = 0.01;
+    settings.check_steps = 5;
+    settings.safe_share = safe_share;
+    settings.max_rollback_checks = max_rollback_checks;
+    AdaptiveStepper adaptive(sim, settings);
+    run(sim, turn, 200, &adaptive);
+    EXPECT_GE(adaptive.switches(), 1);
+    return stepsTakenAgain(adaptive.lastSwitch());
+  };
+  EXPECT_EQ(stepsAgain(1.0, 10), 5);     // every passed check is safe: the last one
+  EXPECT_GT(stepsAgain(1e-9, 1000), 5);  // no check after the start is: back further
+  const int bounded = stepsAgain(1e-9, 2);
+  EXPECT_GE(bounded, 5);
+  EXPECT_LE(bounded, 10);                // but never more than two checks back
 }
 
 TEST(Adaptive, StaysReducedWhereTheSpanFollows)
