@@ -524,6 +524,17 @@ void BM_SpringForces(benchmark::State& state)
 }
 BENCHMARK(BM_SpringForces)->ArgsProduct({kSizes})->Unit(benchmark::kMicrosecond);
 
+// `coarse` with the scenes' damping, from the held cloth hanging at rest.
+SimulationParams coarseAtRest()
+{
+  SimulationParams s;
+  s.method = Method::Coarse;
+  s.alpha = 0.5;
+  s.linearization = Linearization::Equilibrium;
+  s.initial_state = InitialState::Equilibrium;
+  return s;
+}
+
 // `coarse` on the held cloth turned 60 degrees about the vertical in 1 s and back
 // (config/compare/large_motion_100.yaml on N x N: the cloth of config/cloth_large.yaml held by a clamp
 // of its top two rows, nothing fixed), explicit at its own step (coarseStepMultiple times `full`'s
@@ -539,12 +550,8 @@ void BM_CoarseTurn(benchmark::State& state)
   std::vector<int> clamp(2 * size);
   std::iota(clamp.begin(), clamp.end(), 0);
   g.handles = {clamp};
-  SimulationParams s;
-  s.method = Method::Coarse;
-  s.alpha = 0.5;
+  SimulationParams s = coarseAtRest();
   s.handle_formulation = HandleFormulation::ConstraintModes;
-  s.linearization = Linearization::Equilibrium;
-  s.initial_state = InitialState::Equilibrium;
   s.time_step = 0.0008 * 100.0 / size;
   s.time_step *= coarseStepMultiple(g, s);
   Simulation sim(g, s);
@@ -629,11 +636,7 @@ void BM_CoarseDrag(benchmark::State& state)
   std::vector<int> top(size);
   std::iota(top.begin(), top.end(), 0);
   g.handles = {top};
-  SimulationParams s;
-  s.method = Method::Coarse;
-  s.alpha = 0.5;
-  s.linearization = Linearization::Equilibrium;
-  s.initial_state = InitialState::Equilibrium;
+  SimulationParams s = coarseAtRest();
   Collider table;
   table.type = ColliderType::Box;
   table.center = Eigen::Vector3d(0.475, 0.5, -1.4);
