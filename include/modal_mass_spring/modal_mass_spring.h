@@ -12,4 +12,5 @@
 #include "modal_mass_spring/simulation.h"
 #include "modal_mass_spring/spring_forces.h"
 #include "modal_mass_spring/spring_law.h"
+#include "modal_mass_spring/surface_distance.h"
 #include "modal_mass_spring/validation.h"
