@@ -109,6 +109,28 @@ SelfCollision::Geometry SelfCollision::geometry(const Pair& pair, const double* 
   return g;
 }
 
+// Inline: the narrow phase and the sweeps call them for every touching pair (this file only).
+inline Eigen::Vector3d SelfCollision::relative(const double* values, const Pair& pair)
+{
+  Eigen::Vector3d r = pointAt(values, pair.p) - pair.kept_geometry.w[0] * pointAt(values, pair.c[0]);
+  if (pair.c[1] >= 0)
+    r -= pair.kept_geometry.w[1] * pointAt(values, pair.c[1]) + pair.kept_geometry.w[2] * pointAt(values, pair.c[2]);
+  return r;
+}
+
+inline void SelfCollision::apply(double* values, const Pair& pair, const Eigen::Vector3d& delta)
+{
+  auto ref = [](double* v, int slot) { return Eigen::Map<Eigen::Vector3d>(v + 3 * slot); };
+  const Eigen::Vector3d share = delta / pair.sum;
+  ref(values, pair.p) += pair.share[0] * share;
+  ref(values, pair.c[0]) -= pair.share[1] * share;
+  if (pair.c[1] >= 0)
+  {
+    ref(values, pair.c[1]) -= pair.share[2] * share;
+    ref(values, pair.c[2]) -= pair.share[3] * share;
+  }
+}
+
 bool SelfCollision::edgeHeldByNeighbour(const std::vector<Pair>& group, const std::vector<Geometry>& geometry, int k,
                                         int opposite) const
 {
@@ -465,14 +487,6 @@ const Eigen::Vector3d& SelfCollision::surfaceOf(int slot, const double* x)
   return surface;
 }
 
-Eigen::Vector3d SelfCollision::relative(const double* values, const Pair& pair)
-{
-  Eigen::Vector3d r = pointAt(values, pair.p) - pair.kept_geometry.w[0] * pointAt(values, pair.c[0]);
-  if (pair.c[1] >= 0)
-    r -= pair.kept_geometry.w[1] * pointAt(values, pair.c[1]) + pair.kept_geometry.w[2] * pointAt(values, pair.c[2]);
-  return r;
-}
-
 void SelfCollision::weigh(Pair& pair, const double* x)
 {
   const int slots[4] = {pair.p, pair.c[0], pair.c[1], pair.c[2]};
@@ -495,19 +509,6 @@ void SelfCollision::addTouch(Pair& pair, double gap, const double* x, const doub
     weigh(pair, x);
   touches_.push_back(Touch{&pair, relative(x_start, pair)});
   report_.closest_before = std::min(report_.closest_before, gap);
-}
-
-void SelfCollision::apply(double* values, const Pair& pair, const Eigen::Vector3d& delta)
-{
-  auto ref = [](double* v, int slot) { return Eigen::Map<Eigen::Vector3d>(v + 3 * slot); };
-  const Eigen::Vector3d share = delta / pair.sum;
-  ref(values, pair.p) += pair.share[0] * share;
-  ref(values, pair.c[0]) -= pair.share[1] * share;
-  if (pair.c[1] >= 0)
-  {
-    ref(values, pair.c[1]) -= pair.share[2] * share;
-    ref(values, pair.c[2]) -= pair.share[3] * share;
-  }
 }
 
 bool SelfCollision::stirred(const Pair& pair, int sweep) const
