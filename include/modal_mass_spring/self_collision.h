@@ -16,7 +16,8 @@
 // Broad phase: a list of candidate pairs within the thickness plus twice a skin, kept over the steps;
 // the pairs of a particle that has moved more than half the skin since its pairs were last listed
 // are listed anew (all of them when many have), so that no pair outside the list can have come
-// within the thickness (docs/design.md, "Self-collision", gives the bound). A listing searches a
+// within the thickness (docs/design.md, "Self-collision", gives the bound); a listing of some
+// particles visits only the groups that name them (named_by_). A listing searches a
 // uniform grid of cells as wide as the reach (the listing distance plus the longest edge of any
 // triangle, so that a triangle within it has its first corner in a neighbouring cell), sorted by a
 // counting sort. Narrow phase, every step: the candidates within the thickness at the step's end,
@@ -128,7 +129,8 @@ private:
   // within the thickness plus the reuse fraction then is `kept`: a pair of its own (1, with its
   // closest point's weights and normal in `kept_geometry`) or one whose point another pair holds (2,
   // likewise; 3 for a triangle whose point is at a particle the particle pair holds, not looked at);
-  // its closest point is found again once its particles have travelled the reuse fraction since.
+  // its closest point is found again once its particles have travelled the reuse fraction since. A
+  // kept pair keeps its particles' shares of a push as well (weigh), found with its closest point.
   struct Geometry
   {
     double w[3] = {1.0, 0.0, 0.0};
@@ -137,6 +139,7 @@ private:
   };
   struct Pair
   {
+    Pair(int p, int c0, int c1, int c2, int half) : p(p), c{c0, c1, c2}, half(half) {}
     int p;
     int c[3];
     int half;
@@ -144,28 +147,39 @@ private:
     double travel = 0.0;
     int kept = 0;
     Geometry kept_geometry;
+    double share[4] = {0.0, 0.0, 0.0, 0.0};
+    double sum = 0.0;
+    int surfaces = -1;
   };
   // The closest point to p on the pair's other side, its barycentric weights, the unit normal from
   // there to p (oriented by the start positions inside a triangle) and the gap along it.
   Geometry geometry(const Pair& pair, const double* x, const double* x_start) const;
-  // A pair closer than the thickness, with what its sweeps need: its geometry at the step's end, the
-  // inverse masses of its particles along the normal (relative to a free particle's) and their
-  // weighted sum, and its relative position at the step's start.
+  // A pair closer than the thickness (a kept pair: its geometry is kept_geometry, measured at the
+  // step's end) and its relative position at the step's start.
   struct Touch
   {
-    Pair pair;
-    Geometry g;
-    double m[4];
-    double sum;
+    Pair* pair;
     Eigen::Vector3d start;
   };
+  // The touch of a kept pair within the thickness (gap), weighed first when the surfaces changed.
+  void addTouch(Pair& pair, double gap, const double* x, const double* x_start);
+  // Each of the pair's particles' share of a push along its kept normal (its weight, 1 for p, times
+  // its inverse mass relative to a free particle's: 0 on a collider when the push is along the
+  // surface's normal, more than 60 degrees from the surface), their weighted sum, and the surfaces
+  // they were weighed with (surfaces_).
+  void weigh(Pair& pair, const double* x);
   // Lists the candidate pairs closer than the thickness plus twice the skin at positions x: every
   // pair when `moved` is empty, else those of the particles in it and of the triangles at them.
   void listCandidates(const Eigen::VectorXd& x, const std::vector<int>& moved);
   // Its steps (self_collision_candidates.cpp), at positions xs with the listing distance `listed`
   // and the broad phase's cells `reach` wide. Empties every group (all), or moves the pairs with a
-  // moved particle to the end of their group, [gone_from, gone_end).
-  void dropMovedPairs(bool all, std::vector<int>& gone_from, std::vector<int>& gone_end);
+  // moved particle to the end of their group, [gone_from_, gone_end_), in the groups that name one
+  // (dropped_from_, found by named_by_).
+  void dropMovedPairs(bool all, const std::vector<int>& moved);
+  // A pair listed into its group, the group named by its other particles (named_by_).
+  void addPair(const Pair& pair);
+  // After a full listing: every particle's named_by_ found anew.
+  void nameAll();
   // The square of the longest edge of a cell's triangles.
   double longestCellEdge(const double* xs) const;
   // The centre and the squared radius of a sphere around the cell anchored at slot s that holds
@@ -183,13 +197,14 @@ private:
   // A pair listed again takes what was found of it before (its margin, its kept closest point: they
   // hold for the pair whatever the listing), so that a listing does not send it to the narrow phase;
   // then the gone pairs are erased.
-  void takeBackFound(const std::vector<int>& gone_from, const std::vector<int>& gone_end);
+  void takeBackFound();
   int slotAt(int row, int col) const { return slot_of_[row * grid_.params().cols + col]; }
   // The candidates closer than the thickness at the step's end x, one per closest point.
   void findTouches(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x);
   // Whether slot p's candidates are as they were last looked at within the tolerances (none listed or
-  // dropped since, the kept ones travelled less than the reuse fraction, the others less than their margin).
-  bool groupSettled(int p) const;
+  // dropped since, the kept ones travelled less than the reuse fraction, the others less than their
+  // margin): by the group's bound while it holds, else pair by pair (setting the bound anew).
+  bool groupSettled(int p);
   // The sum of the pair's particles' travel (travel_).
   double travelOf(const Pair& pair) const
   {
@@ -207,7 +222,7 @@ private:
   // covered particle), and the pairs within reach kept.
   int lookAtParticlePairs(int p, const double* x, const double* x_start, int covered[8]);
   void lookAtTrianglePairs(int p, const double* x, const double* x_start, const int covered[8], int covering);
-  void keepWithinReach(int p);
+  void keepWithinReach(int p, const double* x, const double* x_start);
   // Whether the triangle pair `k` of `group` (one particle's candidates, with this step's geometry)
   // leaves its closest point (on the edge opposite its corner `opposite`) to the triangle sharing
   // that edge, when that one holds the same point.
@@ -218,28 +233,28 @@ private:
   bool findMoved(const Eigen::VectorXd& x);
   // Adds the path from the last step's end positions to x to each particle's travel; false when not finite.
   bool addTravel(const Eigen::VectorXd& x);
-  // The particles of the touches that lie on a collider, and the surface's normal there: found anew
-  // for a particle that has travelled the reuse fraction since it was last, and for every particle
-  // once a collider has moved (or none is given).
-  void findSurfaces(const Eigen::VectorXd& x, const Contact* contact);
-  // The touches' inverse masses, their sums and their relative positions at the step's start.
-  void weighTouches(const Eigen::VectorXd& x_start);
+  // The colliders' surfaces under the touches' particles: all forgotten once a collider has moved
+  // (or none is given); a particle's found anew (surfaceOf) when it has travelled the reuse fraction
+  // since it was last.
+  void checkSurfaces(const Contact* contact);
+  // The outward normal of the collider surface slot s lies on at x (zero when on none).
+  const Eigen::Vector3d& surfaceOf(int s, const double* x);
   // The Gauss-Seidel sweeps over the touches: positions pushed apart, then approaching velocities removed.
   void sweepPositions(Eigen::VectorXd& x);
   void sweepVelocities(Eigen::VectorXd& v, double dt);
-  // The touch's relative position (or velocity) among `values`: p less the weighted corners.
-  static Eigen::Vector3d relative(const double* values, const Touch& t);
+  // The pair's relative position (or velocity) among `values`: p less the corners by their kept weights.
+  static Eigen::Vector3d relative(const double* values, const Pair& pair);
   // Moves p by delta / (1 + sum w^2) and the corners against it by their weights (each times its
   // inverse mass): the pair's relative displacement changes by delta and, between free particles, its
   // momentum not at all.
-  static void apply(double* values, const Touch& t, const Eigen::Vector3d& delta);
+  static void apply(double* values, const Pair& pair, const Eigen::Vector3d& delta);
   // The sweeps end after one that moved nothing by more than this (m, and m over the step for
   // velocities): what it leaves is smaller still, and the next step pushes out what is left. After
   // the first sweep, a pair is swept again only when a push of more than this moved one of its
   // particles in the last sweep or this one (stirred, stir): the rule that ends the sweeps, pair by pair.
   double settledDistance() const { return 1e-3 * thickness_; }
-  bool stirred(const Touch& t, int sweep) const;
-  void stir(const Touch& t, int sweep);
+  bool stirred(const Pair& pair, int sweep) const;
+  void stir(const Pair& pair, int sweep);
 
   const Grid& grid_;
   double thickness_;
@@ -255,7 +270,32 @@ private:
   // Per slot p: its candidate pairs (p against a triangle, or against a particle of a later slot).
   std::vector<std::vector<Pair>> candidates_;
   std::vector<char> group_changed_;  // per slot: pairs listed or dropped since its candidates were looked at
+  // Per slot: the groups with a pair naming it as the other particle or a corner (and maybe some that
+  // did: a listing only adds to it), so that a listing of a few particles visits only their groups.
+  std::vector<std::vector<int>> named_by_;
+  std::vector<int> dropped_from_;        // this listing's groups that named a moved particle
+  std::vector<int> gone_from_, gone_end_;  // per slot in dropped_from_
+  bool naming_ = false;                  // whether the listing keeps named_by_ as it goes (not a full one)
+  // A settled group's bound: no pair's particles can have travelled their allowance (the reuse
+  // fraction, or the margin) while the blocks of the grid that hold them have travelled less than
+  // `slack` since `at`. A block is kBlock x kBlock particles; its travel is the sum over the steps of
+  // the farthest any of its particles went in the step (block_travel_), so a group at rest is one
+  // comparison, not one per pair. Slack < 0: none (the pairs are compared one by one).
+  struct GroupBound
+  {
+    int blocks[4] = {-2, -1, -1, -1};
+    double at = 0.0;
+    double slack = -1.0;
+  };
+  static constexpr int kBlock = 8;
+  double blockTravel(const GroupBound& bound) const;
+  // The blocks of the group's particles (blocks[0]: -2 not found yet, -3 more than four).
+  void findBlocks(int p);
+  std::vector<GroupBound> group_bound_;
+  std::vector<int> block_;              // per slot
+  std::vector<double> block_travel_, block_step_;  // per block
   Eigen::VectorXd built_at_;  // per slot, where its pairs were last listed (empty: none yet)
+  double longest_listed_ = 0.0;  // at least the longest edge of a cell's triangles at built_at_
   std::vector<Geometry> group_geometry_;  // this step's, per candidate of one slot
   std::vector<int> moved_;                // slots moved more than half the skin
   Eigen::VectorXd last_x_;                // the free positions at the last step's end, before its correction
@@ -270,6 +310,8 @@ private:
   std::vector<Eigen::Vector3d> surface_normal_;
   std::vector<double> surface_travel_;
   bool surface_contact_ = false;
+  const Contact* contact_ = nullptr;  // this correction's
+  int surfaces_ = 0;                  // counts the colliders' changes (Pair::surfaces)
   std::vector<Eigen::Isometry3d> surface_poses_;
   std::vector<char> surface_active_;
   // Per anchor slot: the centre and the squared radius of a sphere around its cell (this step's).

@@ -45,6 +45,11 @@ SelfCollision::SelfCollision(const Grid& grid, double thickness, double friction
       row_.push_back(p / cols);
       col_.push_back(p % cols);
     }
+  const int block_cols = (cols + kBlock - 1) / kBlock;
+  for (size_t s = 0; s < particle_of_.size(); ++s)
+    block_.push_back(row_[s] / kBlock * block_cols + col_[s] / kBlock);
+  block_travel_.assign(block_cols * ((rows + kBlock - 1) / kBlock), 0.0);
+  block_step_ = block_travel_;
   anchor_.assign(particle_of_.size(), 0);
   for (size_t s = 0; s < particle_of_.size(); ++s)
   {
@@ -104,6 +109,28 @@ SelfCollision::Geometry SelfCollision::geometry(const Pair& pair, const double* 
   return g;
 }
 
+// Inline: the narrow phase and the sweeps call them for every touching pair (this file only).
+inline Eigen::Vector3d SelfCollision::relative(const double* values, const Pair& pair)
+{
+  Eigen::Vector3d r = pointAt(values, pair.p) - pair.kept_geometry.w[0] * pointAt(values, pair.c[0]);
+  if (pair.c[1] >= 0)
+    r -= pair.kept_geometry.w[1] * pointAt(values, pair.c[1]) + pair.kept_geometry.w[2] * pointAt(values, pair.c[2]);
+  return r;
+}
+
+inline void SelfCollision::apply(double* values, const Pair& pair, const Eigen::Vector3d& delta)
+{
+  auto ref = [](double* v, int slot) { return Eigen::Map<Eigen::Vector3d>(v + 3 * slot); };
+  const Eigen::Vector3d share = delta / pair.sum;
+  ref(values, pair.p) += pair.share[0] * share;
+  ref(values, pair.c[0]) -= pair.share[1] * share;
+  if (pair.c[1] >= 0)
+  {
+    ref(values, pair.c[1]) -= pair.share[2] * share;
+    ref(values, pair.c[2]) -= pair.share[3] * share;
+  }
+}
+
 bool SelfCollision::edgeHeldByNeighbour(const std::vector<Pair>& group, const std::vector<Geometry>& geometry, int k,
                                         int opposite) const
 {
@@ -136,29 +163,57 @@ bool SelfCollision::edgeHeldByNeighbour(const std::vector<Pair>& group, const st
   return false;
 }
 
-namespace
-{
 
-// A kept pair's gap at positions x: along its kept normal, with its kept weights.
-template <typename KeptPair>
-double keptGap(const KeptPair& pair, const double* x)
+double SelfCollision::blockTravel(const GroupBound& bound) const
 {
-  Eigen::Vector3d r = Eigen::Map<const Eigen::Vector3d>(x + 3 * pair.p);
-  for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
-    r -= pair.kept_geometry.w[k] * Eigen::Map<const Eigen::Vector3d>(x + 3 * pair.c[k]);
-  return r.dot(pair.kept_geometry.normal);
+  double travel = 0.0;
+  for (int k = 0; k < 4 && bound.blocks[k] >= 0; ++k)
+    travel += block_travel_[bound.blocks[k]];
+  return travel;
 }
 
-}  // namespace
+void SelfCollision::findBlocks(int p)
+{
+  GroupBound& bound = group_bound_[p];
+  std::fill(bound.blocks, bound.blocks + 4, -1);
+  int blocks = 0;
+  for (const Pair& pair : candidates_[p])
+    for (int slot : {pair.p, pair.c[0], pair.c[1], pair.c[2]})
+      if (slot >= 0 && std::find(bound.blocks, bound.blocks + blocks, block_[slot]) == bound.blocks + blocks)
+      {
+        if (blocks == 4)
+        {
+          bound.blocks[0] = -3;  // too many: no bound
+          return;
+        }
+        bound.blocks[blocks++] = block_[slot];
+      }
+}
 
-bool SelfCollision::groupSettled(int p) const
+bool SelfCollision::groupSettled(int p)
 {
   if (group_changed_[p])
     return false;
+  GroupBound& bound = group_bound_[p];
+  if (bound.slack >= 0.0 && blockTravel(bound) - bound.at < bound.slack)
+    return true;
   const double reuse = kReuse * thickness_;
+  double slack = std::numeric_limits<double>::infinity();
   for (const Pair& pair : candidates_[p])
-    if (!(travelOf(pair) - pair.travel < (pair.kept ? reuse : pair.margin)))
+  {
+    const double left = (pair.kept ? reuse : pair.margin) - (travelOf(pair) - pair.travel);
+    if (!(left > 0.0))
+    {
+      bound.slack = -1.0;
       return false;
+    }
+    slack = std::min(slack, left);
+  }
+  if (bound.blocks[0] == -2)
+    findBlocks(p);
+  // Each of a pair's (at most four) particles travels no farther than its block.
+  bound.slack = bound.blocks[0] == -3 ? -1.0 : 0.25 * slack;
+  bound.at = blockTravel(bound);
   return true;
 }
 
@@ -182,7 +237,7 @@ void SelfCollision::lookAtGroup(int p, const double* xs, const double* starts)
   int covered[8];
   const int covering = lookAtParticlePairs(p, xs, starts, covered);
   lookAtTrianglePairs(p, xs, starts, covered, covering);
-  keepWithinReach(p);
+  keepWithinReach(p, xs, starts);
 }
 
 int SelfCollision::lookAtParticlePairs(int p, const double* xs, const double* starts, int covered[8])
@@ -213,8 +268,9 @@ int SelfCollision::lookAtParticlePairs(int p, const double* xs, const double* st
     if (p < q)
     {
       pair.kept_geometry = geometry(pair, xs, starts);
+      pair.surfaces = -1;
       if (pair.kept_geometry.gap < thickness_)
-        touches_.push_back(Touch{pair, pair.kept_geometry, {}, 0.0, Eigen::Vector3d::Zero()});
+        addTouch(pair, pair.kept_geometry.gap, xs, starts);
     }
   }
   return covering;
@@ -241,7 +297,7 @@ void SelfCollision::lookAtTrianglePairs(int p, const double* xs, const double* s
     if ((pair.kept == 1 || pair.kept == 2) && travelOf(pair) - pair.travel < reuse)
     {
       group_geometry_[k] = pair.kept_geometry;
-      group_geometry_[k].gap = keptGap(pair, xs);
+      group_geometry_[k].gap = relative(xs, pair).dot(pair.kept_geometry.normal);
       continue;
     }
     if (apart(pair))
@@ -251,7 +307,7 @@ void SelfCollision::lookAtTrianglePairs(int p, const double* xs, const double* s
   }
 }
 
-void SelfCollision::keepWithinReach(int p)
+void SelfCollision::keepWithinReach(int p, const double* xs, const double* starts)
 {
   const double reach = (1.0 + kReuse) * thickness_;
   std::vector<Pair>& group = candidates_[p];
@@ -269,9 +325,10 @@ void SelfCollision::keepWithinReach(int p)
     const bool reused = group[k].kept != 0;  // a pair looked at anew was marked not kept
     group[k].kept = held ? 2 : 1;
     group[k].kept_geometry = g;
+    group[k].surfaces = -1;
     if (!held && g.gap < thickness_)
     {
-      touches_.push_back(Touch{group[k], g, {}, 0.0, Eigen::Vector3d::Zero()});
+      addTouch(group[k], g.gap, xs, starts);
       report_.reused += reused;
     }
   }
@@ -288,18 +345,19 @@ void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::Vec
     {
       lookAtGroup(p, xs, x_start.data());
       group_changed_[p] = 0;
+      group_bound_[p].slack = -1.0;
+      group_bound_[p].blocks[0] = -2;  // its pairs may have changed
       continue;
     }
     // Every pair as it was: the kept ones' gaps along their kept normals, with their kept weights.
-    for (const Pair& pair : candidates_[p])
+    for (Pair& pair : candidates_[p])
     {
       if (pair.kept != 1)
         continue;
-      Geometry g = pair.kept_geometry;
-      g.gap = keptGap(pair, xs);
-      if (g.gap < thickness_)
+      const double gap = relative(xs, pair).dot(pair.kept_geometry.normal);
+      if (gap < thickness_)
       {
-        touches_.push_back(Touch{pair, g, {}, 0.0, Eigen::Vector3d::Zero()});
+        addTouch(pair, gap, xs, x_start.data());
         ++report_.reused;
       }
     }
@@ -326,12 +384,11 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
   report_.relisted = all ? particles : static_cast<int>(moved_.size());
   if (report_.relisted > 0)
     listCandidates(x, moved_);
+  checkSurfaces(contact);
   findTouches(x_start, x);
   if (touches_.empty())
     return;
-  findSurfaces(x, contact);
   report_.contacts = static_cast<int>(touches_.size());
-  weighTouches(x_start);
   sweepPositions(x);
   sweepVelocities(v, dt);
 }
@@ -369,105 +426,102 @@ bool SelfCollision::addTravel(const Eigen::VectorXd& x)
     travel_.assign(particles, 0.0);
   }
   bool finite = true;
+  std::fill(block_step_.begin(), block_step_.end(), 0.0);
   for (int p = 0; p < particles; ++p)
   {
-    travel_[p] += (x.segment<3>(3 * p) - last_x_.segment<3>(3 * p)).norm();
+    const double step = (x.segment<3>(3 * p) - last_x_.segment<3>(3 * p)).norm();
+    travel_[p] += step;
     last_x_.segment<3>(3 * p) = x.segment<3>(3 * p);
     finite = finite && std::isfinite(travel_[p]);
+    block_step_[block_[p]] = std::max(block_step_[block_[p]], step);
   }
+  if (!finite)
+    std::fill(block_travel_.begin(), block_travel_.end(), 0.0);
+  else
+    for (size_t b = 0; b < block_travel_.size(); ++b)
+      block_travel_[b] += block_step_[b];
   return finite;
 }
 
-void SelfCollision::findSurfaces(const Eigen::VectorXd& x, const Contact* contact)
+void SelfCollision::checkSurfaces(const Contact* contact)
 {
+  contact_ = contact;
   const int colliders = contact ? static_cast<int>(contact->colliders().size()) : 0;
   bool same_colliders = surface_travel_.size() == particle_of_.size() && surface_poses_.size() == static_cast<size_t>(colliders) &&
                         (contact != nullptr) == surface_contact_;
   for (int i = 0; i < colliders && same_colliders; ++i)
     same_colliders = surface_active_[i] == contact->active(i) && surface_poses_[i].matrix() == contact->pose(i).matrix();
-  if (!same_colliders)
+  if (same_colliders)
+    return;
+  ++surfaces_;  // every pair is weighed anew
+  surface_normal_.assign(particle_of_.size(), Eigen::Vector3d::Zero());
+  surface_travel_.assign(particle_of_.size(), std::numeric_limits<double>::quiet_NaN());
+  surface_contact_ = contact != nullptr;
+  surface_poses_.clear();
+  surface_active_.clear();
+  for (int i = 0; i < colliders; ++i)
   {
-    surface_normal_.assign(particle_of_.size(), Eigen::Vector3d::Zero());
-    surface_travel_.assign(particle_of_.size(), std::numeric_limits<double>::quiet_NaN());
-    surface_contact_ = contact != nullptr;
-    surface_poses_.clear();
-    surface_active_.clear();
-    for (int i = 0; i < colliders; ++i)
-    {
-      surface_poses_.push_back(contact->pose(i));
-      surface_active_.push_back(contact->active(i));
-    }
-  }
-  const double reuse = kReuse * thickness_;
-  for (const Touch& touch : touches_)
-    for (int slot : {touch.pair.p, touch.pair.c[0], touch.pair.c[1], touch.pair.c[2]})
-    {
-      if (slot < 0 || travel_[slot] - surface_travel_[slot] < reuse)
-        continue;
-      surface_travel_[slot] = travel_[slot];
-      surface_normal_[slot].setZero();
-      const Eigen::Vector3d at = x.segment<3>(3 * slot);
-      for (int i = 0; i < colliders; ++i)
-      {
-        Eigen::Vector3d normal;
-        if (contact->active(i) &&
-            signedDistance(contact->colliders()[i], contact->pose(i), at, normal) <= 1.001 * contact->thickness())
-        {
-          surface_normal_[slot] = normal;
-          break;
-        }
-      }
-    }
-}
-
-Eigen::Vector3d SelfCollision::relative(const double* values, const Touch& t)
-{
-  Eigen::Vector3d r = pointAt(values, t.pair.p);
-  for (int k = 0; k < 3 && t.pair.c[k] >= 0; ++k)
-    r -= t.g.w[k] * pointAt(values, t.pair.c[k]);
-  return r;
-}
-
-void SelfCollision::weighTouches(const Eigen::VectorXd& x_start)
-{
-  // A particle's inverse mass in a pair pushing along its normal, relative to a free particle's: 0 on
-  // a collider when the push is along the surface's normal (more than 60 degrees from the surface).
-  for (Touch& t : touches_)
-  {
-    const int slots[4] = {t.pair.p, t.pair.c[0], t.pair.c[1], t.pair.c[2]};
-    const double weights[4] = {1.0, t.g.w[0], t.g.w[1], t.g.w[2]};
-    for (int k = 0; k < 4; ++k)
-    {
-      t.m[k] = slots[k] >= 0 && std::abs(surface_normal_[slots[k]].dot(t.g.normal)) <= 0.5 ? 1.0 : 0.0;
-      t.sum += slots[k] >= 0 ? weights[k] * weights[k] * t.m[k] : 0.0;
-    }
-    t.start = relative(x_start.data(), t);
-    report_.closest_before = std::min(report_.closest_before, t.g.gap);
+    surface_poses_.push_back(contact->pose(i));
+    surface_active_.push_back(contact->active(i));
   }
 }
 
-void SelfCollision::apply(double* values, const Touch& t, const Eigen::Vector3d& delta)
+const Eigen::Vector3d& SelfCollision::surfaceOf(int slot, const double* x)
 {
-  auto ref = [](double* v, int slot) { return Eigen::Map<Eigen::Vector3d>(v + 3 * slot); };
-  const Eigen::Vector3d share = delta / t.sum;
-  ref(values, t.pair.p) += t.m[0] * share;
-  for (int k = 0; k < 3 && t.pair.c[k] >= 0; ++k)
-    ref(values, t.pair.c[k]) -= t.m[k + 1] * t.g.w[k] * share;
+  Eigen::Vector3d& surface = surface_normal_[slot];
+  if (travel_[slot] - surface_travel_[slot] < kReuse * thickness_)
+    return surface;
+  surface_travel_[slot] = travel_[slot];
+  surface.setZero();
+  const int colliders = contact_ ? static_cast<int>(contact_->colliders().size()) : 0;
+  for (int i = 0; i < colliders; ++i)
+  {
+    Eigen::Vector3d normal;
+    if (contact_->active(i) &&
+        signedDistance(contact_->colliders()[i], contact_->pose(i), pointAt(x, slot), normal) <= 1.001 * contact_->thickness())
+    {
+      surface = normal;
+      break;
+    }
+  }
+  return surface;
 }
 
-bool SelfCollision::stirred(const Touch& t, int sweep) const
+void SelfCollision::weigh(Pair& pair, const double* x)
 {
-  for (int slot : {t.pair.p, t.pair.c[0], t.pair.c[1], t.pair.c[2]})
-    if (slot >= 0 && stirred_[slot] >= sweep - 1)
-      return true;
-  return false;
+  const int slots[4] = {pair.p, pair.c[0], pair.c[1], pair.c[2]};
+  const double weights[4] = {1.0, pair.kept_geometry.w[0], pair.kept_geometry.w[1], pair.kept_geometry.w[2]};
+  pair.sum = 0.0;
+  for (int k = 0; k < 4; ++k)
+  {
+    const bool free = slots[k] >= 0 && std::abs(surfaceOf(slots[k], x).dot(pair.kept_geometry.normal)) <= 0.5;
+    pair.share[k] = free ? weights[k] : 0.0;
+    pair.sum += pair.share[k] * weights[k];
+  }
+  pair.surfaces = surfaces_;
 }
 
-void SelfCollision::stir(const Touch& t, int sweep)
+void SelfCollision::addTouch(Pair& pair, double gap, const double* x, const double* x_start)
 {
-  for (int slot : {t.pair.p, t.pair.c[0], t.pair.c[1], t.pair.c[2]})
-    if (slot >= 0)
-      stirred_[slot] = sweep;
+  // The shares are kept with the closest point: its particles have travelled less than the reuse
+  // fraction since, as a collider's normal is kept for a particle.
+  if (pair.surfaces != surfaces_)
+    weigh(pair, x);
+  touches_.push_back(Touch{&pair, relative(x_start, pair)});
+  report_.closest_before = std::min(report_.closest_before, gap);
+}
+
+bool SelfCollision::stirred(const Pair& pair, int sweep) const
+{
+  return stirred_[pair.p] >= sweep - 1 || stirred_[pair.c[0]] >= sweep - 1 ||
+         (pair.c[1] >= 0 && (stirred_[pair.c[1]] >= sweep - 1 || stirred_[pair.c[2]] >= sweep - 1));
+}
+
+void SelfCollision::stir(const Pair& pair, int sweep)
+{
+  stirred_[pair.p] = stirred_[pair.c[0]] = sweep;
+  if (pair.c[1] >= 0)
+    stirred_[pair.c[1]] = stirred_[pair.c[2]] = sweep;
 }
 
 void SelfCollision::sweepPositions(Eigen::VectorXd& x)
@@ -485,12 +539,14 @@ void SelfCollision::sweepPositions(Eigen::VectorXd& x)
     for (int k = 0; k < count; ++k)
     {
       const Touch& t = touches_[k];
-      if (sweep > 0 && !stirred(t, sweep))
+      const Pair& pair = *t.pair;
+      if (sweep > 0 && !stirred(pair, sweep))
         continue;
       // The gap along the pair's normal at the step's end: it moves by micrometres over the sweeps.
-      const Eigen::Vector3d r = relative(xs, t);
-      const double gap = r.dot(t.g.normal);
-      if (gap >= thickness_ || t.sum <= 0.0)  // apart, or every particle of the pair held by a collider
+      const Eigen::Vector3d& n = pair.kept_geometry.normal;
+      const Eigen::Vector3d r = relative(xs, pair);
+      const double gap = r.dot(n);
+      if (gap >= thickness_ || pair.sum <= 0.0)  // apart, or every particle of the pair held by a collider
       {
         report_.closest_after = std::min(report_.closest_after, gap);
         continue;
@@ -501,9 +557,9 @@ void SelfCollision::sweepPositions(Eigen::VectorXd& x)
       const double push = thickness_ - gap;
       largest = std::max(largest, push);
       const Eigen::Vector3d slip = r - t.start;
-      apply(xs, t, push * t.g.normal + coulomb(slip - slip.dot(t.g.normal) * t.g.normal, friction_ * push));
+      apply(xs, pair, push * n + coulomb(slip - slip.dot(n) * n, friction_ * push));
       if (push > settled)
-        stir(t, sweep);
+        stir(pair, sweep);
     }
     if (largest <= settled)
       break;
@@ -524,19 +580,20 @@ void SelfCollision::sweepVelocities(Eigen::VectorXd& v, double dt)
     {
       if (!touched_[k])
         continue;
-      const Touch& t = touches_[k];
-      if (sweep > 0 && !stirred(t, sweep))
+      const Pair& pair = *touches_[k].pair;
+      if (sweep > 0 && !stirred(pair, sweep))
         continue;
       // Velocities: remove the approach, Coulomb on the relative tangential velocity.
-      const Eigen::Vector3d velocity = relative(vs, t);
-      const double approach = -velocity.dot(t.g.normal);
+      const Eigen::Vector3d& n = pair.kept_geometry.normal;
+      const Eigen::Vector3d velocity = relative(vs, pair);
+      const double approach = -velocity.dot(n);
       if (approach <= 0.0)
         continue;
       largest = std::max(largest, approach);
-      const Eigen::Vector3d tangential = velocity + approach * t.g.normal;
-      apply(vs, t, approach * t.g.normal + coulomb(tangential, friction_ * approach));
+      const Eigen::Vector3d tangential = velocity + approach * n;
+      apply(vs, pair, approach * n + coulomb(tangential, friction_ * approach));
       if (approach * dt > settled)
-        stir(t, sweep);
+        stir(pair, sweep);
     }
     if (largest * dt <= settled)
       break;

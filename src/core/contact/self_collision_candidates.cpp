@@ -54,6 +54,7 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
   const bool all = moved.empty();
   candidates_.resize(count);
   group_changed_.resize(count);
+  group_bound_.resize(count);
   is_moved_.assign(count, all ? 1 : 0);
   for (int p : moved)
     is_moved_[p] = 1;
@@ -61,59 +62,116 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
   const bool triangles = primitive_ == SelfPrimitive::Triangles;
   // The pairs with a moved particle go; they are listed anew below (moved to the end of their group,
   // [gone_from, gone_end), until those listed again have taken what was found of them).
-  std::vector<int> gone_from(all ? 0 : count), gone_end(all ? 0 : count);
-  dropMovedPairs(all, gone_from, gone_end);
+  named_by_.resize(count);
+  gone_from_.resize(count);
+  gone_end_.resize(count);
+  dropMovedPairs(all, moved);
   const double listed = (1.0 + 2.0 * kSkin) * thickness_;
   // A triangle within `listed` of a particle has its first corner within `listed` plus its longest
-  // edge (cellSphere: the cheap test before the exact one).
+  // edge (cellSphere: the cheap test before the exact one). At a listing of some particles, a bound
+  // on it instead of a pass over every cell: the longest edge between the positions the particles
+  // were listed at (those moved now are listed where they are), plus half the skin at each end.
   double longest = 0.0;
+  if (!all)
+    for (int p : moved)
+      built_at_.segment<3>(3 * p) = pointAt(xs, p);
   if (triangles)
   {
     cell_sphere_.assign(count, Eigen::Vector4d::Constant(-1.0));
-    longest = longestCellEdge(xs);
+    if (all)
+      longest = longest_listed_ = std::sqrt(longestCellEdge(xs));
+    else
+    {
+      for (int m : moved)
+        for (int q : fan_[m])
+          if (q >= 0)
+            longest_listed_ = std::max(longest_listed_, (pointAt(built_at_.data(), m) - pointAt(built_at_.data(), q)).norm());
+      longest = longest_listed_ + kSkin * thickness_;
+    }
   }
   if (triangles && all)
     for (int s = 0; s < count; ++s)
       if (anchor_[s])
         cellSphere(s, xs, listed);
-  const double reach = listed + std::sqrt(longest);
+  const double reach = listed + longest;
   const Cells cells = sortIntoCells(xs, count, reach, cell_of_, cell_start_, sorted_);
+  naming_ = !all;  // a full listing names them all at the end
   listAroundMoved(cells, xs, reach, listed);
   built_at_.resize(x.size());
   if (all)
   {
     built_at_ = x;
+    nameAll();
     return;
   }
-  for (int p : moved)
-    built_at_.segment<3>(3 * p) = pointAt(xs, p);
   if (triangles)
     listMovedTriangles(moved, cells, xs, reach, listed);
-  takeBackFound(gone_from, gone_end);
+  takeBackFound();
 }
 
-void SelfCollision::dropMovedPairs(bool all, std::vector<int>& gone_from, std::vector<int>& gone_end)
+void SelfCollision::dropMovedPairs(bool all, const std::vector<int>& moved)
 {
   const int count = static_cast<int>(candidates_.size());
-  for (int p = 0; p < count; ++p)
+  dropped_from_.clear();
+  if (all)
+  {
+    for (int p = 0; p < count; ++p)
+    {
+      candidates_[p].clear();
+      group_changed_[p] = 1;
+    }
+    return;
+  }
+  // The groups with a pair naming a moved particle: its own, and those named_by_ it.
+  for (int m : moved)
+  {
+    dropped_from_.push_back(m);
+    dropped_from_.insert(dropped_from_.end(), named_by_[m].begin(), named_by_[m].end());
+    named_by_[m].clear();  // every pair naming it goes
+  }
+  std::sort(dropped_from_.begin(), dropped_from_.end());
+  dropped_from_.erase(std::unique(dropped_from_.begin(), dropped_from_.end()), dropped_from_.end());
+  for (int p : dropped_from_)
   {
     std::vector<Pair>& group = candidates_[p];
-    group_changed_[p] = all;
-    if (all)
-    {
-      group.clear();
-      continue;
-    }
-    gone_end[p] = static_cast<int>(group.size());
-    gone_from[p] = static_cast<int>(std::partition(group.begin(), group.end(),
-                                                   [&](const Pair& pair) {
-                                                     return !(is_moved_[pair.p] || is_moved_[pair.c[0]] ||
-                                                              (pair.c[1] >= 0 && (is_moved_[pair.c[1]] ||
-                                                                                  is_moved_[pair.c[2]])));
-                                                   }) -
-                                    group.begin());
-    group_changed_[p] = gone_from[p] != gone_end[p];
+    gone_end_[p] = static_cast<int>(group.size());
+    gone_from_[p] = static_cast<int>(std::partition(group.begin(), group.end(),
+                                                    [&](const Pair& pair) {
+                                                      return !(is_moved_[pair.p] || is_moved_[pair.c[0]] ||
+                                                               (pair.c[1] >= 0 && (is_moved_[pair.c[1]] ||
+                                                                                   is_moved_[pair.c[2]])));
+                                                    }) -
+                                     group.begin());
+    group_changed_[p] = gone_from_[p] != gone_end_[p];
   }
+}
+
+void SelfCollision::addPair(const Pair& pair)
+{
+  candidates_[pair.p].push_back(pair);
+  group_changed_[pair.p] = 1;
+  for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
+  {
+    std::vector<int>& named = named_by_[pair.c[k]];
+    if (std::find(named.begin(), named.end(), pair.p) == named.end())
+      named.push_back(pair.p);
+  }
+}
+
+void SelfCollision::nameAll()
+{
+  const int count = static_cast<int>(candidates_.size());
+  for (std::vector<int>& named : named_by_)
+    named.clear();
+  std::vector<int> last(count, -1);  // the last group that named each particle
+  for (int p = 0; p < count; ++p)
+    for (const Pair& pair : candidates_[p])
+      for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
+        if (last[pair.c[k]] != p)
+        {
+          last[pair.c[k]] = p;
+          named_by_[pair.c[k]].push_back(p);
+        }
 }
 
 double SelfCollision::longestCellEdge(const double* xs) const
@@ -171,8 +229,11 @@ void SelfCollision::listTriangles(int p, int q, bool moved_only, const double* x
       const Eigen::Vector3d y = closestOnTriangle(xp, pointAt(xs, corners[0]), pointAt(xs, corners[1]), pointAt(xs, corners[2]), w);
       if ((xp - y).squaredNorm() < listed2)
       {
-        candidates_[p].push_back(Pair{p, {corners[0], corners[1], corners[2]}, half, -1.0, 0.0, 0, Geometry{}});
-        group_changed_[p] = 1;
+        const Pair pair(p, corners[0], corners[1], corners[2], half);
+        if (naming_)
+          addPair(pair);
+        else
+          candidates_[p].push_back(pair);
       }
     }
     ++half;
@@ -195,9 +256,11 @@ void SelfCollision::listAroundMoved(const Cells& cells, const double* xs, double
         return;
       if (d2 < listed2 && (q > p || !is_moved_[q]) && separatedIndices(row_[p], col_[p], row_[q], col_[q]))
       {
-        candidates_[p].push_back(Pair{p, {q, -1, -1}, -1, -1.0, 0.0, 0, Geometry{}});
-        candidates_[q].push_back(Pair{q, {p, -1, -1}, -1, -1.0, 0.0, 0, Geometry{}});
-        group_changed_[p] = group_changed_[q] = 1;
+        const Pair pq(p, q, -1, -1, -1), qp(q, p, -1, -1, -1);
+        if (naming_)
+          addPair(pq), addPair(qp);
+        else
+          candidates_[p].push_back(pq), candidates_[q].push_back(qp);
       }
       if (triangles && anchor_[q])
         listTriangles(p, q, false, xs, listed);
@@ -211,6 +274,11 @@ void SelfCollision::listMovedTriangles(const std::vector<int>& moved, const Cell
   const double reach2 = reach * reach;
   is_anchor_listed_.assign(candidates_.size(), 0);
   for (int m : moved)
+  {
+    // The cells at m not listed yet (a cell at several moved particles is listed once), against the
+    // particles that have not moved within reach of m: every point of a triangle at m is within its
+    // longest edge of m, so one search around m finds them for its cells.
+    int anchors[4], cells_at_m = 0;
     for (int r = std::max(0, row_[m] - 1); r <= row_[m]; ++r)
       for (int c = std::max(0, col_[m] - 1); c <= col_[m]; ++c)
       {
@@ -218,25 +286,31 @@ void SelfCollision::listMovedTriangles(const std::vector<int>& moved, const Cell
         if (q < 0 || !anchor_[q] || is_anchor_listed_[q])
           continue;
         is_anchor_listed_[q] = 1;
-        forNeighbours(cells, xs + 3 * q, [&](int p) {
-          if (!is_moved_[p] && (pointAt(xs, q) - pointAt(xs, p)).squaredNorm() < reach2)
-            listTriangles(p, q, true, xs, listed);  // the other half kept its pairs
-        });
+        anchors[cells_at_m++] = q;
       }
+    if (cells_at_m == 0)
+      continue;
+    const Eigen::Vector3d xm = pointAt(xs, m);
+    forNeighbours(cells, xs + 3 * m, [&](int p) {
+      if (is_moved_[p] || (pointAt(xs, p) - xm).squaredNorm() >= reach2)
+        return;
+      for (int k = 0; k < cells_at_m; ++k)
+        listTriangles(p, anchors[k], true, xs, listed);  // the other half kept its pairs
+    });
+  }
 }
 
-void SelfCollision::takeBackFound(const std::vector<int>& gone_from, const std::vector<int>& gone_end)
+void SelfCollision::takeBackFound()
 {
-  const int count = static_cast<int>(candidates_.size());
-  for (int p = 0; p < count; ++p)
+  for (int p : dropped_from_)
   {
     std::vector<Pair>& group = candidates_[p];
-    const int gone = gone_end[p] - gone_from[p];
+    const int gone = gone_end_[p] - gone_from_[p];
     if (gone == 0)
       continue;
     int found = 0;
-    for (size_t k = gone_end[p]; k < group.size(); ++k)
-      for (int j = gone_from[p]; j < gone_end[p]; ++j)
+    for (size_t k = gone_end_[p]; k < group.size(); ++k)
+      for (int j = gone_from_[p]; j < gone_end_[p]; ++j)
         if (group[j].c[0] == group[k].c[0] && group[j].c[1] == group[k].c[1] && group[j].half == group[k].half)
         {
           group[k] = group[j];
@@ -244,8 +318,8 @@ void SelfCollision::takeBackFound(const std::vector<int>& gone_from, const std::
           break;
         }
     // The same pairs as before: the group is as it was looked at.
-    group_changed_[p] = found != gone || static_cast<int>(group.size()) - gone_end[p] != gone;
-    group.erase(group.begin() + gone_from[p], group.begin() + gone_end[p]);
+    group_changed_[p] = found != gone || static_cast<int>(group.size()) - gone_end_[p] != gone;
+    group.erase(group.begin() + gone_from_[p], group.begin() + gone_end_[p]);
   }
 }
 
