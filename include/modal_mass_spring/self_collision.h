@@ -180,10 +180,8 @@ private:
   void addPair(const Pair& pair);
   // After a full listing: every particle's named_by_ found anew.
   void nameAll();
-  // The square of the longest edge of a cell's triangles; measured at a listing of some particles
-  // when more than one in kWholeEdge moved (else bounded: longest_listed_).
+  // The square of the longest edge of a cell's triangles.
   double longestCellEdge(const double* xs) const;
-  static constexpr int kWholeEdge = 64;
   // The centre and the squared radius of a sphere around the cell anchored at slot s that holds
   // every point within `listed` of its triangles (found once a listing, cell_sphere_).
   const Eigen::Vector4d& cellSphere(int s, const double* xs, double listed);

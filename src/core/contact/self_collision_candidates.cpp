@@ -68,11 +68,9 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
   dropMovedPairs(all, moved);
   const double listed = (1.0 + 2.0 * kSkin) * thickness_;
   // A triangle within `listed` of a particle has its first corner within `listed` plus its longest
-  // edge (cellSphere: the cheap test before the exact one). At a listing of a few particles, a bound
+  // edge (cellSphere: the cheap test before the exact one). At a listing of some particles, a bound
   // on it instead of a pass over every cell: the longest edge between the positions the particles
-  // were listed at (those moved now are listed where they are), plus half the skin at each end. The
-  // bound widens the cells, and so every moved particle's search: once more than one particle in
-  // kWholeEdge has moved, the pass costs less (docs/benchmarks.md, "Self-collision").
+  // were listed at (those moved now are listed where they are), plus half the skin at each end.
   double longest = 0.0;
   if (!all)
     for (int p : moved)
@@ -88,8 +86,7 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
         for (int q : fan_[m])
           if (q >= 0)
             longest_listed_ = std::max(longest_listed_, (pointAt(built_at_.data(), m) - pointAt(built_at_.data(), q)).norm());
-      longest = kWholeEdge * moved.size() > static_cast<size_t>(count) ? std::sqrt(longestCellEdge(xs))
-                                                                       : longest_listed_ + kSkin * thickness_;
+      longest = longest_listed_ + kSkin * thickness_;
     }
   }
   if (triangles && all)
