@@ -186,8 +186,8 @@ private:
   // every point within `listed` of its triangles (found once a listing, cell_sphere_).
   const Eigen::Vector4d& cellSphere(int s, const double* xs, double listed);
   // Particle p against the cell anchored at q (both its triangles, or only those with a moved corner
-  // when `moved_only`), when every corner of the cell is more than two springs from p and a triangle
-  // is within `listed`.
+  // when `moved_only`), when a triangle is within `listed`; every corner of the cell is more than two
+  // springs from p (the caller checks it).
   void listTriangles(int p, int q, bool moved_only, const double* xs, double listed);
   // The moved particles against everything (a particle pair in both particles' lists).
   void listAroundMoved(const Cells& cells, const double* xs, double reach, double listed);

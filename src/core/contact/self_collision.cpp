@@ -209,9 +209,14 @@ bool SelfCollision::groupSettled(int p)
     }
     slack = std::min(slack, left);
   }
+  // Each of a pair's (at most four) particles travels no farther than its block. No bound when p's
+  // own block went farther than it allows in the last step: it would not hold the next (a falling
+  // cloth's groups), and finding the blocks costs more than it saves.
+  bound.slack = -1.0;
+  if (0.25 * slack <= block_step_[block_[p]])
+    return true;
   if (bound.blocks[0] == -2)
     findBlocks(p);
-  // Each of a pair's (at most four) particles travels no farther than its block.
   bound.slack = bound.blocks[0] == -3 ? -1.0 : 0.25 * slack;
   bound.at = blockTravel(bound);
   return true;
