@@ -594,7 +594,7 @@ BENCHMARK(BM_CoarseTurn)->ArgsProduct({{50, 100, 200}, {0, 1}})->Unit(benchmark:
 
 // The drag's 9 s (config/compare/cloth_drag_50.yaml on N x N, as benchmark/size_sweep.py makes it):
 // the top row lowered 0.35 m in 4 s onto the table, dragged 0.5 m along y in 4 s, held 1 s, each leg
-// from rest to rest. Its own function, for callgrind's --toggle-collect='*driveDrag*'.
+// from rest to rest.
 void driveDrag(Simulation& sim, double time_step)
 {
   const long steps = std::lround(9.0 / time_step);
