@@ -28,15 +28,17 @@ struct AdaptiveSettings
   double tolerance;  // m, the RMS distance to `full` it accepts
   double dwell;      // s within tolerance of the span before it goes back
   int check_steps;   // steps between two checks
-  // The median ratio of the distance to `full` to the error indicator over the shipped scenarios
-  // (docs/results.md, "The reduced models' error indicator"): the indicator times this is the
-  // distance it stands for.
-  double indicator_scale = 30.0;
+  // The indicator times this is the distance it stands for (indicatorScale(reduced)).
+  double indicator_scale;
   // A fallback goes back to the last check whose estimate was within this share of the tolerance:
   // the distance grows before the indicator shows it (docs/results.md, "The adaptive method").
   double safe_share = 1.0 / 3.0;
   int max_rollback_checks = 10;  // and never more checks back than this: the motions kept are bounded
 };
+
+// The error indicator's calibration for method `reduced`: the distance to `full` it stands for per
+// unit of Simulation::errorIndicator.
+double indicatorScale(Method reduced);
 
 // The settings a simulation's parameters give (adaptive_method, error_tolerance, adaptive_dwell,
 // adaptive_check_steps).

@@ -156,7 +156,7 @@ struct SimulationState
   double time_step = 0.0;  // s
   long step_count = 0;     // the time is step_count x time_step
   State coordinates;       // the method's q, v, a
-  Eigen::VectorXd offset;  // a modal method's frozen offset (free dofs); empty for `full`
+  Eigen::VectorXd offset;  // a modal method's or `coarse`'s frozen offset (free dofs); empty for `full`
   HandleMotion handles;    // the handles' motion the state was stepped to
   FrameMotion frame;       // B's (at rest without a moving frame)
   // Per collider: its pose (grid coordinates), whether it is active (a frame's before its first pose
@@ -320,13 +320,15 @@ public:
   double projectionError() const { return projection_error_; }
   // How far the current state is estimated to be from what `full` would do from it (m, an RMS over
   // the free particles): the displacement that balances the full model's force outside the
-  // method's span (reduction/error_indicator.h). 0 for `full`. O(springs + n r) and a sparse solve;
-  // the first call factorises the springs' Laplacian. A modal method's only (std::logic_error for
-  // `coarse`, which has no span).
+  // method's span, the modes' or the coarse grid's interpolation (reduction/error_indicator.h). 0
+  // for `full`. O(springs + n r) (`coarse`: O(springs)) and sparse solves; the first call factorises
+  // the springs' Laplacian.
   double errorIndicator();
   // How far the current state is from the span of method `reduced` (m, an RMS over the free
-  // particles): the part of the displacement (less the handles' constraint modes) that its
-  // M-orthogonal projection onto the basis leaves. The basis must be built (std::logic_error).
+  // particles): for a modal method the part of the displacement (less the handles' constraint modes)
+  // that its M-orthogonal projection onto the basis leaves, for `coarse` the part its interpolation
+  // of the state sampled at its particles misses; either is what a switch to it keeps frozen. The
+  // basis or the coarse grid must be built (std::logic_error).
   double spanDistance(Method reduced) const;
   const LinearizationInfo& linearization() const { return linearization_; }
   // x_ref: the initial positions (rest) or the static equilibrium.
@@ -453,6 +455,9 @@ private:
   Eigen::VectorXd bodyDisplacement() const;
   // Positions in B (any grid's, every dof) in the world: themselves unless a moving frame moved.
   Eigen::VectorXd worldPositions(Eigen::VectorXd x) const;
+  // Every dof's position in the body frame (the world's unless a frame moves): positions() before
+  // worldPositions().
+  Eigen::VectorXd bodyPositions() const;
   Eigen::VectorXd bodyVelocity() const;
   FrameForces frameForcesOf(const FrameMotion& motion) const;
   // Throws std::invalid_argument for a frame motion setHandleFrameMotion refuses.

@@ -28,7 +28,7 @@ StepResult SimulationNode::stepTrack(Track& track)
     // the background): in it, or with its basis and cubature at hand, as after a reset under full.
     Simulation& simulation = *track.simulation;
     const Method reduced = config_.simulation.adaptive_method;
-    if (simulation.method() != reduced &&
+    if (simulation.method() != reduced && reduced != Method::Coarse &&
         !(simulation.basisBuilt() && (reduced != Method::Cubature || simulation.cubature())))
       return simulation.step(1);
     try
@@ -73,8 +73,8 @@ void SimulationNode::refreshErrorEstimate(Track& track)
   Simulation& simulation = *track.simulation;
   if (adaptiveTrack(track) || track.shadow)
     return;
-  // `full` is its own reference; `coarse` has no span for the indicator to measure outside of.
-  if (!isModal(simulation.method()) || simulation.diverged())
+  // `full` is its own reference.
+  if (simulation.method() == Method::Full || simulation.diverged())
   {
     track.error_estimate = 0.0;
     return;
@@ -85,7 +85,7 @@ void SimulationNode::refreshErrorEstimate(Track& track)
   track.estimate_wall = now;
   try
   {
-    const double estimate = AdaptiveSettings{}.indicator_scale * simulation.errorIndicator();
+    const double estimate = indicatorScale(simulation.method()) * simulation.errorIndicator();
     track.error_estimate = std::isfinite(estimate) ? estimate : 0.0;
   }
   catch (const std::exception& error)

@@ -227,7 +227,7 @@ ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, const Accurac
     e.switches = run.adaptive->switches();
     e.error_indicator = run.adaptive->reduced() ? run.sim->errorIndicator() : std::numeric_limits<double>::quiet_NaN();
   }
-  else if (isModal(run.sim->method()))
+  else if (run.sim->method() != Method::Full)
     e.error_indicator = run.sim->errorIndicator();
   return e;
 }

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <stdexcept>
 
 namespace modal_mass_spring
 {
@@ -125,7 +126,7 @@ GridParams coarseGridParams(const GridParams& f, int coarse_cols)
   return g;
 }
 
-CoarseGrid::CoarseGrid(const Grid& fine, int coarse_cols) : grid(coarseGridParams(fine.params(), coarse_cols))
+CoarseGrid::CoarseGrid(const Grid& fine, int coarse_cols) : grid(coarseGridParams(fine.params(), coarse_cols)), fine_(fine)
 {
   const GridParams& f = fine.params();
   const GridParams& g = grid.params();
@@ -191,6 +192,27 @@ CoarseGrid::CoarseGrid(const Grid& fine, int coarse_cols) : grid(coarseGridParam
   mass = Eigen::VectorXd::Constant(grid.numFreeDofs(), grid.particleMass());
   if (grid.numHandleDofs() > 0)
     handle_coupling = handleCoupling(grid, x_ref);
+
+  entries.clear();
+  for (int k = 0; k < interpolation.outerSize(); ++k)
+    for (SparseMatrix::InnerIterator it(interpolation, k); it; ++it)
+      if (const int free = grid.freeIndex(static_cast<int>(it.col())); free >= 0)
+        entries.emplace_back(static_cast<int>(it.row()), free, it.value());
+  free_interpolation_.resize(fine.numFreeDofs(), grid.numFreeDofs());
+  free_interpolation_.setFromTriplets(entries.begin(), entries.end());
+  span_gram_.compute(SparseMatrix(free_interpolation_.transpose() * free_interpolation_));
+  if (span_gram_.info() != Eigen::Success)
+    throw std::runtime_error("coarse grid: its interpolation's Gram matrix could not be factorised");
+}
+
+Eigen::VectorXd CoarseGrid::missed(const Eigen::VectorXd& x) const
+{
+  return fine_.gatherFree(x) - interpolation * (sampling * x);
+}
+
+Eigen::VectorXd CoarseGrid::outsideSpan(const Eigen::VectorXd& f) const
+{
+  return f - free_interpolation_ * span_gram_.solve(free_interpolation_.transpose() * f);
 }
 
 }  // namespace modal_mass_spring

@@ -10,6 +10,7 @@
 #include "modal_mass_spring/spring_forces.h"  // SparseMatrix
 
 #include <Eigen/Core>
+#include <Eigen/SparseCholesky>
 
 #include <array>
 #include <vector>
@@ -46,6 +47,20 @@ struct CoarseGrid
   // Per coarse handle dof (Grid::handleDofs() order): the fine handle dof (an index into the fine
   // grid's handleDofs()) whose motion it copies, that of the fine handle particle nearest it.
   std::vector<int> handle_source;
+
+  // What the interpolation misses of fine positions x (every fine dof), on the fine free dofs:
+  // x less its interpolation from the coarse particles sampled from it, P R x. A switch to the coarse
+  // grid keeps this part frozen.
+  Eigen::VectorXd missed(const Eigen::VectorXd& x) const;
+  // The part of a fine free-dof force that the coarse free dofs cannot represent:
+  // f - M P_f (P_f^T M P_f)^-1 P_f^T f, P_f the interpolation from the coarse free dofs (the
+  // fine particles weigh the same, so M drops out).
+  Eigen::VectorXd outsideSpan(const Eigen::VectorXd& f) const;
+
+private:
+  const Grid& fine_;
+  SparseMatrix free_interpolation_;  // P_f
+  Eigen::SimplicialLLT<SparseMatrix> span_gram_;  // P_f^T P_f, factorised
 };
 
 // The most columns the default coarse grid has: on a cloth a metre wide, 5 cm apart, 4-5 mm mean RMS

@@ -19,17 +19,18 @@ ErrorIndicator::ErrorIndicator(const Grid& grid, const Eigen::VectorXd& mass) : 
     throw std::runtime_error("error indicator: the springs' Laplacian plus the mass could not be factorised");
 }
 
-double ErrorIndicator::estimate(const Eigen::VectorXd& x, const Eigen::MatrixXd& phi,
-                                const Eigen::VectorXd& external) const
+Eigen::VectorXd ErrorIndicator::force(const Eigen::VectorXd& x, const Eigen::VectorXd& external) const
 {
   Eigen::VectorXd f_all;
   springForces(grid_, x, f_all);
   f_all += grid_.gravityForce();
   if (external.size() == f_all.size())
     f_all += external;
-  Eigen::VectorXd r = grid_.gatherFree(f_all);
-  const Eigen::VectorXd in_span = phi.transpose() * r;
-  r -= mass_.cwiseProduct(phi * in_span);
+  return grid_.gatherFree(f_all);
+}
+
+double ErrorIndicator::balance(const Eigen::VectorXd& r) const
+{
   const Eigen::VectorXd du = factor_.solve(r);
   return particle_mass_ > 0.0 ? std::sqrt(du.dot(mass_.cwiseProduct(du)) / particle_mass_) : 0.0;
 }

@@ -195,14 +195,16 @@ std::vector<int> Simulation::particleContacts() const
   return contacts;
 }
 
-Eigen::VectorXd Simulation::positions() const
+Eigen::VectorXd Simulation::positions() const { return worldPositions(bodyPositions()); }
+
+Eigen::VectorXd Simulation::bodyPositions() const
 {
   Eigen::VectorXd x = x_ref_;
   if (handle_current_.displacement.size() > 0)
     for (int k = 0; k < grid_.numHandleDofs(); ++k)
       x[grid_.handleDofs()[k]] += handle_current_.displacement[k];
   grid_.addFree(bodyDisplacement(), x);
-  return worldPositions(std::move(x));
+  return x;
 }
 
 Eigen::VectorXd Simulation::worldPositions(Eigen::VectorXd x) const
@@ -222,31 +224,33 @@ double Simulation::errorIndicator()
 {
   if (params_.method == Method::Full)
     return 0.0;
-  if (params_.method == Method::Coarse)
-    throw std::logic_error("errorIndicator: method 'coarse' has no span to measure the force outside of");
   if (!error_indicator_)
     error_indicator_ = std::make_unique<ErrorIndicator>(grid_, mass_);
-  // In the body frame where one moves: the springs do not see the frame, and the basis lives there.
-  Eigen::VectorXd x = x_ref_;
-  if (handle_current_.displacement.size() > 0)
-    for (int k = 0; k < grid_.numHandleDofs(); ++k)
-      x[grid_.handleDofs()[k]] += handle_current_.displacement[k];
-  grid_.addFree(bodyDisplacement(), x);
+  // In the body frame where one moves: the springs do not see the frame, and the span lives there.
+  const Eigen::VectorXd f = error_indicator_->force(bodyPositions(), external_force_);
+  if (params_.method == Method::Coarse)
+    return error_indicator_->balance(coarse_->outsideSpan(f));
   const ModalBasis& basis = params_.method == Method::Linear ? basis_ : physical_basis_;
-  return error_indicator_->estimate(x, basis.phi, external_force_);
+  return error_indicator_->balance(f - mass_.cwiseProduct(basis.phi * (basis.phi.transpose() * f)));
 }
 
 double Simulation::spanDistance(Method reduced) const
 {
-  if (!basis_built_ || !isModal(reduced))
-    throw std::logic_error("spanDistance: needs a modal method whose basis is built");
-  const bool skinning = params_.basis == BasisKind::Skinning && reduced != Method::Linear;
-  const ModalBasis& basis = reduced == Method::Linear ? basis_ : physical_basis_;
-  const Eigen::MatrixXd& psi = skinning ? skinning_constraint_modes_ : constraint_modes_;
-  Eigen::VectorXd u = bodyDisplacement();
-  if (formulation_ != HandleFormulation::MovingFrame && psi.size() > 0 && handle_current_.displacement.size() > 0)
-    u -= psi * handle_current_.displacement;
-  const Eigen::VectorXd rest = u - basis.phi * (basis.phi.transpose() * mass_.cwiseProduct(u));
+  Eigen::VectorXd rest;
+  if (reduced == Method::Coarse && coarse_)
+    rest = coarse_->missed(bodyPositions());
+  else if (basis_built_ && isModal(reduced))
+  {
+    const bool skinning = params_.basis == BasisKind::Skinning && reduced != Method::Linear;
+    const ModalBasis& basis = reduced == Method::Linear ? basis_ : physical_basis_;
+    const Eigen::MatrixXd& psi = skinning ? skinning_constraint_modes_ : constraint_modes_;
+    Eigen::VectorXd u = bodyDisplacement();
+    if (formulation_ != HandleFormulation::MovingFrame && psi.size() > 0 && handle_current_.displacement.size() > 0)
+      u -= psi * handle_current_.displacement;
+    rest = u - basis.phi * (basis.phi.transpose() * mass_.cwiseProduct(u));
+  }
+  else
+    throw std::logic_error("spanDistance: needs a modal method whose basis is built, or `coarse` whose grid is");
   return std::sqrt(rest.dot(mass_.cwiseProduct(rest)) * grid_.dimension() / mass_.sum());
 }
 

@@ -161,6 +161,70 @@ TEST(CoarseGrid, HandlesHoldTheNearestCoarseParticles)
   EXPECT_TRUE(coarse.grid.fixedParticles().empty());
 }
 
+// The interpolation reproduces an affine map of the grid exactly, so nothing of it is missed; a
+// particle moved between the coarse ones is. What is outside the span of a force is orthogonal to
+// every coarse free dof's interpolation, and nothing of a force in it is outside.
+TEST(CoarseGrid, MissesWhatItsInterpolationCannotHold)
+{
+  const Grid grid(swingingSheet(13));
+  const CoarseGrid coarse(grid, 5);
+  const Eigen::Matrix3d a = Eigen::AngleAxisd(0.4, Eigen::Vector3d(1, 2, 3).normalized()).toRotationMatrix() * 1.1;
+  Eigen::VectorXd x = grid.initialPositions();
+  for (Eigen::Index k = 0; k < x.size(); k += 3)
+    x.segment<3>(k) = a * x.segment<3>(k) + Eigen::Vector3d(0.1, -0.2, 0.3);
+  EXPECT_LT(coarse.missed(x).cwiseAbs().maxCoeff(), 1e-12);
+  const int between = 4 * 13 + 4;  // row 4, column 4: between coarse particles (every third)
+  x[3 * between + 2] += 0.01;
+  const Eigen::VectorXd missed = coarse.missed(x);
+  EXPECT_NEAR(missed[grid.freeIndex(3 * between + 2)], 0.01, 1e-12);
+  EXPECT_GT(missed.cwiseAbs().maxCoeff(), 0.009);
+
+  // P_f: the interpolation from the coarse free dofs.
+  Eigen::MatrixXd p_free = Eigen::MatrixXd::Zero(grid.numFreeDofs(), coarse.grid.numFreeDofs());
+  const Eigen::MatrixXd p(coarse.interpolation);
+  for (int c = 0; c < coarse.grid.numDofs(); ++c)
+    if (const int free = coarse.grid.freeIndex(c); free >= 0)
+      p_free.col(free) = p.col(c);
+  const Eigen::VectorXd f = Eigen::VectorXd::Random(grid.numFreeDofs());
+  const Eigen::VectorXd outside = coarse.outsideSpan(f);
+  EXPECT_GT(outside.norm(), 0.1 * f.norm());
+  EXPECT_LT((p_free.transpose() * outside).cwiseAbs().maxCoeff(), 1e-12);
+  const Eigen::VectorXd in_span = p_free * Eigen::VectorXd::Random(coarse.grid.numFreeDofs());
+  EXPECT_LT(coarse.outsideSpan(in_span).cwiseAbs().maxCoeff(), 1e-12);
+}
+
+// The error indicator of `coarse`: nothing on the grid itself, where the span is every
+// displacement; on a coarser grid, the swinging sheet leaves force outside it, the more the coarser.
+// How far a state is from the span: nothing for a state `coarse` itself stepped to, something for
+// `full`'s, and what a switch freezes.
+TEST(Coarse, ErrorIndicatorAndSpanDistanceSeeWhatTheCoarseGridCannotHold)
+{
+  const GridParams g = swingingSheet(13);
+  std::vector<double> indicator;
+  for (int cols : {4, 7, 13})
+  {
+    Simulation sim(g, coarseParams(cols, 5e-4));
+    ASSERT_FALSE(sim.step(400).diverged);
+    indicator.push_back(sim.errorIndicator());
+    EXPECT_LT(sim.spanDistance(Method::Coarse), 1e-12) << cols << " columns";
+  }
+  std::cout << "indicator on 4, 7, 13 columns: " << indicator[0] << ", " << indicator[1] << ", " << indicator[2] << " m\n";
+  EXPECT_LT(indicator[2], 1e-12);
+  EXPECT_GT(indicator[1], 1e-6);
+  EXPECT_GT(indicator[0], indicator[1]);
+
+  Simulation sim(g, methodParams(Method::Full, 4, 5e-4));
+  ASSERT_FALSE(sim.step(400).diverged);
+  EXPECT_THROW(sim.spanDistance(Method::Coarse), std::logic_error);  // no coarse grid yet
+  sim.setMethod(Method::Coarse);
+  sim.setMethod(Method::Full);
+  const double distance = sim.spanDistance(Method::Coarse);
+  EXPECT_GT(distance, 1e-5);
+  sim.setMethod(Method::Coarse);
+  const Eigen::VectorXd frozen = sim.saveState().offset;
+  EXPECT_NEAR(std::sqrt(frozen.squaredNorm() / (frozen.size() / 3)), distance, 1e-12);
+}
+
 // With as many columns as the grid, the coarse grid is the grid: `coarse` steps as `full` does, held
 // by moving handles over a table it lands on.
 TEST(Coarse, OnTheGridItselfIsFull)
@@ -303,8 +367,6 @@ TEST(Coarse, RefusedWhereItHasNoMeaning)
   SimulationParams s = coarseParams(0);
   s.self_collision = true;
   EXPECT_TRUE(contains(refusal([&] { Simulation(clothSheet(13), s); }), "method"));
-  Simulation sim(swingingSheet(13), coarseParams(0));
-  EXPECT_THROW(sim.errorIndicator(), std::logic_error);
   GridParams row = clothSheet(13);
   row.rows = 1;
   row.fixed = {0};

@@ -97,7 +97,7 @@ TEST(Validation, SimulationParametersAreRefusedByName)
   { const std::string m = refused([](SimulationParams& s) { s.error_tolerance = -0.01; }); EXPECT_TRUE(contains(m, "'error_tolerance' = -0.01")) << m; }
   EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.adaptive_dwell = INFINITY; }), "'adaptive_dwell' = inf"));
   EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.adaptive_method = Method::Full; }),
-                       "'adaptive_method' = 'full': must be one of physical, cubature"));
+                       "'adaptive_method' = 'full': must be one of physical, cubature, coarse"));
   EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.equilibrium_max_iterations = 0; }),
                        "'equilibrium_max_iterations' = 0"));
   EXPECT_TRUE(contains(refused([](SimulationParams& s) { s.time_step = -1.0; }), "'time_step' = -1"));
