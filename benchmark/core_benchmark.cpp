@@ -592,6 +592,29 @@ void BM_CoarseTurn(benchmark::State& state)
 }
 BENCHMARK(BM_CoarseTurn)->ArgsProduct({{50, 100, 200}, {0, 1}})->Unit(benchmark::kMicrosecond);
 
+// The error indicator of `coarse` (what the adaptive method's check costs while reduced), on the held
+// cloth of BM_CoarseTurn hanging at rest, against one step of `coarse` at its own step.
+void BM_CoarseErrorIndicator(benchmark::State& state)
+{
+  const int size = static_cast<int>(state.range(0));
+  GridParams g = swingingCloth(size);
+  g.rotation_deg = 0.0;
+  std::vector<int> clamp(2 * size);
+  std::iota(clamp.begin(), clamp.end(), 0);
+  g.handles = {clamp};
+  SimulationParams s = coarseAtRest();
+  s.time_step = 0.0008 * 100.0 / size;
+  s.time_step *= coarseStepMultiple(g, s);
+  Simulation sim(g, s);
+  sim.errorIndicator();  // the Laplacian factorised once
+  for (auto _ : state)
+    benchmark::DoNotOptimize(sim.errorIndicator());
+  const double start = threadCpuSeconds();
+  sim.step(20);
+  state.counters["coarse_step_us"] = 1e6 * (threadCpuSeconds() - start) / 20;
+}
+BENCHMARK(BM_CoarseErrorIndicator)->Arg(50)->Arg(100)->Unit(benchmark::kMicrosecond);
+
 // The drag's 9 s (config/compare/cloth_drag_50.yaml on N x N, as benchmark/size_sweep.py makes it):
 // the top row lowered 0.35 m in 4 s onto the table, dragged 0.5 m along y in 4 s, held 1 s, each leg
 // from rest to rest.

@@ -5,8 +5,9 @@
 // max_rollback_checks checks back) are taken again under `full` from the state saved there (with the
 // handle and collider motions they had), so that the error that grew before the check found it is not
 // carried into `full`. Under `full`, it switches back once the state has stayed within `tolerance` of the
-// reduced span (Simulation::spanDistance) for `dwell` seconds; the part outside the span is then kept
-// frozen, as every switch does (Simulation::setMethod).
+// reduced span (Simulation::spanDistance) for `dwell` seconds, touching no collider; the part outside
+// the span is then kept frozen, as every switch does (Simulation::setMethod), and a frozen part
+// dragged along a collider would go into it.
 #pragma once
 
 #include "modal_mass_spring/options.h"
@@ -41,7 +42,7 @@ struct AdaptiveSettings
 double indicatorScale(Method reduced);
 
 // The settings a simulation's parameters give (adaptive_method, error_tolerance, adaptive_dwell,
-// adaptive_check_steps).
+// adaptive_check_steps, 0 resolved to the steps of kAdaptiveCheckPeriod at time_step).
 AdaptiveSettings adaptiveSettings(const SimulationParams& params);
 
 // Throws std::invalid_argument naming a setting out of its range: a tolerance not positive and
@@ -81,6 +82,8 @@ private:
   // Back to the checkpoint, then the steps since again under `full`.
   StepResult fallBack(std::ostringstream& why);
   StepResult check();
+  // Whether a particle touched a collider in the last step.
+  bool touching() const;
 
   Simulation& sim_;
   AdaptiveSettings settings_;

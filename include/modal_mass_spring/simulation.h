@@ -29,6 +29,11 @@ struct CoarseGrid;
 struct IntegratorSettings;
 enum class Remainder;
 
+// The simulated time between two checks of the adaptive stepper unless adaptive_check_steps says
+// otherwise: 20 steps at 5 ms, the motions' time scale rather than a count of steps, so that a
+// small step does not check more often for nothing (docs/results.md, "The adaptive method").
+constexpr double kAdaptiveCheckPeriod = 0.1;  // s
+
 struct SimulationParams
 {
   Method method = Method::Physical;
@@ -56,7 +61,7 @@ struct SimulationParams
   bool adaptive = false;
   double error_tolerance = 0.015;
   double adaptive_dwell = 0.2;
-  int adaptive_check_steps = 20;
+  int adaptive_check_steps = 0;  // 0: as many as make kAdaptiveCheckPeriod
   // Newton iterations of the static equilibrium before it is refused (linearization or
   // initial_state 'equilibrium'): a 100 x 100 cloth hanging from its flat vertical sheet takes 3 to
   // 20; config/cloth.yaml, released at 30 degrees and buckling as it hangs, 60 to 400 (its path hangs

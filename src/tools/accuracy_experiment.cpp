@@ -444,12 +444,13 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
     s.step_seconds_median = median(times[k]);
     s.step_cpu_seconds_median = median(cpu_times[k]);
     s.indicator_rank_correlation = rankCorrelation(indicators[k], distances[k]);
-    s.cpu_per_simulated_second = cpuPerSimulatedSecond(s.step_cpu_seconds_median, time_steps[k]);
-    s.real_time_factor = realTimeFactor(s.step_cpu_seconds_median, time_steps[k]);
-    double sum = 0.0;
-    for (double t : times[k])
-      sum += t;
-    s.step_seconds_mean = times[k].empty() ? std::numeric_limits<double>::quiet_NaN() : sum / times[k].size();
+    s.step_seconds_mean = mean(times[k]);
+    s.step_cpu_seconds_mean = mean(cpu_times[k]);
+    // `adaptive` takes steps of two costs, reduced and `full`: the median is one of them, the mean
+    // what the run cost.
+    const double cpu = std::isnan(s.reduced_share) ? s.step_cpu_seconds_median : s.step_cpu_seconds_mean;
+    s.cpu_per_simulated_second = cpuPerSimulatedSecond(cpu, time_steps[k]);
+    s.real_time_factor = realTimeFactor(cpu, time_steps[k]);
   }
   return out;
 }

@@ -29,6 +29,16 @@ inline double median(std::vector<double> values)
   return n % 2 ? values[n / 2] : 0.5 * (values[n / 2 - 1] + values[n / 2]);
 }
 
+inline double mean(const std::vector<double>& values)
+{
+  if (values.empty())
+    return std::numeric_limits<double>::quiet_NaN();
+  double sum = 0.0;
+  for (double v : values)
+    sum += v;
+  return sum / static_cast<double>(values.size());
+}
+
 inline void report(const ProgressFn& progress, const std::string& label, double fraction)
 {
   if (progress)

@@ -500,7 +500,7 @@ std::vector<AccuracySummary> notBuiltSummaries(const std::string& variant, const
   const double nan = std::numeric_limits<double>::quiet_NaN();
   std::vector<AccuracySummary> out;
   for (const auto& [method, reason] : result.not_built)
-    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, nan, nan, nan, false, reason, nan, nan, -1, nan, nan, nan});
+    out.push_back({variant, method, nan, nan, nan, nan, nan, nan, nan, nan, nan, nan, false, reason, nan, nan, -1, nan, nan, nan});
   return out;
 }
 

@@ -277,8 +277,9 @@ struct AccuracySummary
 {
   std::string variant, method;
   double mean_rms = 0.0, max_rms = 0.0, mean_max = 0.0, final_rms = 0.0;
-  double step_seconds_median = 0.0, step_seconds_mean = 0.0, step_cpu_seconds_median = 0.0;
-  // The median CPU time per step over the time step (cpuPerSimulatedSecond) and its inverse.
+  double step_seconds_median = 0.0, step_seconds_mean = 0.0, step_cpu_seconds_median = 0.0, step_cpu_seconds_mean = 0.0;
+  // The CPU time per step over the time step (cpuPerSimulatedSecond) and its inverse: of the median
+  // step, and for `adaptive`, whose steps have two costs, of the mean.
   double cpu_per_simulated_second = 0.0, real_time_factor = 0.0;
   bool diverged = false;
   std::string not_built;  // why the method could not be built (no samples, distances NaN); empty when it ran

@@ -11,12 +11,10 @@ namespace modal_mass_spring
 ErrorIndicator::ErrorIndicator(const Grid& grid, const Eigen::VectorXd& mass) : grid_(grid), mass_(mass)
 {
   particle_mass_ = mass_.sum() / grid_.dimension();
-  SparseMatrix matrix = springLaplacian(grid_);
+  matrix_ = springLaplacian(grid_);
   for (Eigen::Index k = 0; k < mass_.size(); ++k)
-    matrix.coeffRef(k, k) += mass_[k] / (kTau * kTau);
-  factor_.compute(matrix);
-  if (factor_.info() != Eigen::Success)
-    throw std::runtime_error("error indicator: the springs' Laplacian plus the mass could not be factorised");
+    matrix_.coeffRef(k, k) += mass_[k] / (kTau * kTau);
+  diagonal_ = matrix_.diagonal();
 }
 
 Eigen::VectorXd ErrorIndicator::force(const Eigen::VectorXd& x, const Eigen::VectorXd& external) const
@@ -29,9 +27,22 @@ Eigen::VectorXd ErrorIndicator::force(const Eigen::VectorXd& x, const Eigen::Vec
   return grid_.gatherFree(f_all);
 }
 
-double ErrorIndicator::balance(const Eigen::VectorXd& r) const
+double ErrorIndicator::balance(const Eigen::VectorXd& r)
 {
-  const Eigen::VectorXd du = factor_.solve(r);
+  if (!factored_)
+  {
+    factor_.compute(matrix_);
+    if (factor_.info() != Eigen::Success)
+      throw std::runtime_error("error indicator: the springs' Laplacian plus the mass could not be factorised");
+    factored_ = true;
+  }
+  return rms(factor_.solve(r));
+}
+
+double ErrorIndicator::balanceLocally(const Eigen::VectorXd& r) const { return rms(r.cwiseQuotient(diagonal_)); }
+
+double ErrorIndicator::rms(const Eigen::VectorXd& du) const
+{
   return particle_mass_ > 0.0 ? std::sqrt(du.dot(mass_.cwiseProduct(du)) / particle_mass_) : 0.0;
 }
 

@@ -2,6 +2,7 @@
 
 #include "modal_mass_spring/parameter_error.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -22,6 +23,8 @@ AdaptiveSettings adaptiveSettings(const SimulationParams& p)
   s.tolerance = p.error_tolerance;
   s.dwell = p.adaptive_dwell;
   s.check_steps = p.adaptive_check_steps;
+  if (s.check_steps == 0)
+    s.check_steps = p.time_step > 0.0 ? std::max(1, static_cast<int>(std::lround(kAdaptiveCheckPeriod / p.time_step))) : 1;
   s.indicator_scale = indicatorScale(p.adaptive_method);
   return s;
 }
@@ -33,7 +36,12 @@ void validateAdaptiveSettings(const AdaptiveSettings& s)
   if (!std::isfinite(s.dwell) || s.dwell < 0.0)
     rejectParameter("adaptive_dwell", s.dwell, "must be a finite number >= 0 (s)");
   if (s.check_steps < 1)
-    rejectParameter("adaptive_check_steps", s.check_steps, "must be an integer >= 1");
+  {
+    std::ostringstream allowed;
+    allowed << "must be an integer >= 1 (in the parameters also 0: every " << kAdaptiveCheckPeriod
+            << " s of simulated time)";
+    rejectParameter("adaptive_check_steps", s.check_steps, allowed.str());
+  }
   if (s.reduced != Method::Physical && s.reduced != Method::Cubature && s.reduced != Method::Coarse)
     rejectParameter("adaptive_method", "'" + toString(s.reduced) + "'", "must be one of physical, cubature, coarse");
   if (!std::isfinite(s.indicator_scale) || s.indicator_scale <= 0.0)
@@ -101,6 +109,15 @@ StepResult AdaptiveStepper::step()
   return result;
 }
 
+bool AdaptiveStepper::touching() const
+{
+  const Contact* contact = sim_.contact();
+  if (!contact)
+    return false;
+  const std::vector<int>& touching = contact->report().touching;
+  return std::any_of(touching.begin(), touching.end(), [](int n) { return n > 0; });
+}
+
 StepResult AdaptiveStepper::fallBack(std::ostringstream& why)
 {
   sim_.restoreState(checkpoint_);
@@ -146,7 +163,7 @@ StepResult AdaptiveStepper::check()
   else
   {
     last_estimate_ = sim_.spanDistance(settings_.reduced);
-    if (last_estimate_ > settings_.tolerance)
+    if (last_estimate_ > settings_.tolerance || touching())
     {
       within_since_ = -1.0;
       return result;

@@ -229,7 +229,7 @@ double Simulation::errorIndicator()
   // In the body frame where one moves: the springs do not see the frame, and the span lives there.
   const Eigen::VectorXd f = error_indicator_->force(bodyPositions(), external_force_);
   if (params_.method == Method::Coarse)
-    return error_indicator_->balance(coarse_->outsideSpan(f));
+    return error_indicator_->balanceLocally(coarse_->outsideSpan(f));
   const ModalBasis& basis = params_.method == Method::Linear ? basis_ : physical_basis_;
   return error_indicator_->balance(f - mass_.cwiseProduct(basis.phi * (basis.phi.transpose() * f)));
 }

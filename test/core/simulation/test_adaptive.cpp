@@ -34,6 +34,14 @@ SimulationParams heldParams(Method method, BasisKind basis)
   return s;
 }
 
+// The defaults at the tests' 5 ms step: a check every 20 steps.
+AdaptiveSettings stepsOf5ms()
+{
+  SimulationParams p;
+  p.time_step = 5e-3;
+  return adaptiveSettings(p);
+}
+
 // The top row's positions at step k of a motion `move(start, k)`.
 using Motion = std::function<Eigen::VectorXd(const Eigen::VectorXd& start, int k)>;
 
@@ -79,7 +87,7 @@ TEST(Adaptive, BadSettingsAreRefusedByName)
 {
   Simulation sim(topRowHeld(), heldParams(Method::Full, BasisKind::Skinning));
   auto refusedSetting = [&](const std::function<void(AdaptiveSettings&)>& change) {
-    AdaptiveSettings s = adaptiveSettings(SimulationParams{});
+    AdaptiveSettings s = stepsOf5ms();
     change(s);
     return refusal([&] { AdaptiveStepper stepper(sim, s); });
   };
@@ -92,6 +100,17 @@ TEST(Adaptive, BadSettingsAreRefusedByName)
   EXPECT_TRUE(
       contains(refusedSetting([](AdaptiveSettings& s) { s.reduced = Method::Linear; }), "must be one of physical, cubature, coarse"));
   EXPECT_EQ(sim.method(), Method::Full);  // nothing changed
+
+  // adaptive_check_steps 0: a check every 0.1 s of simulated time.
+  SimulationParams p;
+  p.time_step = 5e-3;
+  EXPECT_EQ(adaptiveSettings(p).check_steps, 20);
+  p.time_step = 8e-4;
+  EXPECT_EQ(adaptiveSettings(p).check_steps, 125);
+  p.adaptive_check_steps = 7;
+  EXPECT_EQ(adaptiveSettings(p).check_steps, 7);
+  p.adaptive_check_steps = -1;
+  EXPECT_TRUE(contains(refusal([&] { validateAdaptiveSettings(adaptiveSettings(p)); }), "'adaptive_check_steps' = -1"));
 }
 
 TEST(Adaptive, FallsBackToFullWhereTheSpanCannotTurnTheCloth)
@@ -101,7 +120,7 @@ TEST(Adaptive, FallsBackToFullWhereTheSpanCannotTurnTheCloth)
   Simulation full(topRowHeld(), heldParams(Method::Full, BasisKind::LinearModes));
   Simulation modes(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
   Simulation adaptive_sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
-  AdaptiveSettings settings = adaptiveSettings(SimulationParams{});
+  AdaptiveSettings settings = stepsOf5ms();
   settings.reduced = Method::Physical;
   settings.tolerance = 0.01;
   AdaptiveStepper adaptive(adaptive_sim, settings);
@@ -138,7 +157,7 @@ TEST(Adaptive, AFallBackGoesBackToTheLastCheckSafelyWithinTheTolerance)
   // crosses the tolerance, so how far back a fallback goes depends on the safe share.
   auto stepsAgain = [](double safe_share, int max_rollback_checks) {
     Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
-    AdaptiveSettings settings = adaptiveSettings(SimulationParams{});
+    AdaptiveSettings settings = stepsOf5ms();
     settings.reduced = Method::Physical;
     settings.tolerance = 0.01;
     settings.check_steps = 5;
@@ -162,7 +181,7 @@ TEST(Adaptive, StaysReducedWhereTheSpanFollows)
   // `physical` alone to the bit.
   Simulation physical(topRowHeld(), heldParams(Method::Physical, BasisKind::Skinning));
   Simulation adaptive_sim(topRowHeld(), heldParams(Method::Physical, BasisKind::Skinning));
-  AdaptiveSettings settings = adaptiveSettings(SimulationParams{});
+  AdaptiveSettings settings = stepsOf5ms();
   settings.reduced = Method::Physical;
   AdaptiveStepper adaptive(adaptive_sim, settings);
   run(physical, translate, 200);
@@ -179,7 +198,7 @@ TEST(Adaptive, GoesBackToTheSpanOnceTheStateIsWithinToleranceForTheDwell)
   // state's distance to their span: after the dwell it is reduced again, the state carried over (no
   // particle jumps at the switch).
   Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
-  AdaptiveSettings settings = adaptiveSettings(SimulationParams{});
+  AdaptiveSettings settings = stepsOf5ms();
   settings.reduced = Method::Physical;
   settings.tolerance = 0.01;
   AdaptiveStepper first(sim, settings);
@@ -216,7 +235,7 @@ TEST(Adaptive, AFallBackRetakesEachStepWithItsExternalForce)
   Simulation full(topRowHeld(), heldParams(Method::Full, BasisKind::LinearModes));
   Simulation unpushed(topRowHeld(), heldParams(Method::Full, BasisKind::LinearModes));
   Simulation adaptive_sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
-  AdaptiveSettings settings = adaptiveSettings(SimulationParams{});
+  AdaptiveSettings settings = stepsOf5ms();
   settings.reduced = Method::Physical;
   settings.tolerance = 1e-15;  // its first check fails: `full` from the start
   AdaptiveStepper adaptive(adaptive_sim, settings);
@@ -253,7 +272,7 @@ TEST(Adaptive, FallsBackFromACoarseGridAndStaysOnTheGridsOwn)
   Simulation coarse(topRowHeld(), heldCoarse(4));
   Simulation adaptive_sim(topRowHeld(), heldCoarse(4));
   Simulation same_sim(topRowHeld(), heldCoarse(10));
-  AdaptiveSettings settings = adaptiveSettings(SimulationParams{});
+  AdaptiveSettings settings = stepsOf5ms();
   settings.reduced = Method::Coarse;
   settings.indicator_scale = indicatorScale(Method::Coarse);
   const double at_rest = settings.indicator_scale * coarse.errorIndicator();
