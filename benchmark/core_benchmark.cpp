@@ -1,5 +1,6 @@
 // Google Benchmark of the core: basis construction (with and without modal derivatives), one step of each method, the
 // extra cost of moving handles, position reconstruction and one evaluation of all spring forces.
+#include "modal_mass_spring/adaptive.h"
 #include "modal_mass_spring/cpu_time.h"
 #include "modal_mass_spring/force_model.h"
 #include "modal_mass_spring/modal_derivatives.h"
@@ -537,14 +538,13 @@ SimulationParams coarseAtRest()
 
 // `coarse` on the held cloth turned 60 degrees about the vertical in 1 s and back
 // (config/compare/large_motion_100.yaml on N x N: the cloth of config/cloth_large.yaml held by a clamp
-// of its top two rows, nothing fixed), explicit at its own step (coarseStepMultiple times `full`'s
-// largest stable one, 0.8 ms x 100 / N), the clamp's motion handed over every step as the node and
-// modal_compare hand it: range(1) = 0, every clamp particle's motion (setHandleMotion); 1, the clamp's
-// frame (setHandleFrameMotion). Counter: CPU seconds per simulated second, which compares the sizes'
+// of its top two rows, nothing fixed), explicit, the clamp's motion handed over every step as the node
+// and modal_compare hand it: every clamp particle's motion (setHandleMotion), or the clamp's frame
+// (setHandleFrameMotion). At `full`'s largest stable step (0.8 ms x 100 / N) or at coarse's own
+// (coarseStepMultiple times it), alone or through the adaptive stepper. Counter: CPU seconds per simulated second, which compares
 // different steps.
-void BM_CoarseTurn(benchmark::State& state)
+void turnCoarse(benchmark::State& state, int size, bool frame, bool own_step, bool adaptive)
 {
-  const int size = static_cast<int>(state.range(0));
   GridParams g = swingingCloth(size);
   g.rotation_deg = 0.0;
   std::vector<int> clamp(2 * size);
@@ -553,8 +553,16 @@ void BM_CoarseTurn(benchmark::State& state)
   SimulationParams s = coarseAtRest();
   s.handle_formulation = HandleFormulation::ConstraintModes;
   s.time_step = 0.0008 * 100.0 / size;
-  s.time_step *= coarseStepMultiple(g, s);
+  if (own_step)
+    s.time_step *= coarseStepMultiple(g, s);
   Simulation sim(g, s);
+  std::unique_ptr<AdaptiveStepper> stepper;
+  if (adaptive)
+  {
+    AdaptiveSettings settings = adaptiveSettings(s);
+    settings.reduced = Method::Coarse;
+    stepper = std::make_unique<AdaptiveStepper>(sim, settings);
+  }
   const std::vector<int>& dofs = sim.grid().handleDofs();
   Eigen::Matrix3Xd points(3, static_cast<Eigen::Index>(dofs.size()) / 3);
   for (Eigen::Index p = 0; p < points.cols(); ++p)
@@ -570,14 +578,14 @@ void BM_CoarseTurn(benchmark::State& state)
     const double turn = 0.5 * angle * (1.0 - std::cos(w * t)), rate = 0.5 * angle * w * std::sin(w * t);
     const double spin = 0.5 * angle * w * w * std::cos(w * t);
     const FrameMotion m = turnAbout(pivot, axis, turn, rate, spin);
-    if (state.range(1) == 1)
+    if (frame)
       sim.setHandleFrameMotion(m);
     else
     {
       const RigidPointMotion motion = pointMotion(m, points);
       sim.setHandleMotion(motion.position.reshaped(), motion.velocity.reshaped(), motion.acceleration.reshaped());
     }
-    const StepResult r = sim.step(1);
+    const StepResult r = stepper ? stepper->step() : sim.step(1);
     if (r.diverged)
     {
       static std::string message;
@@ -589,8 +597,24 @@ void BM_CoarseTurn(benchmark::State& state)
   if (sim.time() > start_time)
     state.counters["cpu_per_simulated_s"] = (threadCpuSeconds() - start_cpu) / (sim.time() - start_time);
   state.counters["time_step_ms"] = 1e3 * s.time_step;
+  if (stepper)
+    state.counters["reduced_share"] = stepper->reducedShare();
+}
+
+// range(1) = 0: every clamp particle's motion; 1: the clamp's frame. At coarse's own step.
+void BM_CoarseTurn(benchmark::State& state)
+{
+  turnCoarse(state, static_cast<int>(state.range(0)), state.range(1) == 1, true, false);
 }
 BENCHMARK(BM_CoarseTurn)->ArgsProduct({{50, 100, 200}, {0, 1}})->Unit(benchmark::kMicrosecond);
+
+// The same turn at `full`'s step, every clamp particle's motion: range(1) = 0, `coarse` alone; 1,
+// through the adaptive stepper (its check every 0.1 s, the motions it keeps for a fall back).
+void BM_AdaptiveCoarseTurn(benchmark::State& state)
+{
+  turnCoarse(state, static_cast<int>(state.range(0)), false, false, state.range(1) == 1);
+}
+BENCHMARK(BM_AdaptiveCoarseTurn)->ArgsProduct({{50, 100}, {0, 1}})->Unit(benchmark::kMicrosecond);
 
 // The error indicator of `coarse` (what the adaptive method's check costs while reduced), on the held
 // cloth of BM_CoarseTurn hanging at rest, against one step of `coarse` at its own step.

@@ -15,6 +15,7 @@
 
 #include <Eigen/Geometry>
 
+#include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -68,16 +69,17 @@ public:
   const std::string& lastSwitch() const { return last_switch_; }
 
 private:
-  // What the caller gave a step: the handles' motion, B's, the colliders' poses, the external force.
+  // What the caller gave a step: the handles' motion, B's, the colliders' poses, the external force
+  // (shared between the steps it did not change in: a copy a step costs more than a coarse step).
   struct Motion
   {
     HandleMotion handles;
     FrameMotion frame;
     std::vector<Eigen::Isometry3d> colliders;
     std::vector<bool> active;
-    Eigen::VectorXd external_force;
+    std::shared_ptr<const Eigen::VectorXd> external_force;
   };
-  Motion motion() const;
+  Motion motion();
   void apply(const Motion& m);
   // Back to the checkpoint, then the steps since again under `full`.
   StepResult fallBack(std::ostringstream& why);
@@ -96,6 +98,8 @@ private:
   std::vector<Motion> since_check_;  // the motions of the reduced steps since
   int checks_since_ = 0;             // checks passed since it
   Eigen::VectorXd handle_reference_;  // the handle dofs' positions at zero displacement
+  std::shared_ptr<const Eigen::VectorXd> recorded_force_;  // the external force the last motion kept
+  long recorded_force_changes_ = -1;                       // and Simulation::externalForceChanges() then
 };
 
 }  // namespace modal_mass_spring

@@ -268,6 +268,8 @@ public:
   // std::invalid_argument for a vector of the wrong size or with a non-finite entry, changing nothing.
   void setExternalForce(const Eigen::VectorXd& force);
   const Eigen::VectorXd& externalForce() const { return external_force_; }
+  // How many times the external force was set (or restored): equal counts, the same force.
+  long externalForceChanges() const { return external_force_changes_; }
   // Prescribes the handle particles' positions (absolute, m), velocities and accelerations at the
   // end of the next step, each vector over grid().handleDofs() (dimension values per handle
   // particle, handle by handle); velocity and acceleration may be empty (zero). The next step()
@@ -503,6 +505,7 @@ private:
   std::unique_ptr<ErrorIndicator> error_indicator_;  // built at the first errorIndicator()
   std::unique_ptr<CoarseGrid> coarse_;               // built at the first use of `coarse`
   Eigen::VectorXd external_force_;  // on every dof; zero: none
+  long external_force_changes_ = 0;
   SparseMatrix handle_coupling_;        // K_ib at x_ref (interior x handle dofs)
   Eigen::MatrixXd constraint_modes_;    // Psi; empty until a modal method needs it
   HandleMotion handle_current_;         // where the handles are in the current state

@@ -31,6 +31,7 @@ void Simulation::setExternalForce(const Eigen::VectorXd& force)
   // the start carries over the change, as over a method switch.
   const double rise = methodEnergy() - start_energy_;
   external_force_ = force;
+  ++external_force_changes_;
   model_->setExternalForce(grid_.gatherFree(external_force_));
   start_energy_ = methodEnergy() - rise;
 }

@@ -96,6 +96,7 @@ void Simulation::restoreState(const SimulationState& s)
   frame_current_ = frame_target_ = s.frame;
   frame_pending_ = false;
   external_force_ = s.external_force;
+  ++external_force_changes_;
   if (contact_)
     contact_->restore(s.collider_poses, s.colliders_active, s.colliders_moved);
   if (s.method != method())
