@@ -54,6 +54,25 @@ def finite(s):
     return all(math.isfinite(v) for v in (s.error_estimate, s.reduced_share, s.rms_distance, s.total_energy))
 
 
+def warning(node):
+    """The first WARN naming error_tolerance that `node` puts in /diagnostics within 20 s, or a failure."""
+    found = []
+
+    def take(array):
+        for d in array.status:
+            if d.name.lstrip("/").startswith(node + ":") and d.level == DiagnosticStatus.WARN and "above error_tolerance" in d.message:
+                found.append(d)
+
+    sub = rospy.Subscriber("/diagnostics", DiagnosticArray, take)
+    end = time.time() + 20.0
+    while not found and time.time() < end:
+        time.sleep(0.1)
+    sub.unregister()
+    if not found:
+        raise AssertionError("no WARN naming error_tolerance from /" + node)
+    return found[0]
+
+
 class Adaptive(unittest.TestCase):
     def test_a_tolerance_it_cannot_meet_falls_back_to_full_and_logs_each_switch_once(self):
         # Its first switch came before this checker listened: a reset starts the stepper again.
@@ -91,20 +110,17 @@ class Adaptive(unittest.TestCase):
         s = status("/plain", lambda s: s.error_estimate > 0.0)
         self.assertIsNotNone(s, "no error estimate in ~status")
         self.assertEqual((s.method, s.active_method, s.switches, s.reduced_share), ("physical", "physical", 0, 1.0))
-        found = []
+        self.assertIn("method adaptive falls back to full", warning("plain").message)
 
-        def take(array):
-            for d in array.status:
-                if "plain" in d.name and d.level == DiagnosticStatus.WARN and "above error_tolerance" in d.message:
-                    found.append(d)
-
-        sub = rospy.Subscriber("/diagnostics", DiagnosticArray, take)
-        end = time.time() + 20.0
-        while not found and time.time() < end:
-            time.sleep(0.1)
-        sub.unregister()
-        self.assertTrue(found, "no WARN naming error_tolerance from /plain")
-        self.assertIn("method adaptive falls back to full", found[0].message)
+    def test_the_coarse_grid_falls_back_and_warns_as_the_modes_do(self):
+        s = status("/coarse", lambda s: s.switches >= 1)
+        self.assertIsNotNone(s, "adaptive on the coarse grid did not fall back to full within 30 s")
+        self.assertEqual((s.method, s.active_method), ("adaptive", "full"))
+        self.assertTrue(finite(s), s)
+        s = status("/plain_coarse", lambda s: s.error_estimate > 0.0)
+        self.assertIsNotNone(s, "no error estimate of the coarse grid in ~status")
+        self.assertEqual((s.method, s.active_method), ("coarse", "coarse"))
+        warning("plain_coarse")
 
     def test_z_set_method_takes_adaptive_and_names_it_among_the_methods(self):
         rospy.wait_for_service("/plain/set_method", timeout=30.0)
