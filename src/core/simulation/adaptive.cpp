@@ -114,6 +114,12 @@ StepResult AdaptiveStepper::step()
   return result;
 }
 
+double AdaptiveStepper::insideColliders() const
+{
+  const Contact* contact = sim_.contact();
+  return contact ? deepestInside(sim_.grid(), sim_.points(), *contact) : 0.0;
+}
+
 bool AdaptiveStepper::touching() const
 {
   const Contact* contact = sim_.contact();
@@ -149,7 +155,9 @@ StepResult AdaptiveStepper::check()
   if (reduced())
   {
     last_estimate_ = settings_.indicator_scale * sim_.errorIndicator();
-    if (last_estimate_ <= settings_.tolerance)
+    const double inside = insideColliders();
+    const double thickness = sim_.contact() ? sim_.contact()->thickness() : 0.0;
+    if (last_estimate_ <= settings_.tolerance && inside <= thickness)
     {
       if (last_estimate_ <= settings_.safe_share * settings_.tolerance ||
           ++checks_since_ >= settings_.max_rollback_checks)
@@ -160,8 +168,12 @@ StepResult AdaptiveStepper::check()
       }
       return result;
     }
-    why << "to full at t = " << sim_.time() << " s: estimated distance " << last_estimate_
-        << " m above error_tolerance " << settings_.tolerance << " m";
+    why << "to full at t = " << sim_.time() << " s: ";
+    if (last_estimate_ > settings_.tolerance)
+      why << "estimated distance " << last_estimate_ << " m above error_tolerance " << settings_.tolerance << " m";
+    else
+      why << "a particle " << inside << " m inside a collider, deeper than the contact thickness " << thickness
+          << " m";
     result = fallBack(why);
     within_since_ = -1.0;
   }

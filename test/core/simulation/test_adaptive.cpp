@@ -298,3 +298,47 @@ TEST(Adaptive, FallsBackFromACoarseGridAndStaysOnTheGridsOwn)
   EXPECT_EQ(same.reducedShare(), 1.0);
   EXPECT_LT(largestParticleDistance(same_sim, full.positions()), 1e-9);
 }
+
+// A coarse grid cannot bend round a table's edge: a sheet dropped flat half over a box hangs over
+// its edge, and its particles between the coarse ones cut into the box. Whatever the tolerance, the
+// stepper falls back once a particle is further inside than the contact thickness, and `full` keeps
+// them out.
+TEST(Adaptive, FallsBackWhereTheCoarseGridCutsIntoACollider)
+{
+  GridParams g = clothSheet(13);
+  g.rotation_deg = 90.0;  // lying flat
+  const Eigen::Matrix3Xd start = Grid(g).toPoints(Grid(g).initialPositions());
+  Collider box;
+  box.type = ColliderType::Box;
+  const double edge = 0.5 * (start.row(1).minCoeff() + start.row(1).maxCoeff()) + 0.01;  // between particles
+  box.half_extents = Eigen::Vector3d(1.0, 0.5, 0.5);
+  box.center = Eigen::Vector3d(start.row(0).mean(), edge - 0.5, start.row(2).minCoeff() - 0.02 - 0.5);
+  SimulationParams s = methodParams(Method::Coarse, 4, 5e-4);
+  s.alpha = 0.5;
+  s.coarse_cols = 4;
+  s.colliders = {box};
+  Simulation coarse(g, s);
+  Simulation adaptive_sim(g, s);
+  AdaptiveSettings settings = stepsOf5ms();
+  settings.reduced = Method::Coarse;
+  settings.indicator_scale = indicatorScale(Method::Coarse);
+  settings.tolerance = 1.0;  // the estimate never decides
+  AdaptiveStepper adaptive(adaptive_sim, settings);
+  const double thickness = coarse.contact()->thickness();
+  double coarse_deepest = 0.0, adaptive_deepest_after = 0.0;
+  for (int k = 1; k <= 2000; ++k)
+  {
+    ASSERT_FALSE(coarse.step().diverged) << "step " << k;
+    ASSERT_FALSE(adaptive.step().diverged) << "step " << k;
+    coarse_deepest = std::max(coarse_deepest, deepestInside(coarse.grid(), coarse.points(), *coarse.contact()));
+    if (!adaptive.reduced())
+      adaptive_deepest_after =
+          std::max(adaptive_deepest_after, deepestInside(adaptive_sim.grid(), adaptive_sim.points(), *adaptive_sim.contact()));
+  }
+  std::cout << "coarse alone " << coarse_deepest << " m deep at most; adaptive: " << adaptive.lastSwitch()
+            << "; under full " << adaptive_deepest_after << " m\n";
+  EXPECT_GT(coarse_deepest, 2.0 * thickness) << "the coarse grid must cut into the box for the test to mean anything";
+  EXPECT_GE(adaptive.switches(), 1);
+  EXPECT_TRUE(contains(adaptive.lastSwitch(), "inside a collider, deeper than the contact thickness")) << adaptive.lastSwitch();
+  EXPECT_LT(adaptive_deepest_after, thickness);
+}
