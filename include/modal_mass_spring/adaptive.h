@@ -7,7 +7,8 @@
 // max_rollback_checks checks back) are taken again under `full` from the state saved there (with the
 // handle and collider motions they had), so that the error that grew before the check found it is not
 // carried into `full`. Under `full`, it switches back once the state has stayed within `tolerance` of the
-// reduced span (Simulation::spanDistance) for `dwell` seconds, touching no collider; the part outside
+// reduced span (Simulation::spanDistance), with an indicator for that span within it too (else the
+// first check would send it back), for `dwell` seconds, touching no collider; the part outside
 // the span is then kept frozen, as every switch does (Simulation::setMethod), and a frozen part
 // dragged along a collider would go into it.
 #pragma once

@@ -331,6 +331,10 @@ public:
   // for `full`. O(springs + n r) (`coarse`: O(springs)) and sparse solves; the first call factorises
   // the springs' Laplacian.
   double errorIndicator();
+  // The same for the span of method `span` at the current positions, whatever the method: what that
+  // method's indicator would be right after a switch to it (which moves no particle). Its basis or
+  // coarse grid must be built (std::logic_error).
+  double errorIndicator(Method span);
   // How far the current state is from the span of method `reduced` (m, an RMS over the free
   // particles): for a modal method the part of the displacement (less the handles' constraint modes)
   // that its M-orthogonal projection onto the basis leaves, for `coarse` the part its interpolation

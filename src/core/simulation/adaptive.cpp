@@ -179,8 +179,11 @@ StepResult AdaptiveStepper::check()
   }
   else
   {
+    // Back only where the reduced method would pass its first check: close to its span, and with
+    // no more force outside it than the tolerance allows (else it would fall back at once).
     last_estimate_ = sim_.spanDistance(settings_.reduced);
-    if (last_estimate_ > settings_.tolerance || touching())
+    if (last_estimate_ > settings_.tolerance || touching() ||
+        settings_.indicator_scale * sim_.errorIndicator(settings_.reduced) > settings_.tolerance)
     {
       within_since_ = -1.0;
       return result;

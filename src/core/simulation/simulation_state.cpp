@@ -221,17 +221,21 @@ Eigen::VectorXd Simulation::worldPositions(Eigen::VectorXd x) const
   return x;
 }
 
-double Simulation::errorIndicator()
+double Simulation::errorIndicator() { return errorIndicator(params_.method); }
+
+double Simulation::errorIndicator(Method span)
 {
-  if (params_.method == Method::Full)
+  if (span == Method::Full)
     return 0.0;
+  if (span == Method::Coarse ? !coarse_ : !basis_built_)
+    throw std::logic_error("errorIndicator: the span of method '" + toString(span) + "' is not built");
   if (!error_indicator_)
     error_indicator_ = std::make_unique<ErrorIndicator>(grid_, mass_);
   // In the body frame where one moves: the springs do not see the frame, and the span lives there.
   const Eigen::VectorXd f = error_indicator_->force(bodyPositions(), external_force_);
-  if (params_.method == Method::Coarse)
+  if (span == Method::Coarse)
     return error_indicator_->balanceLocally(coarse_->outsideSpan(f));
-  const ModalBasis& basis = params_.method == Method::Linear ? basis_ : physical_basis_;
+  const ModalBasis& basis = span == Method::Linear ? basis_ : physical_basis_;
   return error_indicator_->balance(f - mass_.cwiseProduct(basis.phi * (basis.phi.transpose() * f)));
 }
 
