@@ -349,9 +349,10 @@ void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::Vec
     if (!groupSettled(p))
     {
       lookAtGroup(p, xs, x_start.data());
+      if (group_changed_[p])
+        group_bound_[p].blocks[0] = -2;  // other pairs: their blocks are found again
       group_changed_[p] = 0;
       group_bound_[p].slack = -1.0;
-      group_bound_[p].blocks[0] = -2;  // its pairs may have changed
       continue;
     }
     // Every pair as it was: the kept ones' gaps along their kept normals, with their kept weights.
