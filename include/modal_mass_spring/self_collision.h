@@ -176,6 +176,9 @@ private:
   // moved particle to the end of their group, [gone_from_, gone_end_), in the groups that name one
   // (dropped_from_, found by named_by_).
   void dropMovedPairs(bool all, const std::vector<int>& moved);
+  // Marks the particles within `reach` of the box around the moved ones (is_near_moved_): a listing of
+  // some particles files only those into its cells, as it finds no pair farther from a moved particle.
+  void markNearMoved(const std::vector<int>& moved, const double* xs, double reach);
   // A pair listed into its group, the group named by its other particles (named_by_).
   void addPair(const Pair& pair);
   // After a full listing: every particle's named_by_ found anew.
@@ -300,7 +303,7 @@ private:
   std::vector<int> moved_;                // slots moved more than half the skin
   Eigen::VectorXd last_x_;                // the free positions at the last step's end, before its correction
   std::vector<double> travel_;            // per slot: the length of its path over those positions since the start
-  std::vector<char> is_moved_, is_anchor_listed_;
+  std::vector<char> is_moved_, is_anchor_listed_, is_near_moved_;
   std::vector<Touch> touches_;
   std::vector<char> touched_;
   std::vector<int> stirred_;  // per slot: the last sweep that pushed it by more than the settled distance

@@ -59,7 +59,7 @@ Eigen::Vector3d closestOnTriangle(const Eigen::Vector3d& p, const Eigen::Vector3
 }
 
 Cells sortIntoCells(const double* x, int count, double reach, std::vector<int>& cell_of, std::vector<int>& start,
-                    std::vector<int>& sorted)
+                    std::vector<int>& sorted, const std::vector<char>* only)
 {
   Cells cells;
   Eigen::Vector3d low = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity()), high = -low;
@@ -91,6 +91,11 @@ Cells sortIntoCells(const double* x, int count, double reach, std::vector<int>& 
   start.assign(total + 1, 0);
   for (int p = 0; p < count; ++p)
   {
+    if (only && !(*only)[p])
+    {
+      cell_of[p] = -1;
+      continue;
+    }
     int c[3];
     cells.cellOf(x + 3 * p, c);
     cell_of[p] = cells.index(c[0], c[1], c[2]);
@@ -98,10 +103,11 @@ Cells sortIntoCells(const double* x, int count, double reach, std::vector<int>& 
   }
   for (int c = 0; c < total; ++c)
     start[c + 1] += start[c];
-  sorted.resize(count);
+  sorted.resize(start[total]);
   std::vector<int> fill(start.begin(), start.end() - 1);
   for (int p = 0; p < count; ++p)
-    sorted[fill[cell_of[p]]++] = p;
+    if (cell_of[p] >= 0)
+      sorted[fill[cell_of[p]]++] = p;
   cells.start = &start;
   cells.sorted = &sorted;
   return cells;

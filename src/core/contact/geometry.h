@@ -53,8 +53,10 @@ struct Cells
 
 // Sorts the `count` points x (3 each) into cells at least `reach` wide; cell_of, start and sorted
 // are the caller's storage (kept between calls, no allocation once grown), which the cells point to.
+// With `only`, only the points it marks are filed, in the cells that all the points would have (so
+// that they are visited in the same order as when all are filed).
 Cells sortIntoCells(const double* x, int count, double reach, std::vector<int>& cell_of, std::vector<int>& start,
-                    std::vector<int>& sorted);
+                    std::vector<int>& sorted, const std::vector<char>* only = nullptr);
 
 // Calls visit(q) for every point in the 27 cells around `point`.
 template <typename Visit>

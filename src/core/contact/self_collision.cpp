@@ -349,9 +349,10 @@ void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::Vec
     if (!groupSettled(p))
     {
       lookAtGroup(p, xs, x_start.data());
+      if (group_changed_[p])
+        group_bound_[p].blocks[0] = -2;  // other pairs: their blocks are found again
       group_changed_[p] = 0;
       group_bound_[p].slack = -1.0;
-      group_bound_[p].blocks[0] = -2;  // its pairs may have changed
       continue;
     }
     // Every pair as it was: the kept ones' gaps along their kept normals, with their kept weights.
@@ -506,7 +507,7 @@ void SelfCollision::weigh(Pair& pair, const double* x)
   pair.surfaces = surfaces_;
 }
 
-void SelfCollision::addTouch(Pair& pair, double gap, const double* x, const double* x_start)
+inline void SelfCollision::addTouch(Pair& pair, double gap, const double* x, const double* x_start)
 {
   // The shares are kept with the closest point: its particles have travelled less than the reuse
   // fraction since, as a collider's normal is kept for a particle.
@@ -516,7 +517,7 @@ void SelfCollision::addTouch(Pair& pair, double gap, const double* x, const doub
   report_.closest_before = std::min(report_.closest_before, gap);
 }
 
-bool SelfCollision::stirred(const Pair& pair, int sweep) const
+inline bool SelfCollision::stirred(const Pair& pair, int sweep) const
 {
   return stirred_[pair.p] >= sweep - 1 || stirred_[pair.c[0]] >= sweep - 1 ||
          (pair.c[1] >= 0 && (stirred_[pair.c[1]] >= sweep - 1 || stirred_[pair.c[2]] >= sweep - 1));

@@ -104,7 +104,9 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
       if (anchor_[s])
         cellSphere(s, xs, listed);
   const double reach = listed + longest;
-  const Cells cells = sortIntoCells(xs, count, reach, cell_of_, cell_start_, sorted_);
+  if (!all)
+    markNearMoved(moved, xs, reach);
+  const Cells cells = sortIntoCells(xs, count, reach, cell_of_, cell_start_, sorted_, all ? nullptr : &is_near_moved_);
   naming_ = !all;  // a full listing names them all at the end
   listAroundMoved(cells, xs, reach, listed);
   built_at_.resize(x.size());
@@ -117,6 +119,26 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
   if (triangles)
     listMovedTriangles(moved, cells, xs, reach, listed);
   takeBackFound();
+}
+
+void SelfCollision::markNearMoved(const std::vector<int>& moved, const double* xs, double reach)
+{
+  Eigen::Vector3d low = pointAt(xs, moved.front()), high = low;
+  for (int m : moved)
+  {
+    low = low.cwiseMin(pointAt(xs, m));
+    high = high.cwiseMax(pointAt(xs, m));
+  }
+  low.array() -= reach;
+  high.array() += reach;
+  const int count = static_cast<int>(candidates_.size());
+  is_near_moved_.resize(count);
+  for (int p = 0; p < count; ++p)
+  {
+    const double* at = xs + 3 * p;
+    is_near_moved_[p] = at[0] >= low[0] && at[0] <= high[0] && at[1] >= low[1] && at[1] <= high[1] &&
+                        at[2] >= low[2] && at[2] <= high[2];
+  }
 }
 
 void SelfCollision::dropMovedPairs(bool all, const std::vector<int>& moved)
