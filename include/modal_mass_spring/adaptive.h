@@ -8,7 +8,8 @@
 // handle and collider motions they had), so that the error that grew before the check found it is not
 // carried into `full`. Under `full`, it switches back once the state has stayed within `tolerance` of the
 // reduced span (Simulation::spanDistance), with an indicator for that span within it too (else the
-// first check would send it back), for `dwell` seconds, touching no collider; the part outside
+// first check would send it back), for `dwell` seconds (twice as long after each return in a row
+// that fell back at its first check, up to 64 times), touching no collider; the part outside
 // the span is then kept frozen, as every switch does (Simulation::setMethod), and a frozen part
 // dragged along a collider would go into it.
 #pragma once
@@ -87,6 +88,10 @@ private:
   // Back to the checkpoint, then the steps since again under `full`.
   StepResult fallBack(std::ostringstream& why);
   StepResult check();
+  // The time within tolerance before a return: `dwell`, doubled (from a check period at least) for
+  // each return in a row that fell back at its first check: a coarse grid left within its span drifts
+  // to its own hanging shape within a check, and going back and forth costs both methods' steps.
+  double dwell() const;
   // How deep the particle deepest inside a collider is (m; 0: none, or no colliders).
   double insideColliders() const;
   // Whether a particle touched a collider in the last step.
@@ -102,6 +107,9 @@ private:
   SimulationState checkpoint_;       // the reduced state at the last safe check
   std::vector<Motion> since_check_;  // the motions of the reduced steps since
   int checks_since_ = 0;             // checks passed since it
+  bool first_check_ = false;         // the next check is the first since a return to the reduced method
+  int futile_returns_ = 0;           // returns in a row that fell back at their first check
+  static constexpr int kMaxBackOff = 6;
   Eigen::VectorXd handle_reference_;  // the handle dofs' positions at zero displacement
   std::shared_ptr<const Eigen::VectorXd> recorded_force_;  // the external force the last motion kept
   long recorded_force_changes_ = -1;                       // and Simulation::externalForceChanges() then

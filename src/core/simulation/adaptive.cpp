@@ -120,6 +120,14 @@ double AdaptiveStepper::insideColliders() const
   return contact ? deepestInside(sim_.grid(), sim_.points(), *contact) : 0.0;
 }
 
+double AdaptiveStepper::dwell() const
+{
+  if (futile_returns_ == 0)
+    return settings_.dwell;
+  const double check_period = settings_.check_steps * sim_.params().time_step;
+  return std::max(settings_.dwell, check_period) * std::pow(2.0, std::min(futile_returns_, kMaxBackOff));
+}
+
 bool AdaptiveStepper::touching() const
 {
   const Contact* contact = sim_.contact();
@@ -157,8 +165,12 @@ StepResult AdaptiveStepper::check()
     last_estimate_ = settings_.indicator_scale * sim_.errorIndicator();
     const double inside = insideColliders();
     const double thickness = sim_.contact() ? sim_.contact()->thickness() : 0.0;
+    const bool first_check = first_check_;
+    first_check_ = false;
     if (last_estimate_ <= settings_.tolerance && inside <= thickness)
     {
+      if (first_check)
+        futile_returns_ = 0;
       if (last_estimate_ <= settings_.safe_share * settings_.tolerance ||
           ++checks_since_ >= settings_.max_rollback_checks)
       {
@@ -174,13 +186,15 @@ StepResult AdaptiveStepper::check()
     else
       why << "a particle " << inside << " m inside a collider, deeper than the contact thickness " << thickness
           << " m";
+    if (first_check)
+      ++futile_returns_;
     result = fallBack(why);
     within_since_ = -1.0;
   }
   else
   {
-    // Back only where the reduced method would pass its first check: close to its span, and with
-    // no more force outside it than the tolerance allows (else it would fall back at once).
+    // Back only where the reduced method could pass its first check: close to its span, and with
+    // no more force outside it than the tolerance allows.
     last_estimate_ = sim_.spanDistance(settings_.reduced);
     if (last_estimate_ > settings_.tolerance || touching() ||
         settings_.indicator_scale * sim_.errorIndicator(settings_.reduced) > settings_.tolerance)
@@ -190,11 +204,15 @@ StepResult AdaptiveStepper::check()
     }
     if (within_since_ < 0.0)
       within_since_ = sim_.time();
-    if (sim_.time() - within_since_ < settings_.dwell)
+    if (sim_.time() - within_since_ < dwell())
       return result;
     why << "to " << toString(settings_.reduced) << " at t = " << sim_.time() << " s: within "
         << last_estimate_ << " m of its span for " << sim_.time() - within_since_ << " s";
+    if (futile_returns_ > 0)
+      why << " (" << futile_returns_ << " return" << (futile_returns_ == 1 ? "" : "s")
+          << " before fell back at the first check)";
     sim_.setMethod(settings_.reduced);
+    first_check_ = true;
     checkpoint_ = sim_.saveState();
     since_check_.clear();
     checks_since_ = 0;
