@@ -344,3 +344,31 @@ TEST(Adaptive, FallsBackWhereTheCoarseGridCutsIntoACollider)
   EXPECT_TRUE(contains(adaptive.lastSwitch(), "inside a collider, deeper than the contact thickness")) << adaptive.lastSwitch();
   EXPECT_LT(adaptive_deepest_after, thickness);
 }
+
+// A fall back onto a table takes its steps again as `full` takes them: the colliders' poses it
+// replays leave the contact as it was. (Explicit: the implicit step agrees to its Newton tolerance
+// only, 5e-7 m after 200 steps of this scene.)
+TEST(Adaptive, AFallBackOntoATableRetakesTheStepsAsFullTakesThem)
+{
+  GridParams g = clothSheet(10);
+  g.rotation_deg = 90.0;  // lying flat
+  SimulationParams s = methodParams(Method::Full, 4, 1e-3);
+  s.alpha = 0.5;
+  s.colliders = {tableBelow(g, 0.01)};
+  Simulation full(g, s);
+  s.method = Method::Coarse;
+  s.coarse_cols = 4;
+  Simulation adaptive_sim(g, s);
+  AdaptiveSettings settings = stepsOf5ms();
+  settings.reduced = Method::Coarse;
+  settings.tolerance = 1e-15;  // its first check fails: `full` from the start
+  AdaptiveStepper adaptive(adaptive_sim, settings);
+  for (int k = 1; k <= 200; ++k)
+  {
+    ASSERT_FALSE(full.step().diverged);
+    ASSERT_FALSE(adaptive.step().diverged);
+  }
+  EXPECT_EQ(adaptive.reducedShare(), 0.0);
+  ASSERT_GT(full.contact()->report().touching[0], 0) << "the cloth must reach the table for the test to mean anything";
+  EXPECT_LT(largestParticleDistance(adaptive_sim, full.positions()), 1e-9);
+}
