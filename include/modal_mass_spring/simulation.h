@@ -55,7 +55,9 @@ struct SimulationParams
   int tangent_refresh_steps = 20;  // lagged_tangent: steps between two factorisations of the tangent
   // The adaptive stepper's (adaptive.h): the reduced method, the RMS distance to `full` it accepts
   // (m), the time within it of the span before going back to it (s), the steps between checks.
-  Method adaptive_method = Method::Cubature;
+  // `coarse`: the one reduced method cheaper than `full` with contact, and built in no time
+  // (docs/results.md, "On the coarse grid").
+  Method adaptive_method = Method::Coarse;
   // Parameter `method: adaptive`: the simulation runs adaptive_method (its `method`), stepped by an
   // AdaptiveStepper that falls back to `full` (the node's single method; the tools' --methods).
   bool adaptive = false;
