@@ -536,20 +536,27 @@ SimulationParams coarseAtRest()
   return s;
 }
 
-// `coarse` on the held cloth turned 60 degrees about the vertical in 1 s and back
-// (config/compare/large_motion_100.yaml on N x N: the cloth of config/cloth_large.yaml held by a clamp
-// of its top two rows, nothing fixed), explicit, the clamp's motion handed over every step as the node
-// and modal_compare hand it: every clamp particle's motion (setHandleMotion), or the clamp's frame
-// (setHandleFrameMotion). At `full`'s largest stable step (0.8 ms x 100 / N) or at coarse's own
-// (coarseStepMultiple times it), alone or through the adaptive stepper. Counter: CPU seconds per simulated second, which compares
-// different steps.
-void turnCoarse(benchmark::State& state, int size, bool frame, bool own_step, bool adaptive)
+// The cloth of config/cloth_large.yaml on N x N, held by a clamp of its top two rows, nothing fixed.
+GridParams clampedCloth(int size)
 {
   GridParams g = swingingCloth(size);
   g.rotation_deg = 0.0;
   std::vector<int> clamp(2 * size);
   std::iota(clamp.begin(), clamp.end(), 0);
   g.handles = {clamp};
+  return g;
+}
+
+// `coarse` on the held cloth turned 60 degrees about the vertical in 1 s and back
+// (config/compare/large_motion_100.yaml on N x N: the cloth of config/cloth_large.yaml held by a clamp
+// of its top two rows, nothing fixed), explicit, the clamp's motion handed over every step as the node
+// and modal_compare hand it: every clamp particle's motion (setHandleMotion), or the clamp's frame
+// (setHandleFrameMotion). At `full`'s largest stable step (0.8 ms x 100 / N) or at coarse's own
+// (coarseStepMultiple times it), alone or through the adaptive stepper. Counter: CPU seconds per
+// simulated second, which compares different steps.
+void turnCoarse(benchmark::State& state, int size, bool frame, bool own_step, bool adaptive)
+{
+  const GridParams g = clampedCloth(size);
   SimulationParams s = coarseAtRest();
   s.handle_formulation = HandleFormulation::ConstraintModes;
   s.time_step = 0.0008 * 100.0 / size;
@@ -621,11 +628,7 @@ BENCHMARK(BM_AdaptiveCoarseTurn)->ArgsProduct({{50, 100}, {0, 1}})->Unit(benchma
 void BM_CoarseErrorIndicator(benchmark::State& state)
 {
   const int size = static_cast<int>(state.range(0));
-  GridParams g = swingingCloth(size);
-  g.rotation_deg = 0.0;
-  std::vector<int> clamp(2 * size);
-  std::iota(clamp.begin(), clamp.end(), 0);
-  g.handles = {clamp};
+  const GridParams g = clampedCloth(size);
   SimulationParams s = coarseAtRest();
   s.time_step = 0.0008 * 100.0 / size;
   s.time_step *= coarseStepMultiple(g, s);
