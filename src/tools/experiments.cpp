@@ -122,7 +122,8 @@ private:
 };
 
 // Steps per timed run so that one run lasts about min_repeat_seconds, timed on the steps the method
-// takes: one that diverges is timed up to its divergence (its timed runs end there).
+// takes: one that diverges is timed up to its divergence (its timed runs end there). An adaptive
+// run spans two of its checks at least, so that its time holds what the checks cost and decide.
 int stepsPerRepeat(Simulation& sim, double min_repeat_seconds, const std::optional<AdaptiveSettings>& adaptive)
 {
   int calibration = 10;
@@ -138,7 +139,8 @@ int stepsPerRepeat(Simulation& sim, double min_repeat_seconds, const std::option
       break;
     calibration *= 4;
   }
-  return std::max(10, static_cast<int>(std::min(1e7, min_repeat_seconds / std::max(per_step, 1e-9))));
+  const int fewest = adaptive ? std::max(10, 2 * adaptive->check_steps) : 10;
+  return std::max(fewest, static_cast<int>(std::min(1e7, min_repeat_seconds / std::max(per_step, 1e-9))));
 }
 
 // Seconds per step of one timed run of up to `steps` steps. A run that diverges ends there (the linear

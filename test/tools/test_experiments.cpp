@@ -570,7 +570,7 @@ TEST(Cost, AMethodThatDivergesAtOnceIsReportedWithItsStep)
 
 // Method "adaptive" is timed after the others, with the share of its steps taken reduced: all of
 // them under a tolerance it always meets, none under one it never does (its first check fails and
-// its steps are taken again under `full`).
+// its steps are taken again under `full`). Its timed runs are short, yet span its checks.
 TEST(Cost, AdaptiveIsTimedAfterTheMethodsWithItsShareOfReducedSteps)
 {
   ExperimentSetup setup;
