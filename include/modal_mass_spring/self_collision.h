@@ -208,12 +208,31 @@ private:
   // dropped since, the kept ones travelled less than the reuse fraction, the others less than their
   // margin): by the group's bound while it holds, else pair by pair (setting the bound anew).
   bool groupSettled(int p);
-  // The sum of the pair's particles' travel (travel_).
-  double travelOf(const Pair& pair) const
+  // What a settled group's steps read of its pairs, a quarter of their size, so that the steps
+  // stream that and not every pair (whose closest points and shares make a pair 152 bytes): per
+  // pair, its other particles, its travel when last looked at and its allowance then (the reuse
+  // fraction when kept, else its margin); and the pairs kept as their own (kept 1), whose gaps
+  // are measured every step. Found again after a group is looked at or its pairs listed.
+  struct Allowance
   {
-    const double travel = travel_[pair.p] + travel_[pair.c[0]];
-    return pair.c[1] >= 0 ? travel + travel_[pair.c[1]] + travel_[pair.c[2]] : travel;
+    int c[3];
+    double travel;
+    double allowance;
+  };
+  struct GroupSummary
+  {
+    bool found = false;
+    std::vector<Allowance> allowances;
+    std::vector<int> own;  // indices of the kept pairs of their own
+  };
+  const GroupSummary& summaryOf(int p);
+  // The sum of the pair's particles' travel (travel_): p against corners c.
+  double travelOf(int p, const int c[3]) const
+  {
+    const double travel = travel_[p] + travel_[c[0]];
+    return c[1] >= 0 ? travel + travel_[c[1]] + travel_[c[2]] : travel;
   }
+  double travelOf(const Pair& pair) const { return travelOf(pair.p, pair.c); }
   // Looks at slot p's candidates (those not still apart) and keeps those within reach of the thickness.
   void lookAtGroup(int p, const double* x, const double* x_start);
   // Whether a pair whose particles have travelled less than its margin since it was last looked at is
@@ -295,6 +314,7 @@ private:
   // The blocks of the group's particles (blocks[0]: -2 not found yet, -3 more than four).
   void findBlocks(int p);
   std::vector<GroupBound> group_bound_;
+  std::vector<GroupSummary> group_summary_;
   std::vector<int> block_;              // per slot
   std::vector<double> block_travel_, block_step_;  // per block
   Eigen::VectorXd built_at_;  // per slot, where its pairs were last listed (empty: none yet)

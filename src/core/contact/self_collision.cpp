@@ -190,6 +190,27 @@ void SelfCollision::findBlocks(int p)
       }
 }
 
+const SelfCollision::GroupSummary& SelfCollision::summaryOf(int p)
+{
+  GroupSummary& summary = group_summary_[p];
+  if (summary.found)
+    return summary;
+  const double reuse = kReuse * thickness_;
+  const std::vector<Pair>& group = candidates_[p];
+  summary.allowances.clear();
+  summary.own.clear();
+  for (size_t k = 0; k < group.size(); ++k)
+  {
+    const Pair& pair = group[k];
+    summary.allowances.push_back(
+        Allowance{{pair.c[0], pair.c[1], pair.c[2]}, pair.travel, pair.kept ? reuse : pair.margin});
+    if (pair.kept == 1)
+      summary.own.push_back(static_cast<int>(k));
+  }
+  summary.found = true;
+  return summary;
+}
+
 bool SelfCollision::groupSettled(int p)
 {
   if (group_changed_[p])
@@ -197,11 +218,10 @@ bool SelfCollision::groupSettled(int p)
   GroupBound& bound = group_bound_[p];
   if (bound.slack >= 0.0 && blockTravel(bound) - bound.at < bound.slack)
     return true;
-  const double reuse = kReuse * thickness_;
   double slack = std::numeric_limits<double>::infinity();
-  for (const Pair& pair : candidates_[p])
+  for (const Allowance& pair : summaryOf(p).allowances)
   {
-    const double left = (pair.kept ? reuse : pair.margin) - (travelOf(pair) - pair.travel);
+    const double left = pair.allowance - (travelOf(p, pair.c) - pair.travel);
     if (!(left > 0.0))
     {
       bound.slack = -1.0;
@@ -349,6 +369,7 @@ void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::Vec
     if (!groupSettled(p))
     {
       lookAtGroup(p, xs, x_start.data());
+      group_summary_[p].found = false;
       if (group_changed_[p])
         group_bound_[p].blocks[0] = -2;  // other pairs: their blocks are found again
       group_changed_[p] = 0;
@@ -356,10 +377,10 @@ void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::Vec
       continue;
     }
     // Every pair as it was: the kept ones' gaps along their kept normals, with their kept weights.
-    for (Pair& pair : candidates_[p])
+    std::vector<Pair>& group = candidates_[p];
+    for (int k : summaryOf(p).own)
     {
-      if (pair.kept != 1)
-        continue;
+      Pair& pair = group[k];
       const double gap = relative(xs, pair).dot(pair.kept_geometry.normal);
       if (gap < thickness_)
       {

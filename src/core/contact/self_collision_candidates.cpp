@@ -65,6 +65,7 @@ void SelfCollision::listCandidates(const Eigen::VectorXd& x, const std::vector<i
   candidates_.resize(count);
   group_changed_.resize(count);
   group_bound_.resize(count);
+  group_summary_.resize(count);
   is_moved_.assign(count, all ? 1 : 0);
   for (int p : moved)
     is_moved_[p] = 1;
@@ -151,6 +152,7 @@ void SelfCollision::dropMovedPairs(bool all, const std::vector<int>& moved)
     {
       candidates_[p].clear();
       group_changed_[p] = 1;
+      group_summary_[p].found = false;
     }
     return;
   }
@@ -166,6 +168,7 @@ void SelfCollision::dropMovedPairs(bool all, const std::vector<int>& moved)
   for (int p : dropped_from_)
   {
     std::vector<Pair>& group = candidates_[p];
+    group_summary_[p].found = false;  // its pairs are reordered
     gone_end_[p] = static_cast<int>(group.size());
     gone_from_[p] = static_cast<int>(std::partition(group.begin(), group.end(),
                                                     [&](const Pair& pair) {
@@ -182,6 +185,7 @@ void SelfCollision::addPair(const Pair& pair)
 {
   candidates_[pair.p].push_back(pair);
   group_changed_[pair.p] = 1;
+  group_summary_[pair.p].found = false;
   for (int k = 0; k < 3 && pair.c[k] >= 0; ++k)
   {
     std::vector<int>& named = named_by_[pair.c[k]];
