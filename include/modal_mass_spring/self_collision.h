@@ -155,14 +155,22 @@ private:
   // there to p (oriented by the start positions inside a triangle) and the gap along it.
   Geometry geometry(const Pair& pair, const double* x, const double* x_start) const;
   // A pair closer than the thickness (a kept pair: its geometry is kept_geometry, measured at the
-  // step's end) and its relative position at the step's start.
+  // step's end) and its relative position at the step's start: what the sweeps read of the pair,
+  // copied, so that they stream the touches and do not gather the pairs from their groups.
   struct Touch
   {
-    Pair* pair;
+    int p;
+    int c[3];
+    double w[3];
+    Eigen::Vector3d normal;
+    double share[4];
+    double sum;
     Eigen::Vector3d start;
   };
   // The touch of a kept pair within the thickness (gap), weighed first when the surfaces changed.
   void addTouch(Pair& pair, double gap, const double* x, const double* x_start);
+  // A kept pair's touch, its start not set.
+  static Touch touchOf(const Pair& pair);
   // Each of the pair's particles' share of a push along its kept normal (its weight, 1 for p, times
   // its inverse mass relative to a free particle's: 0 on a collider when the push is along the
   // surface's normal, more than 60 degrees from the surface), their weighted sum, and the surfaces
@@ -208,24 +216,33 @@ private:
   // dropped since, the kept ones travelled less than the reuse fraction, the others less than their
   // margin): by the group's bound while it holds, else pair by pair (setting the bound anew).
   bool groupSettled(int p);
-  // What a settled group's steps read of its pairs, a quarter of their size, so that the steps
-  // stream that and not every pair (whose closest points and shares make a pair 152 bytes): per
-  // pair, its other particles, its travel when last looked at and its allowance then (the reuse
-  // fraction when kept, else its margin); and the pairs kept as their own (kept 1), whose gaps
-  // are measured every step. Found again after a group is looked at or its pairs listed.
+  // What a settled group's steps read of its pairs, so that they stream that and not every pair (a
+  // pair is 152 bytes, and a resting fold has 73,000): per pair, its other particles, its travel when
+  // last looked at and its allowance then (the reuse fraction when kept, else its margin); and the
+  // pairs kept as their own (kept 1), whose gaps are measured every step, as touches (without their
+  // start) with the surfaces they were weighed with. Found as a group is looked at, and again after
+  // a listing changed its pairs.
   struct Allowance
   {
     int c[3];
     double travel;
     double allowance;
   };
+  struct OwnPair
+  {
+    int k;  // its index in the group
+    int surfaces;
+    Touch touch;
+  };
   struct GroupSummary
   {
     bool found = false;
     std::vector<Allowance> allowances;
-    std::vector<int> own;  // indices of the kept pairs of their own
+    std::vector<OwnPair> own;
   };
-  const GroupSummary& summaryOf(int p);
+  GroupSummary& summaryOf(int p);
+  // The settled group p's touches: its kept pairs' gaps along their kept normals, with their kept weights.
+  void addOwnTouches(int p, const double* x, const double* x_start);
   // The sum of the pair's particles' travel (travel_): p against corners c.
   double travelOf(int p, const int c[3]) const
   {
@@ -264,19 +281,23 @@ private:
   // The Gauss-Seidel sweeps over the touches: positions pushed apart, then approaching velocities removed.
   void sweepPositions(Eigen::VectorXd& x);
   void sweepVelocities(Eigen::VectorXd& v, double dt);
-  // The pair's relative position (or velocity) among `values`: p less the corners by their kept weights.
-  static Eigen::Vector3d relative(const double* values, const Pair& pair);
+  // The pair's relative position (or velocity) among `values`: p less the corners c by their kept weights w.
+  static Eigen::Vector3d relative(const double* values, int p, const int c[3], const double w[3]);
+  static Eigen::Vector3d relative(const double* values, const Pair& pair)
+  {
+    return relative(values, pair.p, pair.c, pair.kept_geometry.w);
+  }
   // Moves p by delta / (1 + sum w^2) and the corners against it by their weights (each times its
   // inverse mass): the pair's relative displacement changes by delta and, between free particles, its
   // momentum not at all.
-  static void apply(double* values, const Pair& pair, const Eigen::Vector3d& delta);
+  static void apply(double* values, const Touch& touch, const Eigen::Vector3d& delta);
   // The sweeps end after one that moved nothing by more than this (m, and m over the step for
   // velocities): what it leaves is smaller still, and the next step pushes out what is left. After
   // the first sweep, a pair is swept again only when a push of more than this moved one of its
   // particles in the last sweep or this one (stirred, stir): the rule that ends the sweeps, pair by pair.
   double settledDistance() const { return 1e-3 * thickness_; }
-  bool stirred(const Pair& pair, int sweep) const;
-  void stir(const Pair& pair, int sweep);
+  bool stirred(const Touch& touch, int sweep) const;
+  void stir(const Touch& touch, int sweep);
 
   const Grid& grid_;
   double thickness_;

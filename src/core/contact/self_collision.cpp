@@ -110,24 +110,24 @@ SelfCollision::Geometry SelfCollision::geometry(const Pair& pair, const double* 
 }
 
 // Inline: the narrow phase and the sweeps call them for every touching pair (this file only).
-inline Eigen::Vector3d SelfCollision::relative(const double* values, const Pair& pair)
+inline Eigen::Vector3d SelfCollision::relative(const double* values, int p, const int c[3], const double w[3])
 {
-  Eigen::Vector3d r = pointAt(values, pair.p) - pair.kept_geometry.w[0] * pointAt(values, pair.c[0]);
-  if (pair.c[1] >= 0)
-    r -= pair.kept_geometry.w[1] * pointAt(values, pair.c[1]) + pair.kept_geometry.w[2] * pointAt(values, pair.c[2]);
+  Eigen::Vector3d r = pointAt(values, p) - w[0] * pointAt(values, c[0]);
+  if (c[1] >= 0)
+    r -= w[1] * pointAt(values, c[1]) + w[2] * pointAt(values, c[2]);
   return r;
 }
 
-inline void SelfCollision::apply(double* values, const Pair& pair, const Eigen::Vector3d& delta)
+inline void SelfCollision::apply(double* values, const Touch& touch, const Eigen::Vector3d& delta)
 {
   auto ref = [](double* v, int slot) { return Eigen::Map<Eigen::Vector3d>(v + 3 * slot); };
-  const Eigen::Vector3d share = delta / pair.sum;
-  ref(values, pair.p) += pair.share[0] * share;
-  ref(values, pair.c[0]) -= pair.share[1] * share;
-  if (pair.c[1] >= 0)
+  const Eigen::Vector3d share = delta / touch.sum;
+  ref(values, touch.p) += touch.share[0] * share;
+  ref(values, touch.c[0]) -= touch.share[1] * share;
+  if (touch.c[1] >= 0)
   {
-    ref(values, pair.c[1]) -= pair.share[2] * share;
-    ref(values, pair.c[2]) -= pair.share[3] * share;
+    ref(values, touch.c[1]) -= touch.share[2] * share;
+    ref(values, touch.c[2]) -= touch.share[3] * share;
   }
 }
 
@@ -190,7 +190,7 @@ void SelfCollision::findBlocks(int p)
       }
 }
 
-const SelfCollision::GroupSummary& SelfCollision::summaryOf(int p)
+SelfCollision::GroupSummary& SelfCollision::summaryOf(int p)
 {
   GroupSummary& summary = group_summary_[p];
   if (summary.found)
@@ -205,7 +205,7 @@ const SelfCollision::GroupSummary& SelfCollision::summaryOf(int p)
     summary.allowances.push_back(
         Allowance{{pair.c[0], pair.c[1], pair.c[2]}, pair.travel, pair.kept ? reuse : pair.margin});
     if (pair.kept == 1)
-      summary.own.push_back(static_cast<int>(k));
+      summary.own.push_back(OwnPair{static_cast<int>(k), pair.surfaces, touchOf(pair)});
   }
   summary.found = true;
   return summary;
@@ -370,24 +370,35 @@ void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::Vec
     {
       lookAtGroup(p, xs, x_start.data());
       group_summary_[p].found = false;
+      summaryOf(p);  // while its pairs are at hand
       if (group_changed_[p])
         group_bound_[p].blocks[0] = -2;  // other pairs: their blocks are found again
       group_changed_[p] = 0;
       group_bound_[p].slack = -1.0;
       continue;
     }
-    // Every pair as it was: the kept ones' gaps along their kept normals, with their kept weights.
-    std::vector<Pair>& group = candidates_[p];
-    for (int k : summaryOf(p).own)
+    addOwnTouches(p, xs, x_start.data());
+  }
+}
+
+void SelfCollision::addOwnTouches(int p, const double* xs, const double* starts)
+{
+  for (OwnPair& own : summaryOf(p).own)
+  {
+    Touch& touch = own.touch;
+    const double gap = relative(xs, p, touch.c, touch.w).dot(touch.normal);
+    if (!(gap < thickness_))
+      continue;
+    if (own.surfaces != surfaces_)
     {
-      Pair& pair = group[k];
-      const double gap = relative(xs, pair).dot(pair.kept_geometry.normal);
-      if (gap < thickness_)
-      {
-        addTouch(pair, gap, xs, x_start.data());
-        ++report_.reused;
-      }
+      Pair& pair = candidates_[p][own.k];
+      weigh(pair, xs);
+      own = OwnPair{own.k, pair.surfaces, touchOf(pair)};
     }
+    touches_.push_back(touch);
+    touches_.back().start = relative(starts, p, touch.c, touch.w);
+    report_.closest_before = std::min(report_.closest_before, gap);
+    ++report_.reused;
   }
 }
 
@@ -534,21 +545,34 @@ inline void SelfCollision::addTouch(Pair& pair, double gap, const double* x, con
   // fraction since, as a collider's normal is kept for a particle.
   if (pair.surfaces != surfaces_)
     weigh(pair, x);
-  touches_.push_back(Touch{&pair, relative(x_start, pair)});
+  touches_.push_back(touchOf(pair));
+  touches_.back().start = relative(x_start, pair);
   report_.closest_before = std::min(report_.closest_before, gap);
 }
 
-inline bool SelfCollision::stirred(const Pair& pair, int sweep) const
+SelfCollision::Touch SelfCollision::touchOf(const Pair& pair)
 {
-  return stirred_[pair.p] >= sweep - 1 || stirred_[pair.c[0]] >= sweep - 1 ||
-         (pair.c[1] >= 0 && (stirred_[pair.c[1]] >= sweep - 1 || stirred_[pair.c[2]] >= sweep - 1));
+  const Geometry& g = pair.kept_geometry;
+  return Touch{pair.p,
+               {pair.c[0], pair.c[1], pair.c[2]},
+               {g.w[0], g.w[1], g.w[2]},
+               g.normal,
+               {pair.share[0], pair.share[1], pair.share[2], pair.share[3]},
+               pair.sum,
+               Eigen::Vector3d::Zero()};
 }
 
-void SelfCollision::stir(const Pair& pair, int sweep)
+inline bool SelfCollision::stirred(const Touch& touch, int sweep) const
 {
-  stirred_[pair.p] = stirred_[pair.c[0]] = sweep;
-  if (pair.c[1] >= 0)
-    stirred_[pair.c[1]] = stirred_[pair.c[2]] = sweep;
+  return stirred_[touch.p] >= sweep - 1 || stirred_[touch.c[0]] >= sweep - 1 ||
+         (touch.c[1] >= 0 && (stirred_[touch.c[1]] >= sweep - 1 || stirred_[touch.c[2]] >= sweep - 1));
+}
+
+void SelfCollision::stir(const Touch& touch, int sweep)
+{
+  stirred_[touch.p] = stirred_[touch.c[0]] = sweep;
+  if (touch.c[1] >= 0)
+    stirred_[touch.c[1]] = stirred_[touch.c[2]] = sweep;
 }
 
 void SelfCollision::sweepPositions(Eigen::VectorXd& x)
@@ -566,14 +590,13 @@ void SelfCollision::sweepPositions(Eigen::VectorXd& x)
     for (int k = 0; k < count; ++k)
     {
       const Touch& t = touches_[k];
-      const Pair& pair = *t.pair;
-      if (sweep > 0 && !stirred(pair, sweep))
+      if (sweep > 0 && !stirred(t, sweep))
         continue;
       // The gap along the pair's normal at the step's end: it moves by micrometres over the sweeps.
-      const Eigen::Vector3d& n = pair.kept_geometry.normal;
-      const Eigen::Vector3d r = relative(xs, pair);
+      const Eigen::Vector3d& n = t.normal;
+      const Eigen::Vector3d r = relative(xs, t.p, t.c, t.w);
       const double gap = r.dot(n);
-      if (gap >= thickness_ || pair.sum <= 0.0)  // apart, or every particle of the pair held by a collider
+      if (gap >= thickness_ || t.sum <= 0.0)  // apart, or every particle of the pair held by a collider
       {
         report_.closest_after = std::min(report_.closest_after, gap);
         continue;
@@ -584,9 +607,9 @@ void SelfCollision::sweepPositions(Eigen::VectorXd& x)
       const double push = thickness_ - gap;
       largest = std::max(largest, push);
       const Eigen::Vector3d slip = r - t.start;
-      apply(xs, pair, push * n + coulomb(slip - slip.dot(n) * n, friction_ * push));
+      apply(xs, t, push * n + coulomb(slip - slip.dot(n) * n, friction_ * push));
       if (push > settled)
-        stir(pair, sweep);
+        stir(t, sweep);
     }
     if (largest <= settled)
       break;
@@ -607,20 +630,20 @@ void SelfCollision::sweepVelocities(Eigen::VectorXd& v, double dt)
     {
       if (!touched_[k])
         continue;
-      const Pair& pair = *touches_[k].pair;
-      if (sweep > 0 && !stirred(pair, sweep))
+      const Touch& t = touches_[k];
+      if (sweep > 0 && !stirred(t, sweep))
         continue;
       // Velocities: remove the approach, Coulomb on the relative tangential velocity.
-      const Eigen::Vector3d& n = pair.kept_geometry.normal;
-      const Eigen::Vector3d velocity = relative(vs, pair);
+      const Eigen::Vector3d& n = t.normal;
+      const Eigen::Vector3d velocity = relative(vs, t.p, t.c, t.w);
       const double approach = -velocity.dot(n);
       if (approach <= 0.0)
         continue;
       largest = std::max(largest, approach);
       const Eigen::Vector3d tangential = velocity + approach * n;
-      apply(vs, pair, approach * n + coulomb(tangential, friction_ * approach));
+      apply(vs, t, approach * n + coulomb(tangential, friction_ * approach));
       if (approach * dt > settled)
-        stir(pair, sweep);
+        stir(t, sweep);
     }
     if (largest * dt <= settled)
       break;
