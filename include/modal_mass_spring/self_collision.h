@@ -95,7 +95,7 @@ public:
   void setThickness(double thickness)
   {
     thickness_ = thickness;
-    built_at_.resize(0);  // the candidates were listed for the old thickness
+    built_at_.resize(0);  // the candidates were listed for the old thickness (and the summaries' allowances found)
   }
   void setFriction(double friction) { friction_ = friction; }
 
@@ -169,7 +169,7 @@ private:
   };
   // The touch of a kept pair within the thickness (gap), weighed first when the surfaces changed.
   void addTouch(Pair& pair, double gap, const double* x, const double* x_start);
-  // A kept pair's touch, its start not set.
+  // A kept pair's touch, its start zero.
   static Touch touchOf(const Pair& pair);
   // Each of the pair's particles' share of a push along its kept normal (its weight, 1 for p, times
   // its inverse mass relative to a free particle's: 0 on a collider when the push is along the
@@ -220,8 +220,10 @@ private:
   // pair is 152 bytes, and a resting fold has 73,000): per pair, its other particles, its travel when
   // last looked at and its allowance then (the reuse fraction when kept, else its margin); and the
   // pairs kept as their own (kept 1), whose gaps are measured every step, as touches (without their
-  // start) with the surfaces they were weighed with. Found as a group is looked at, and again after
-  // a listing changed its pairs.
+  // start) with the surfaces they were weighed with (an own pair weighed again is updated in place).
+  // So whatever changes a copied field of a pair, or the order of a group, clears its `found`: a
+  // look at the group (after which it is found at once, its pairs in the cache) and a listing that
+  // changes its pairs.
   struct Allowance
   {
     int c[3];
@@ -234,14 +236,17 @@ private:
     int surfaces;
     Touch touch;
   };
+  // A group's summary; not `found`: to be found again before it is read.
   struct GroupSummary
   {
     bool found = false;
     std::vector<Allowance> allowances;
     std::vector<OwnPair> own;
   };
+  // Group p's summary, found first when it is not.
   GroupSummary& summaryOf(int p);
-  // The settled group p's touches: its kept pairs' gaps along their kept normals, with their kept weights.
+  // The settled group p's touches: its own pairs (kept 1) closer than the thickness, their gaps along
+  // their kept normals with their kept weights; weighed again when the surfaces changed.
   void addOwnTouches(int p, const double* x, const double* x_start);
   // The sum of the pair's particles' travel (travel_): p against corners c.
   double travelOf(int p, const int c[3]) const
