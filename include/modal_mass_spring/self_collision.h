@@ -171,6 +171,8 @@ private:
   void addTouch(Pair& pair, double gap, const double* x, const double* x_start);
   // A kept pair's touch, its start zero.
   static Touch touchOf(const Pair& pair);
+  // Adds a touch within the thickness (gap), its start taken from the start positions.
+  void pushTouch(const Touch& touch, double gap, const double* x_start);
   // Each of the pair's particles' share of a push along its kept normal (its weight, 1 for p, times
   // its inverse mass relative to a free particle's: 0 on a collider when the push is along the
   // surface's normal, more than 60 degrees from the surface), their weighted sum, and the surfaces

@@ -395,9 +395,7 @@ void SelfCollision::addOwnTouches(int p, const double* xs, const double* starts)
       weigh(pair, xs);
       own = OwnPair{own.k, pair.surfaces, touchOf(pair)};
     }
-    touches_.push_back(touch);
-    touches_.back().start = relative(starts, p, touch.c, touch.w);
-    report_.closest_before = std::min(report_.closest_before, gap);
+    pushTouch(touch, gap, starts);
     ++report_.reused;
   }
 }
@@ -545,8 +543,13 @@ inline void SelfCollision::addTouch(Pair& pair, double gap, const double* x, con
   // fraction since, as a collider's normal is kept for a particle.
   if (pair.surfaces != surfaces_)
     weigh(pair, x);
-  touches_.push_back(touchOf(pair));
-  touches_.back().start = relative(x_start, pair);
+  pushTouch(touchOf(pair), gap, x_start);
+}
+
+inline void SelfCollision::pushTouch(const Touch& touch, double gap, const double* x_start)
+{
+  touches_.push_back(touch);
+  touches_.back().start = relative(x_start, touch.p, touch.c, touch.w);
   report_.closest_before = std::min(report_.closest_before, gap);
 }
 
