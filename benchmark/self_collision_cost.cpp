@@ -91,13 +91,14 @@ void BM_FoldedFullStep(benchmark::State& state)
                        Eigen::VectorXd::Zero(sim.grid().numFreeDofs()));
   for (int k = 0; k < state.range(2); ++k)
     sim.step();
-  double self_seconds = 0.0, relisted = 0.0, reused = 0.0, sweeps = 0.0;
+  double self_seconds = 0.0, relisted = 0.0, reused = 0.0, sweeps = 0.0, looked = 0.0;
   for (auto _ : state)
   {
     measuredStep(sim);
     self_seconds += sim.lastSelfCollisionSeconds();
     if (const SelfCollision* self = sim.selfCollision())
     {
+      looked += self->report().looked;
       relisted += self->report().relisted;
       reused += self->report().reused;
       sweeps += self->report().position_sweeps + self->report().velocity_sweeps;
@@ -108,6 +109,7 @@ void BM_FoldedFullStep(benchmark::State& state)
   state.counters["relisted"] = benchmark::Counter(relisted / state.iterations());
   state.counters["reused"] = benchmark::Counter(reused / state.iterations());
   state.counters["sweeps"] = benchmark::Counter(sweeps / state.iterations());
+  state.counters["looked"] = benchmark::Counter(looked / state.iterations());
 }
 BENCHMARK(BM_FoldedFullStep)->ArgsProduct({{30, 100}, {0, 1}, {100, 1000, 5000}})->Unit(benchmark::kMicrosecond);
 

@@ -80,6 +80,9 @@ struct SelfCollisionReport
   int relisted = 0;  // particles whose candidate pairs were listed anew this step (all at a full listing)
   int reused = 0;    // pairs whose closest point and normal were kept from an earlier step (see kReuse)
   int position_sweeps = 0, velocity_sweeps = 0;  // the Gauss-Seidel sweeps of the correction
+  // Whether the narrow phase ran (see kLapse). When it did not, the touches it last found were swept
+  // again: `contacts` and `closest_before` are theirs within the thickness as the first sweep found them.
+  bool looked = true;
 };
 
 struct Cells;  // the broad phase's cells (internal)
@@ -88,7 +91,9 @@ class SelfCollision
 {
 public:
   // grid: 3D; thickness > 0 and <= the spacing; friction >= 0 (validated by the caller).
-  SelfCollision(const Grid& grid, double thickness, double friction, SelfPrimitive primitive = SelfPrimitive::Triangles);
+  // lapse: see kLapse (0: the narrow phase runs every step).
+  SelfCollision(const Grid& grid, double thickness, double friction, SelfPrimitive primitive = SelfPrimitive::Triangles,
+                double lapse = kLapse);
 
   double thickness() const { return thickness_; }
   double friction() const { return friction_; }
@@ -96,6 +101,7 @@ public:
   {
     thickness_ = thickness;
     built_at_.resize(0);  // the candidates were listed for the old thickness (and the summaries' allowances found)
+    looked_at_.resize(0);
   }
   void setFriction(double friction) { friction_ = friction; }
 
@@ -119,6 +125,12 @@ public:
   // measured with the kept weights and normal, within twice this fraction of the thickness of the
   // closest point's (docs/design.md, "Self-collision").
   static constexpr double kReuse = 0.01;
+  // The narrow phase (and the listing) runs only once a particle has moved this fraction of the
+  // thickness since it last ran (or the colliders changed); the steps between sweep the touches it
+  // found, with their closest points and normals. A pair it did not find was no closer than the
+  // thickness then, and its gap has closed by at most twice this fraction since, beyond what one
+  // step closes (docs/design.md, "Self-collision").
+  static constexpr double kLapse = 0.05;
 
 private:
   // One pair: particle p (a free-particle slot) against corners c[0..2] (slots, -1 for none: a
@@ -155,24 +167,26 @@ private:
   // there to p (oriented by the start positions inside a triangle) and the gap along it.
   Geometry geometry(const Pair& pair, const double* x, const double* x_start) const;
   // A pair closer than the thickness (a kept pair: its geometry is kept_geometry, measured at the
-  // step's end) and its relative position at the step's start: what the sweeps read of the pair,
-  // copied, so that they stream the touches and do not gather the pairs from their groups.
+  // step's end): what the sweeps read of the pair, copied, so that they stream the touches and do
+  // not gather the pairs from their groups. In single precision, 48 bytes, so that a resting fold's
+  // touches stay in the cache over the sweeps: the weights' rounding moves a contact point by less
+  // than 1e-7 m in a cloth a metre wide.
   struct Touch
   {
     int p;
     int c[3];
-    double w[3];
-    Eigen::Vector3d normal;
-    double share[4];
-    double sum;
-    Eigen::Vector3d start;
+    float w[3];
+    float normal[3];
+    float sum;            // the sum over its particles of share times weight (weigh)
+    unsigned char shares;  // bit k: particle k (p, c[0], c[1], c[2]) takes its weight's share of a push
+    Eigen::Vector3d normalVector() const { return Eigen::Vector3d(normal[0], normal[1], normal[2]); }
   };
   // The touch of a kept pair within the thickness (gap), weighed first when the surfaces changed.
-  void addTouch(Pair& pair, double gap, const double* x, const double* x_start);
-  // A kept pair's touch, its start zero.
+  void addTouch(Pair& pair, double gap, const double* x);
+  // A kept pair's touch.
   static Touch touchOf(const Pair& pair);
-  // Adds a touch within the thickness (gap), its start taken from the start positions.
-  void pushTouch(const Touch& touch, double gap, const double* x_start);
+  // Adds a touch within the thickness (gap).
+  void pushTouch(const Touch& touch, double gap);
   // Each of the pair's particles' share of a push along its kept normal (its weight, 1 for p, times
   // its inverse mass relative to a free particle's: 0 on a collider when the push is along the
   // surface's normal, more than 60 degrees from the surface), their weighted sum, and the surfaces
@@ -249,7 +263,7 @@ private:
   GroupSummary& summaryOf(int p);
   // The settled group p's touches: its own pairs (kept 1) closer than the thickness, their gaps along
   // their kept normals with their kept weights; weighed again when the surfaces changed.
-  void addOwnTouches(int p, const double* x, const double* x_start);
+  void addOwnTouches(int p, const double* x);
   // The sum of the pair's particles' travel (travel_): p against corners c.
   double travelOf(int p, const int c[3]) const
   {
@@ -268,13 +282,15 @@ private:
   // covered particle), and the pairs within reach kept.
   int lookAtParticlePairs(int p, const double* x, const double* x_start, int covered[8]);
   void lookAtTrianglePairs(int p, const double* x, const double* x_start, const int covered[8], int covering);
-  void keepWithinReach(int p, const double* x, const double* x_start);
+  void keepWithinReach(int p, const double* x);
   // Whether the triangle pair `k` of `group` (one particle's candidates, with this step's geometry)
   // leaves its closest point (on the edge opposite its corner `opposite`) to the triangle sharing
   // that edge, when that one holds the same point.
   bool edgeHeldByNeighbour(const std::vector<Pair>& group, const std::vector<Geometry>& geometry, int k,
                            int opposite) const;
-  // correct's steps. Finds the particles moved half the skin since their pairs were listed (moved_);
+  // correct's steps. Whether the narrow phase is due at x (kLapse).
+  bool lookDue(const Eigen::VectorXd& x) const;
+  // Finds the particles moved half the skin since their pairs were listed (moved_);
   // true when every pair is to be listed anew.
   bool findMoved(const Eigen::VectorXd& x);
   // Adds the path from the last step's end positions to x to each particle's travel; false when not finite.
@@ -282,17 +298,24 @@ private:
   // The colliders' surfaces under the touches' particles: all forgotten once a collider has moved
   // (or none is given); a particle's found anew (surfaceOf) when it has travelled the reuse fraction
   // since it was last.
-  void checkSurfaces(const Contact* contact);
+  // Returns whether they changed.
+  bool checkSurfaces(const Contact* contact);
   // The outward normal of the collider surface slot s lies on at x (zero when on none).
   const Eigen::Vector3d& surfaceOf(int s, const double* x);
   // The Gauss-Seidel sweeps over the touches: positions pushed apart, then approaching velocities removed.
-  void sweepPositions(Eigen::VectorXd& x);
+  void sweep(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double dt);
+  void sweepPositions(const Eigen::VectorXd& x_start, Eigen::VectorXd& x);
   void sweepVelocities(Eigen::VectorXd& v, double dt);
   // The pair's relative position (or velocity) among `values`: p less the corners c by their kept weights w.
-  static Eigen::Vector3d relative(const double* values, int p, const int c[3], const double w[3]);
+  template <typename Weight>
+  static Eigen::Vector3d relative(const double* values, int p, const int c[3], const Weight w[3]);
   static Eigen::Vector3d relative(const double* values, const Pair& pair)
   {
     return relative(values, pair.p, pair.c, pair.kept_geometry.w);
+  }
+  static Eigen::Vector3d relative(const double* values, const Touch& touch)
+  {
+    return relative(values, touch.p, touch.c, touch.w);
   }
   // Moves p by delta / (1 + sum w^2) and the corners against it by their weights (each times its
   // inverse mass): the pair's relative displacement changes by delta and, between free particles, its
@@ -310,6 +333,7 @@ private:
   double thickness_;
   double friction_;
   SelfPrimitive primitive_;
+  double lapse_;
   std::vector<int> particle_of_;  // slot -> grid particle
   std::vector<int> slot_of_;      // grid particle -> slot, -1 when fixed or held
   std::vector<int> row_, col_;    // per slot
@@ -353,6 +377,7 @@ private:
   std::vector<double> travel_;            // per slot: the length of its path over those positions since the start
   std::vector<char> is_moved_, is_anchor_listed_, is_near_moved_;
   std::vector<Touch> touches_;
+  Eigen::VectorXd looked_at_;  // the free positions when the narrow phase last ran (before the correction)
   std::vector<char> touched_;
   std::vector<int> stirred_;  // per slot: the last sweep that pushed it by more than the settled distance
   SelfCollisionReport report_;

@@ -31,8 +31,8 @@ void validateSelfCollision(const GridParams& grid, bool enabled, double thicknes
     rejectParameter("self_friction", friction, "must be a finite Coulomb coefficient >= 0");
 }
 
-SelfCollision::SelfCollision(const Grid& grid, double thickness, double friction, SelfPrimitive primitive)
-  : grid_(grid), thickness_(thickness), friction_(friction), primitive_(primitive)
+SelfCollision::SelfCollision(const Grid& grid, double thickness, double friction, SelfPrimitive primitive, double lapse)
+  : grid_(grid), thickness_(thickness), friction_(friction), primitive_(primitive), lapse_(lapse)
 {
   const int rows = grid.params().rows, cols = grid.params().cols;
   slot_of_.assign(grid.numParticles(), -1);
@@ -110,7 +110,8 @@ SelfCollision::Geometry SelfCollision::geometry(const Pair& pair, const double* 
 }
 
 // Inline: the narrow phase and the sweeps call them for every touching pair (this file only).
-inline Eigen::Vector3d SelfCollision::relative(const double* values, int p, const int c[3], const double w[3])
+template <typename Weight>
+inline Eigen::Vector3d SelfCollision::relative(const double* values, int p, const int c[3], const Weight w[3])
 {
   Eigen::Vector3d r = pointAt(values, p) - w[0] * pointAt(values, c[0]);
   if (c[1] >= 0)
@@ -122,13 +123,11 @@ inline void SelfCollision::apply(double* values, const Touch& touch, const Eigen
 {
   auto ref = [](double* v, int slot) { return Eigen::Map<Eigen::Vector3d>(v + 3 * slot); };
   const Eigen::Vector3d share = delta / touch.sum;
-  ref(values, touch.p) += touch.share[0] * share;
-  ref(values, touch.c[0]) -= touch.share[1] * share;
-  if (touch.c[1] >= 0)
-  {
-    ref(values, touch.c[1]) -= touch.share[2] * share;
-    ref(values, touch.c[2]) -= touch.share[3] * share;
-  }
+  if (touch.shares & 1)
+    ref(values, touch.p) += share;
+  for (int k = 0; k < 3 && touch.c[k] >= 0; ++k)
+    if (touch.shares & (2 << k))
+      ref(values, touch.c[k]) -= touch.w[k] * share;
 }
 
 bool SelfCollision::edgeHeldByNeighbour(const std::vector<Pair>& group, const std::vector<Geometry>& geometry, int k,
@@ -262,7 +261,7 @@ void SelfCollision::lookAtGroup(int p, const double* xs, const double* starts)
   int covered[8];
   const int covering = lookAtParticlePairs(p, xs, starts, covered);
   lookAtTrianglePairs(p, xs, starts, covered, covering);
-  keepWithinReach(p, xs, starts);
+  keepWithinReach(p, xs);
 }
 
 int SelfCollision::lookAtParticlePairs(int p, const double* xs, const double* starts, int covered[8])
@@ -295,7 +294,7 @@ int SelfCollision::lookAtParticlePairs(int p, const double* xs, const double* st
       pair.kept_geometry = geometry(pair, xs, starts);
       pair.surfaces = -1;
       if (pair.kept_geometry.gap < thickness_)
-        addTouch(pair, pair.kept_geometry.gap, xs, starts);
+        addTouch(pair, pair.kept_geometry.gap, xs);
     }
   }
   return covering;
@@ -332,7 +331,7 @@ void SelfCollision::lookAtTrianglePairs(int p, const double* xs, const double* s
   }
 }
 
-void SelfCollision::keepWithinReach(int p, const double* xs, const double* starts)
+void SelfCollision::keepWithinReach(int p, const double* xs)
 {
   const double reach = (1.0 + kReuse) * thickness_;
   std::vector<Pair>& group = candidates_[p];
@@ -353,7 +352,7 @@ void SelfCollision::keepWithinReach(int p, const double* xs, const double* start
     group[k].surfaces = -1;
     if (!held && g.gap < thickness_)
     {
-      addTouch(group[k], g.gap, xs, starts);
+      addTouch(group[k], g.gap, xs);
       report_.reused += reused;
     }
   }
@@ -377,16 +376,16 @@ void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::Vec
       group_bound_[p].slack = -1.0;
       continue;
     }
-    addOwnTouches(p, xs, x_start.data());
+    addOwnTouches(p, xs);
   }
 }
 
-void SelfCollision::addOwnTouches(int p, const double* xs, const double* starts)
+void SelfCollision::addOwnTouches(int p, const double* xs)
 {
   for (OwnPair& own : summaryOf(p).own)
   {
     Touch& touch = own.touch;
-    const double gap = relative(xs, p, touch.c, touch.w).dot(touch.normal);
+    const double gap = relative(xs, touch).dot(touch.normalVector());
     if (!(gap < thickness_))
       continue;
     if (own.surfaces != surfaces_)
@@ -395,7 +394,7 @@ void SelfCollision::addOwnTouches(int p, const double* xs, const double* starts)
       weigh(pair, xs);
       own = OwnPair{own.k, pair.surfaces, touchOf(pair)};
     }
-    pushTouch(touch, gap, starts);
+    pushTouch(touch, gap);
     ++report_.reused;
   }
 }
@@ -406,6 +405,13 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
 {
   report_ = SelfCollisionReport{};
   report_.closest_before = report_.closest_after = thickness_;
+  if (!checkSurfaces(contact) && !lookDue(x))
+  {
+    report_.looked = false;
+    report_.reused = static_cast<int>(touches_.size());
+    sweep(x_start, x, v, dt);
+    return;
+  }
   const int particles = static_cast<int>(particle_of_.size());
   bool all = findMoved(x);
   if (!addTravel(x))
@@ -420,13 +426,32 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
   report_.relisted = all ? particles : static_cast<int>(moved_.size());
   if (report_.relisted > 0)
     listCandidates(x, moved_);
-  checkSurfaces(contact);
   findTouches(x_start, x);
+  looked_at_ = x;
+  report_.contacts = static_cast<int>(touches_.size());
+  sweep(x_start, x, v, dt);
+}
+
+void SelfCollision::sweep(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double dt)
+{
   if (touches_.empty())
     return;
-  report_.contacts = static_cast<int>(touches_.size());
-  sweepPositions(x);
+  sweepPositions(x_start, x);
   sweepVelocities(v, dt);
+}
+
+bool SelfCollision::lookDue(const Eigen::VectorXd& x) const
+{
+  if (!(lapse_ > 0.0) || looked_at_.size() != x.size())
+    return true;
+  const double limit2 = lapse_ * lapse_ * thickness_ * thickness_;
+  for (Eigen::Index i = 0; i < x.size(); i += 3)
+  {
+    const double dx = x[i] - looked_at_[i], dy = x[i + 1] - looked_at_[i + 1], dz = x[i + 2] - looked_at_[i + 2];
+    if (!(dx * dx + dy * dy + dz * dz <= limit2))  // NaN too
+      return true;
+  }
+  return false;
 }
 
 bool SelfCollision::findMoved(const Eigen::VectorXd& x)
@@ -479,7 +504,7 @@ bool SelfCollision::addTravel(const Eigen::VectorXd& x)
   return finite;
 }
 
-void SelfCollision::checkSurfaces(const Contact* contact)
+bool SelfCollision::checkSurfaces(const Contact* contact)
 {
   contact_ = contact;
   const int colliders = contact ? static_cast<int>(contact->colliders().size()) : 0;
@@ -488,7 +513,7 @@ void SelfCollision::checkSurfaces(const Contact* contact)
   for (int i = 0; i < colliders && same_colliders; ++i)
     same_colliders = surface_active_[i] == contact->active(i) && surface_poses_[i].matrix() == contact->pose(i).matrix();
   if (same_colliders)
-    return;
+    return false;
   ++surfaces_;  // every pair is weighed anew
   surface_normal_.assign(particle_of_.size(), Eigen::Vector3d::Zero());
   surface_travel_.assign(particle_of_.size(), std::numeric_limits<double>::quiet_NaN());
@@ -500,6 +525,7 @@ void SelfCollision::checkSurfaces(const Contact* contact)
     surface_poses_.push_back(contact->pose(i));
     surface_active_.push_back(contact->active(i));
   }
+  return true;
 }
 
 const Eigen::Vector3d& SelfCollision::surfaceOf(int slot, const double* x)
@@ -537,32 +563,33 @@ void SelfCollision::weigh(Pair& pair, const double* x)
   pair.surfaces = surfaces_;
 }
 
-inline void SelfCollision::addTouch(Pair& pair, double gap, const double* x, const double* x_start)
+inline void SelfCollision::addTouch(Pair& pair, double gap, const double* x)
 {
   // The shares are kept with the closest point: its particles have travelled less than the reuse
   // fraction since, as a collider's normal is kept for a particle.
   if (pair.surfaces != surfaces_)
     weigh(pair, x);
-  pushTouch(touchOf(pair), gap, x_start);
+  pushTouch(touchOf(pair), gap);
 }
 
-inline void SelfCollision::pushTouch(const Touch& touch, double gap, const double* x_start)
+inline void SelfCollision::pushTouch(const Touch& touch, double gap)
 {
   touches_.push_back(touch);
-  touches_.back().start = relative(x_start, touch.p, touch.c, touch.w);
   report_.closest_before = std::min(report_.closest_before, gap);
 }
 
 SelfCollision::Touch SelfCollision::touchOf(const Pair& pair)
 {
   const Geometry& g = pair.kept_geometry;
-  return Touch{pair.p,
-               {pair.c[0], pair.c[1], pair.c[2]},
-               {g.w[0], g.w[1], g.w[2]},
-               g.normal,
-               {pair.share[0], pair.share[1], pair.share[2], pair.share[3]},
-               pair.sum,
-               Eigen::Vector3d::Zero()};
+  Touch touch{pair.p,
+              {pair.c[0], pair.c[1], pair.c[2]},
+              {float(g.w[0]), float(g.w[1]), float(g.w[2])},
+              {float(g.normal.x()), float(g.normal.y()), float(g.normal.z())},
+              float(pair.sum),
+              0};
+  for (int k = 0; k < 4; ++k)
+    touch.shares |= pair.share[k] != 0.0 ? 1 << k : 0;
+  return touch;
 }
 
 inline bool SelfCollision::stirred(const Touch& touch, int sweep) const
@@ -578,7 +605,7 @@ void SelfCollision::stir(const Touch& touch, int sweep)
     stirred_[touch.c[1]] = stirred_[touch.c[2]] = sweep;
 }
 
-void SelfCollision::sweepPositions(Eigen::VectorXd& x)
+void SelfCollision::sweepPositions(const Eigen::VectorXd& x_start, Eigen::VectorXd& x)
 {
   double* const xs = x.data();
   const int count = static_cast<int>(touches_.size());
@@ -596,9 +623,14 @@ void SelfCollision::sweepPositions(Eigen::VectorXd& x)
       if (sweep > 0 && !stirred(t, sweep))
         continue;
       // The gap along the pair's normal at the step's end: it moves by micrometres over the sweeps.
-      const Eigen::Vector3d& n = t.normal;
-      const Eigen::Vector3d r = relative(xs, t.p, t.c, t.w);
+      const Eigen::Vector3d n = t.normalVector();
+      const Eigen::Vector3d r = relative(xs, t);
       const double gap = r.dot(n);
+      if (sweep == 0 && !report_.looked && gap < thickness_)
+      {
+        ++report_.contacts;
+        report_.closest_before = std::min(report_.closest_before, gap);
+      }
       if (gap >= thickness_ || t.sum <= 0.0)  // apart, or every particle of the pair held by a collider
       {
         report_.closest_after = std::min(report_.closest_after, gap);
@@ -609,7 +641,7 @@ void SelfCollision::sweepPositions(Eigen::VectorXd& x)
       // the push as the normal bound (as the colliders).
       const double push = thickness_ - gap;
       largest = std::max(largest, push);
-      const Eigen::Vector3d slip = r - t.start;
+      const Eigen::Vector3d slip = r - relative(x_start.data(), t);
       apply(xs, t, push * n + coulomb(slip - slip.dot(n) * n, friction_ * push));
       if (push > settled)
         stir(t, sweep);
@@ -637,8 +669,8 @@ void SelfCollision::sweepVelocities(Eigen::VectorXd& v, double dt)
       if (sweep > 0 && !stirred(t, sweep))
         continue;
       // Velocities: remove the approach, Coulomb on the relative tangential velocity.
-      const Eigen::Vector3d& n = t.normal;
-      const Eigen::Vector3d velocity = relative(vs, t.p, t.c, t.w);
+      const Eigen::Vector3d n = t.normalVector();
+      const Eigen::Vector3d velocity = relative(vs, t);
       const double approach = -velocity.dot(n);
       if (approach <= 0.0)
         continue;
