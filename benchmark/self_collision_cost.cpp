@@ -81,7 +81,8 @@ SimulationParams explicitFull(bool self)
 // 0.2 s, the crease still rolling; 5000: 1 s) that let the upper half settle onto the lower one; arg 1: with self-collision. Reports the
 // self-collision share of the step (its CPU time, Simulation::lastSelfCollisionSeconds), and per step
 // the pairs, the particles whose candidate pairs were listed anew, the pairs that kept their closest
-// points and the correction's sweeps (positions and velocities).
+// points, the correction's sweeps (positions and velocities) and the share of steps whose narrow
+// phase ran (`looked`).
 void BM_FoldedFullStep(benchmark::State& state)
 {
   GridParams g = cloth(static_cast<int>(state.range(0)));

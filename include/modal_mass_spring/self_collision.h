@@ -20,7 +20,8 @@
 // particles visits only the groups that name them (named_by_). A listing searches a
 // uniform grid of cells as wide as the reach (the listing distance plus the longest edge of any
 // triangle, so that a triangle within it has its first corner in a neighbouring cell), sorted by a
-// counting sort. Narrow phase, every step: the candidates within the thickness at the step's end,
+// counting sort. Narrow phase, once a particle has moved a fraction of the thickness since it last
+// ran (kLapse; the steps between sweep the touches it found): the candidates within the thickness at the step's end,
 // one per closest point (a triangle whose closest point is a corner or an edge it shares is left to
 // the pair that holds that point), skipping those whose particles have travelled less than their
 // gap's margin over the thickness since they were last looked at, and keeping the closest point and
@@ -141,8 +142,7 @@ private:
   // within the thickness plus the reuse fraction then is `kept`: a pair of its own (1, with its
   // closest point's weights and normal in `kept_geometry`) or one whose point another pair holds (2,
   // likewise; 3 for a triangle whose point is at a particle the particle pair holds, not looked at);
-  // its closest point is found again once its particles have travelled the reuse fraction since. A
-  // kept pair keeps its particles' shares of a push as well (weigh), found with its closest point.
+  // its closest point is found again once its particles have travelled the reuse fraction since.
   struct Geometry
   {
     double w[3] = {1.0, 0.0, 0.0};
@@ -159,39 +159,33 @@ private:
     double travel = 0.0;
     int kept = 0;
     Geometry kept_geometry;
-    double share[4] = {0.0, 0.0, 0.0, 0.0};
-    double sum = 0.0;
-    int surfaces = -1;
   };
   // The closest point to p on the pair's other side, its barycentric weights, the unit normal from
   // there to p (oriented by the start positions inside a triangle) and the gap along it.
   Geometry geometry(const Pair& pair, const double* x, const double* x_start) const;
-  // A pair closer than the thickness (a kept pair: its geometry is kept_geometry, measured at the
-  // step's end): what the sweeps read of the pair, copied, so that they stream the touches and do
-  // not gather the pairs from their groups. In single precision, 48 bytes, so that a resting fold's
-  // touches stay in the cache over the sweeps: the weights' rounding moves a contact point by less
-  // than 1e-7 m in a cloth a metre wide.
+  // A kept pair of its own (kept 1) as the sweeps read it: its particles, its closest point's weights
+  // and normal, and its particles' shares of a push (weigh). The touches are kept from step to step:
+  // a group's are found anew only when it is looked at, and they are weighed again when the surfaces
+  // change. Those closer than the thickness when the narrow phase ran are swept (swept_) until it
+  // runs again; the sweeps push those closer than the thickness then. In single precision, 48 bytes, so that
+  // a resting fold's touches stay in the cache over the sweeps: the weights' rounding moves a contact
+  // point by less than 1e-7 m in a cloth a metre wide.
   struct Touch
   {
     int p;
     int c[3];
     float w[3];
     float normal[3];
-    float sum;            // the sum over its particles of share times weight (weigh)
+    float scale;          // 1 over the sum of its sharing particles' weights squared (weigh; 0: none shares)
     unsigned char shares;  // bit k: particle k (p, c[0], c[1], c[2]) takes its weight's share of a push
     Eigen::Vector3d normalVector() const { return Eigen::Vector3d(normal[0], normal[1], normal[2]); }
   };
-  // The touch of a kept pair within the thickness (gap), weighed first when the surfaces changed.
-  void addTouch(Pair& pair, double gap, const double* x);
-  // A kept pair's touch.
-  static Touch touchOf(const Pair& pair);
-  // Adds a touch within the thickness (gap).
-  void pushTouch(const Touch& touch, double gap);
-  // Each of the pair's particles' share of a push along its kept normal (its weight, 1 for p, times
-  // its inverse mass relative to a free particle's: 0 on a collider when the push is along the
-  // surface's normal, more than 60 degrees from the surface), their weighted sum, and the surfaces
-  // they were weighed with (surfaces_).
-  void weigh(Pair& pair, const double* x);
+  // Adds the touch of a kept pair of its own, weighed.
+  void addTouch(const Pair& pair, const double* x);
+  // Which of the touch's particles take a share of a push along its normal (its weight, 1 for p,
+  // times its inverse mass relative to a free particle's: none on a collider when the push is along
+  // the surface's normal, more than 60 degrees from the surface), and its scale.
+  void weigh(Touch& touch, const double* x);
   // Lists the candidate pairs closer than the thickness plus twice the skin at positions x: every
   // pair when `moved` is empty, else those of the particles in it and of the triangles at them.
   void listCandidates(const Eigen::VectorXd& x, const std::vector<int>& moved);
@@ -226,18 +220,19 @@ private:
   // then the gone pairs are erased.
   void takeBackFound();
   int slotAt(int row, int col) const { return slot_of_[row * grid_.params().cols + col]; }
-  // The candidates closer than the thickness at the step's end x, one per closest point.
+  // The touches at the step's end x: those of the groups not settled found anew (looking_).
   void findTouches(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x);
+  // The touches closer than the thickness at x (swept_), and the report's contacts, closest gap and
+  // reused pairs.
+  void measureTouches(const Eigen::VectorXd& x);
   // Whether slot p's candidates are as they were last looked at within the tolerances (none listed or
   // dropped since, the kept ones travelled less than the reuse fraction, the others less than their
   // margin): by the group's bound while it holds, else pair by pair (setting the bound anew).
   bool groupSettled(int p);
   // What a settled group's steps read of its pairs, so that they stream that and not every pair (a
   // pair is 152 bytes, and a resting fold has 73,000): per pair, its other particles, its travel when
-  // last looked at and its allowance then (the reuse fraction when kept, else its margin); and the
-  // pairs kept as their own (kept 1), whose gaps are measured every step, as touches (without their
-  // start) with the surfaces they were weighed with (an own pair weighed again is updated in place).
-  // So whatever changes a copied field of a pair, or the order of a group, clears its `found`: a
+  // last looked at and its allowance then (the reuse fraction when kept, else its margin). So
+  // whatever changes a copied field of a pair, or the order of a group, clears its `found`: a
   // look at the group (after which it is found at once, its pairs in the cache) and a listing that
   // changes its pairs.
   struct Allowance
@@ -246,24 +241,14 @@ private:
     double travel;
     double allowance;
   };
-  struct OwnPair
-  {
-    int k;  // its index in the group
-    int surfaces;
-    Touch touch;
-  };
   // A group's summary; not `found`: to be found again before it is read.
   struct GroupSummary
   {
     bool found = false;
     std::vector<Allowance> allowances;
-    std::vector<OwnPair> own;
   };
   // Group p's summary, found first when it is not.
   GroupSummary& summaryOf(int p);
-  // The settled group p's touches: its own pairs (kept 1) closer than the thickness, their gaps along
-  // their kept normals with their kept weights; weighed again when the surfaces changed.
-  void addOwnTouches(int p, const double* x);
   // The sum of the pair's particles' travel (travel_): p against corners c.
   double travelOf(int p, const int c[3]) const
   {
@@ -293,7 +278,8 @@ private:
   // Finds the particles moved half the skin since their pairs were listed (moved_);
   // true when every pair is to be listed anew.
   bool findMoved(const Eigen::VectorXd& x);
-  // Adds the path from the last step's end positions to x to each particle's travel; false when not finite.
+  // Adds the path from the positions at the last narrow phase to x to each particle's travel (a
+  // displacement at least: the pairs' bounds hold over the steps between); false when not finite.
   bool addTravel(const Eigen::VectorXd& x);
   // The colliders' surfaces under the touches' particles: all forgotten once a collider has moved
   // (or none is given); a particle's found anew (surfaceOf) when it has travelled the reuse fraction
@@ -326,8 +312,8 @@ private:
   // the first sweep, a pair is swept again only when a push of more than this moved one of its
   // particles in the last sweep or this one (stirred, stir): the rule that ends the sweeps, pair by pair.
   double settledDistance() const { return 1e-3 * thickness_; }
-  bool stirred(const Touch& touch, int sweep) const;
-  void stir(const Touch& touch, int sweep);
+  static bool stirred(const int* stirred, const Touch& touch, int sweep);
+  static void stir(int* stirred, const Touch& touch, int sweep);
 
   const Grid& grid_;
   double thickness_;
@@ -352,8 +338,8 @@ private:
   bool naming_ = false;                  // whether the listing keeps named_by_ as it goes (not a full one)
   // A settled group's bound: no pair's particles can have travelled their allowance (the reuse
   // fraction, or the margin) while the blocks of the grid that hold them have travelled less than
-  // `slack` since `at`. A block is kBlock x kBlock particles; its travel is the sum over the steps of
-  // the farthest any of its particles went in the step (block_travel_), so a group at rest is one
+  // `slack` since `at`. A block is kBlock x kBlock particles; its travel is the sum over the narrow phases
+  // of the farthest any of its particles went since the last (block_travel_), so a group at rest is one
   // comparison, not one per pair. Slack < 0: none (the pairs are compared one by one).
   struct GroupBound
   {
@@ -373,10 +359,11 @@ private:
   double longest_listed_ = 0.0;  // at least the longest edge of a cell's triangles at built_at_
   std::vector<Geometry> group_geometry_;  // this step's, per candidate of one slot
   std::vector<int> moved_;                // slots moved more than half the skin
-  Eigen::VectorXd last_x_;                // the free positions at the last step's end, before its correction
+  Eigen::VectorXd last_x_;                // the free positions at the last narrow phase, before its correction
   std::vector<double> travel_;            // per slot: the length of its path over those positions since the start
   std::vector<char> is_moved_, is_anchor_listed_, is_near_moved_;
-  std::vector<Touch> touches_;
+  std::vector<Touch> touches_, swept_;
+  std::vector<char> looking_;  // per slot: its group was looked at in this narrow phase
   Eigen::VectorXd looked_at_;  // the free positions when the narrow phase last ran (before the correction)
   std::vector<char> touched_;
   std::vector<int> stirred_;  // per slot: the last sweep that pushed it by more than the settled distance
@@ -387,7 +374,6 @@ private:
   std::vector<double> surface_travel_;
   bool surface_contact_ = false;
   const Contact* contact_ = nullptr;  // this correction's
-  int surfaces_ = 0;                  // counts the colliders' changes (Pair::surfaces)
   std::vector<Eigen::Isometry3d> surface_poses_;
   std::vector<char> surface_active_;
   // Per anchor slot: the centre and the squared radius of a sphere around its cell (this step's).

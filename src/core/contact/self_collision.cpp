@@ -122,7 +122,7 @@ inline Eigen::Vector3d SelfCollision::relative(const double* values, int p, cons
 inline void SelfCollision::apply(double* values, const Touch& touch, const Eigen::Vector3d& delta)
 {
   auto ref = [](double* v, int slot) { return Eigen::Map<Eigen::Vector3d>(v + 3 * slot); };
-  const Eigen::Vector3d share = delta / touch.sum;
+  const Eigen::Vector3d share = touch.scale * delta;
   if (touch.shares & 1)
     ref(values, touch.p) += share;
   for (int k = 0; k < 3 && touch.c[k] >= 0; ++k)
@@ -197,15 +197,9 @@ SelfCollision::GroupSummary& SelfCollision::summaryOf(int p)
   const double reuse = kReuse * thickness_;
   const std::vector<Pair>& group = candidates_[p];
   summary.allowances.clear();
-  summary.own.clear();
-  for (size_t k = 0; k < group.size(); ++k)
-  {
-    const Pair& pair = group[k];
+  for (const Pair& pair : group)
     summary.allowances.push_back(
         Allowance{{pair.c[0], pair.c[1], pair.c[2]}, pair.travel, pair.kept ? reuse : pair.margin});
-    if (pair.kept == 1)
-      summary.own.push_back(OwnPair{static_cast<int>(k), pair.surfaces, touchOf(pair)});
-  }
   summary.found = true;
   return summary;
 }
@@ -292,9 +286,7 @@ int SelfCollision::lookAtParticlePairs(int p, const double* xs, const double* st
     if (p < q)
     {
       pair.kept_geometry = geometry(pair, xs, starts);
-      pair.surfaces = -1;
-      if (pair.kept_geometry.gap < thickness_)
-        addTouch(pair, pair.kept_geometry.gap, xs);
+      addTouch(pair, xs);
     }
   }
   return covering;
@@ -349,53 +341,54 @@ void SelfCollision::keepWithinReach(int p, const double* xs)
     const bool reused = group[k].kept != 0;  // a pair looked at anew was marked not kept
     group[k].kept = held ? 2 : 1;
     group[k].kept_geometry = g;
-    group[k].surfaces = -1;
-    if (!held && g.gap < thickness_)
+    if (!held)
     {
-      addTouch(group[k], g.gap, xs);
-      report_.reused += reused;
+      addTouch(group[k], xs);
+      report_.reused += reused && g.gap < thickness_;
     }
   }
 }
 
 void SelfCollision::findTouches(const Eigen::VectorXd& x_start, const Eigen::VectorXd& x)
 {
-  touches_.clear();
   const double* xs = x.data();
   const int count = static_cast<int>(candidates_.size());
+  looking_.resize(count);
+  for (int p = 0; p < count; ++p)
+    looking_[p] = !groupSettled(p);
+  // A settled group's touches stay as they were found; the others' are found anew.
+  touches_.erase(std::remove_if(touches_.begin(), touches_.end(), [&](const Touch& t) { return looking_[t.p]; }),
+                 touches_.end());
+  const std::ptrdiff_t kept = static_cast<std::ptrdiff_t>(touches_.size());
   for (int p = 0; p < count; ++p)
   {
-    if (!groupSettled(p))
-    {
-      lookAtGroup(p, xs, x_start.data());
-      group_summary_[p].found = false;
-      summaryOf(p);  // while its pairs are at hand
-      if (group_changed_[p])
-        group_bound_[p].blocks[0] = -2;  // other pairs: their blocks are found again
-      group_changed_[p] = 0;
-      group_bound_[p].slack = -1.0;
+    if (!looking_[p])
       continue;
-    }
-    addOwnTouches(p, xs);
+    lookAtGroup(p, xs, x_start.data());
+    group_summary_[p].found = false;
+    summaryOf(p);  // while its pairs are at hand
+    if (group_changed_[p])
+      group_bound_[p].blocks[0] = -2;  // other pairs: their blocks are found again
+    group_changed_[p] = 0;
+    group_bound_[p].slack = -1.0;
   }
+  // In the groups' order, as the sweeps gather and scatter the particles.
+  std::inplace_merge(touches_.begin(), touches_.begin() + kept, touches_.end(),
+                     [](const Touch& a, const Touch& b) { return a.p < b.p; });
 }
 
-void SelfCollision::addOwnTouches(int p, const double* xs)
+void SelfCollision::measureTouches(const Eigen::VectorXd& x)
 {
-  for (OwnPair& own : summaryOf(p).own)
+  swept_.clear();
+  for (const Touch& t : touches_)
   {
-    Touch& touch = own.touch;
-    const double gap = relative(xs, touch).dot(touch.normalVector());
+    const double gap = relative(x.data(), t).dot(t.normalVector());
     if (!(gap < thickness_))
       continue;
-    if (own.surfaces != surfaces_)
-    {
-      Pair& pair = candidates_[p][own.k];
-      weigh(pair, xs);
-      own = OwnPair{own.k, pair.surfaces, touchOf(pair)};
-    }
-    pushTouch(touch, gap);
-    ++report_.reused;
+    swept_.push_back(t);
+    ++report_.contacts;
+    report_.closest_before = std::min(report_.closest_before, gap);
+    report_.reused += !looking_[t.p];
   }
 }
 
@@ -405,11 +398,15 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
 {
   report_ = SelfCollisionReport{};
   report_.closest_before = report_.closest_after = thickness_;
-  if (!checkSurfaces(contact) && !lookDue(x))
+  if (checkSurfaces(contact))
+    for (std::vector<Touch>* touches : {&touches_, &swept_})
+      for (Touch& touch : *touches)
+        weigh(touch, x.data());
+  if (!lookDue(x))
   {
     report_.looked = false;
-    report_.reused = static_cast<int>(touches_.size());
     sweep(x_start, x, v, dt);
+    report_.reused = report_.contacts;
     return;
   }
   const int particles = static_cast<int>(particle_of_.size());
@@ -428,13 +425,13 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
     listCandidates(x, moved_);
   findTouches(x_start, x);
   looked_at_ = x;
-  report_.contacts = static_cast<int>(touches_.size());
+  measureTouches(x);
   sweep(x_start, x, v, dt);
 }
 
 void SelfCollision::sweep(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double dt)
 {
-  if (touches_.empty())
+  if (swept_.empty())
     return;
   sweepPositions(x_start, x);
   sweepVelocities(v, dt);
@@ -514,7 +511,7 @@ bool SelfCollision::checkSurfaces(const Contact* contact)
     same_colliders = surface_active_[i] == contact->active(i) && surface_poses_[i].matrix() == contact->pose(i).matrix();
   if (same_colliders)
     return false;
-  ++surfaces_;  // every pair is weighed anew
+  // Every touch is weighed anew (correct).
   surface_normal_.assign(particle_of_.size(), Eigen::Vector3d::Zero());
   surface_travel_.assign(particle_of_.size(), std::numeric_limits<double>::quiet_NaN());
   surface_contact_ = contact != nullptr;
@@ -549,124 +546,126 @@ const Eigen::Vector3d& SelfCollision::surfaceOf(int slot, const double* x)
   return surface;
 }
 
-void SelfCollision::weigh(Pair& pair, const double* x)
+void SelfCollision::weigh(Touch& touch, const double* x)
 {
-  const int slots[4] = {pair.p, pair.c[0], pair.c[1], pair.c[2]};
-  const double weights[4] = {1.0, pair.kept_geometry.w[0], pair.kept_geometry.w[1], pair.kept_geometry.w[2]};
-  pair.sum = 0.0;
+  const int slots[4] = {touch.p, touch.c[0], touch.c[1], touch.c[2]};
+  const double weights[4] = {1.0, touch.w[0], touch.w[1], touch.w[2]};
+  const Eigen::Vector3d normal = touch.normalVector();
+  double sum = 0.0;
+  touch.shares = 0;
   for (int k = 0; k < 4; ++k)
-  {
-    const bool free = slots[k] >= 0 && std::abs(surfaceOf(slots[k], x).dot(pair.kept_geometry.normal)) <= 0.5;
-    pair.share[k] = free ? weights[k] : 0.0;
-    pair.sum += pair.share[k] * weights[k];
-  }
-  pair.surfaces = surfaces_;
+    if (slots[k] >= 0 && weights[k] != 0.0 && std::abs(surfaceOf(slots[k], x).dot(normal)) <= 0.5)
+    {
+      touch.shares |= 1 << k;
+      sum += weights[k] * weights[k];
+    }
+  touch.scale = sum > 0.0 ? static_cast<float>(1.0 / sum) : 0.0f;
 }
 
-inline void SelfCollision::addTouch(Pair& pair, double gap, const double* x)
-{
-  // The shares are kept with the closest point: its particles have travelled less than the reuse
-  // fraction since, as a collider's normal is kept for a particle.
-  if (pair.surfaces != surfaces_)
-    weigh(pair, x);
-  pushTouch(touchOf(pair), gap);
-}
-
-inline void SelfCollision::pushTouch(const Touch& touch, double gap)
-{
-  touches_.push_back(touch);
-  report_.closest_before = std::min(report_.closest_before, gap);
-}
-
-SelfCollision::Touch SelfCollision::touchOf(const Pair& pair)
+inline void SelfCollision::addTouch(const Pair& pair, const double* x)
 {
   const Geometry& g = pair.kept_geometry;
   Touch touch{pair.p,
               {pair.c[0], pair.c[1], pair.c[2]},
               {float(g.w[0]), float(g.w[1]), float(g.w[2])},
               {float(g.normal.x()), float(g.normal.y()), float(g.normal.z())},
-              float(pair.sum),
+              0.0f,
               0};
-  for (int k = 0; k < 4; ++k)
-    touch.shares |= pair.share[k] != 0.0 ? 1 << k : 0;
-  return touch;
+  weigh(touch, x);
+  touches_.push_back(touch);
 }
 
-inline bool SelfCollision::stirred(const Touch& touch, int sweep) const
+inline bool SelfCollision::stirred(const int* stirred, const Touch& touch, int sweep)
 {
-  return stirred_[touch.p] >= sweep - 1 || stirred_[touch.c[0]] >= sweep - 1 ||
-         (touch.c[1] >= 0 && (stirred_[touch.c[1]] >= sweep - 1 || stirred_[touch.c[2]] >= sweep - 1));
+  return stirred[touch.p] >= sweep - 1 || stirred[touch.c[0]] >= sweep - 1 ||
+         (touch.c[1] >= 0 && (stirred[touch.c[1]] >= sweep - 1 || stirred[touch.c[2]] >= sweep - 1));
 }
 
-void SelfCollision::stir(const Touch& touch, int sweep)
+inline void SelfCollision::stir(int* stirred, const Touch& touch, int sweep)
 {
-  stirred_[touch.p] = stirred_[touch.c[0]] = sweep;
+  stirred[touch.p] = stirred[touch.c[0]] = sweep;
   if (touch.c[1] >= 0)
-    stirred_[touch.c[1]] = stirred_[touch.c[2]] = sweep;
+    stirred[touch.c[1]] = stirred[touch.c[2]] = sweep;
 }
 
+// The sweeps read the members they need into locals first: the pushes write through a double
+// pointer, which the compiler must otherwise assume may change them, and reload them every pair.
 void SelfCollision::sweepPositions(const Eigen::VectorXd& x_start, Eigen::VectorXd& x)
 {
   double* const xs = x.data();
-  const int count = static_cast<int>(touches_.size());
+  const double* const starts = x_start.data();
+  const Touch* const touches = swept_.data();
+  const int count = static_cast<int>(swept_.size());
   touched_.assign(count, 0);
-  const double settled = settledDistance();
+  char* const touched = touched_.data();
   stirred_.assign(particle_of_.size(), -1);
+  int* const stirred_at = stirred_.data();
+  const double thickness = thickness_, friction = friction_, settled = settledDistance();
+  // Measured by the first sweep when the narrow phase did not run (measureTouches did when it did).
+  const bool measure = !report_.looked;
+  int contacts = 0;
+  double closest_before = report_.closest_before, closest_after = thickness;
   for (int sweep = 0; sweep < kSweeps; ++sweep)
   {
     ++report_.position_sweeps;
     double largest = 0.0;
-    report_.closest_after = thickness_;
+    closest_after = thickness;
     for (int k = 0; k < count; ++k)
     {
-      const Touch& t = touches_[k];
-      if (sweep > 0 && !stirred(t, sweep))
+      const Touch& t = touches[k];
+      if (sweep > 0 && !stirred(stirred_at, t, sweep))
         continue;
       // The gap along the pair's normal at the step's end: it moves by micrometres over the sweeps.
       const Eigen::Vector3d n = t.normalVector();
       const Eigen::Vector3d r = relative(xs, t);
       const double gap = r.dot(n);
-      if (sweep == 0 && !report_.looked && gap < thickness_)
+      if (sweep == 0 && measure && gap < thickness)
       {
-        ++report_.contacts;
-        report_.closest_before = std::min(report_.closest_before, gap);
+        ++contacts;
+        closest_before = std::min(closest_before, gap);
       }
-      if (gap >= thickness_ || t.sum <= 0.0)  // apart, or every particle of the pair held by a collider
+      if (gap >= thickness || t.scale == 0.0f)  // apart, or every particle of the pair held by a collider
       {
-        report_.closest_after = std::min(report_.closest_after, gap);
+        closest_after = std::min(closest_after, gap);
         continue;
       }
-      touched_[k] = 1;
+      touched[k] = 1;
       // Positions: push apart to the thickness, Coulomb on the pair's relative slip over the step with
       // the push as the normal bound (as the colliders).
-      const double push = thickness_ - gap;
+      const double push = thickness - gap;
       largest = std::max(largest, push);
-      const Eigen::Vector3d slip = r - relative(x_start.data(), t);
-      apply(xs, t, push * n + coulomb(slip - slip.dot(n) * n, friction_ * push));
+      const Eigen::Vector3d slip = r - relative(starts, t);
+      apply(xs, t, push * n + coulomb(slip - slip.dot(n) * n, friction * push));
       if (push > settled)
-        stir(t, sweep);
+        stir(stirred_at, t, sweep);
     }
     if (largest <= settled)
       break;
   }
+  report_.contacts += contacts;
+  report_.closest_before = closest_before;
+  report_.closest_after = closest_after;
 }
 
 void SelfCollision::sweepVelocities(Eigen::VectorXd& v, double dt)
 {
   double* const vs = v.data();
-  const int count = static_cast<int>(touches_.size());
-  const double settled = settledDistance();
+  const Touch* const touches = swept_.data();
+  const char* const touched = touched_.data();
+  const int count = static_cast<int>(swept_.size());
   stirred_.assign(particle_of_.size(), -1);
+  int* const stirred_at = stirred_.data();
+  const double friction = friction_, settled = settledDistance();
   for (int sweep = 0; sweep < kSweeps; ++sweep)
   {
     ++report_.velocity_sweeps;
     double largest = 0.0;
     for (int k = 0; k < count; ++k)
     {
-      if (!touched_[k])
+      if (!touched[k])
         continue;
-      const Touch& t = touches_[k];
-      if (sweep > 0 && !stirred(t, sweep))
+      const Touch& t = touches[k];
+      if (sweep > 0 && !stirred(stirred_at, t, sweep))
         continue;
       // Velocities: remove the approach, Coulomb on the relative tangential velocity.
       const Eigen::Vector3d n = t.normalVector();
@@ -676,9 +675,9 @@ void SelfCollision::sweepVelocities(Eigen::VectorXd& v, double dt)
         continue;
       largest = std::max(largest, approach);
       const Eigen::Vector3d tangential = velocity + approach * n;
-      apply(vs, t, approach * n + coulomb(tangential, friction_ * approach));
+      apply(vs, t, approach * n + coulomb(tangential, friction * approach));
       if (approach * dt > settled)
-        stir(t, sweep);
+        stir(stirred_at, t, sweep);
     }
     if (largest * dt <= settled)
       break;

@@ -35,8 +35,11 @@ void FullMethod::correctSelfCollision(SelfCollision& self, const Contact* contac
 {
   State& next = mutableNext();
   const Eigen::VectorXd& reference = freeReference();
-  contact_x_.noalias() = reference + next.q;
-  contact_start_.noalias() = reference + state().q;
+  if (!contact)  // else correctContacts left them at this step's end and start
+  {
+    contact_x_.noalias() = reference + next.q;
+    contact_start_.noalias() = reference + state().q;
+  }
   self.correct(contact_start_, contact_x_, next.v, settings_.time_step, contact);
   next.q.noalias() = contact_x_ - reference;
 }

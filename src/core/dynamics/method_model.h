@@ -164,7 +164,8 @@ public:
   // Per free particle of the grid: the collider it touched in the last step's correction, -1 none.
   virtual std::vector<int> touchedBy(const Contact& contact) const { return contact.report().touched_by; }
   // Corrects next() for self-collision, before commit(): `full` only (the Simulation refuses it for
-  // the modal methods; they throw std::logic_error).
+  // the modal methods; they throw std::logic_error). `contact`: the colliders whose correctContacts
+  // ran on this same next() just before (null: none).
   virtual void correctSelfCollision(SelfCollision& self, const Contact* contact);
 
 protected:
