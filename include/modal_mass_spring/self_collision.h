@@ -288,10 +288,14 @@ private:
   bool checkSurfaces(const Contact* contact);
   // The outward normal of the collider surface slot s lies on at x (zero when on none).
   const Eigen::Vector3d& surfaceOf(int s, const double* x);
-  // The Gauss-Seidel sweeps over the touches: positions pushed apart, then approaching velocities removed.
+  // The Gauss-Seidel sweeps over the touches: positions pushed apart, then approaching velocities
+  // removed (the first velocity sweep within the first position sweep; the rest after the position
+  // sweeps, the first of them starting from the largest approach it removed, `fastest`).
   void sweep(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double dt);
-  void sweepPositions(const Eigen::VectorXd& x_start, Eigen::VectorXd& x);
-  void sweepVelocities(Eigen::VectorXd& v, double dt);
+  void sweepVelocities(Eigen::VectorXd& v, double dt, double fastest);
+  // Removes the approach of the touch's relative velocity, with Coulomb friction on the tangential;
+  // returns the approach removed (0 when separating).
+  static double pushVelocity(double* vs, const Touch& t, double friction);
   // The pair's relative position (or velocity) among `values`: p less the corners c by their kept weights w.
   template <typename Weight>
   static Eigen::Vector3d relative(const double* values, int p, const int c[3], const Weight w[3]);
@@ -365,8 +369,9 @@ private:
   std::vector<Touch> touches_, swept_;
   std::vector<char> looking_;  // per slot: its group was looked at in this narrow phase
   Eigen::VectorXd looked_at_;  // the free positions when the narrow phase last ran (before the correction)
-  std::vector<char> touched_;
-  std::vector<int> stirred_;  // per slot: the last sweep that pushed it by more than the settled distance
+  std::vector<char> touched_;  // per touch swept: 0 apart, 1 pushed, 2 pushed and its velocity too in the first sweep
+  // Per slot: the last sweep that pushed it by more than the settled distance (positions, velocities).
+  std::vector<int> stirred_, velocity_stirred_;
   SelfCollisionReport report_;
   // Per slot: the outward normal of the collider surface it lies on (zero when on none), and its
   // travel when that was found (NaN: not yet); the colliders then (whether given, poses, active).

@@ -429,13 +429,6 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
   sweep(x_start, x, v, dt);
 }
 
-void SelfCollision::sweep(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double dt)
-{
-  if (swept_.empty())
-    return;
-  sweepPositions(x_start, x);
-  sweepVelocities(v, dt);
-}
 
 bool SelfCollision::lookDue(const Eigen::VectorXd& x) const
 {
@@ -588,23 +581,43 @@ inline void SelfCollision::stir(int* stirred, const Touch& touch, int sweep)
     stirred[touch.c[1]] = stirred[touch.c[2]] = sweep;
 }
 
+inline double SelfCollision::pushVelocity(double* vs, const Touch& t, double friction)
+{
+  // Remove the approach, Coulomb on the relative tangential velocity.
+  const Eigen::Vector3d n = t.normalVector();
+  const Eigen::Vector3d velocity = relative(vs, t);
+  const double approach = -velocity.dot(n);
+  if (approach <= 0.0)
+    return 0.0;
+  const Eigen::Vector3d tangential = velocity + approach * n;
+  apply(vs, t, approach * n + coulomb(tangential, friction * approach));
+  return approach;
+}
+
 // The sweeps read the members they need into locals first: the pushes write through a double
 // pointer, which the compiler must otherwise assume may change them, and reload them every pair.
-void SelfCollision::sweepPositions(const Eigen::VectorXd& x_start, Eigen::VectorXd& x)
+// The first velocity sweep is folded into the first position sweep: a touch's velocities are pushed
+// as soon as its position is (they do not depend on the positions), while the touch is at hand.
+void SelfCollision::sweep(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, Eigen::VectorXd& v, double dt)
 {
+  if (swept_.empty())
+    return;
   double* const xs = x.data();
+  double* const vs = v.data();
   const double* const starts = x_start.data();
   const Touch* const touches = swept_.data();
   const int count = static_cast<int>(swept_.size());
   touched_.assign(count, 0);
   char* const touched = touched_.data();
   stirred_.assign(particle_of_.size(), -1);
+  velocity_stirred_.assign(particle_of_.size(), -1);
   int* const stirred_at = stirred_.data();
+  int* const velocity_stirred_at = velocity_stirred_.data();
   const double thickness = thickness_, friction = friction_, settled = settledDistance();
   // Measured by the first sweep when the narrow phase did not run (measureTouches did when it did).
   const bool measure = !report_.looked;
   int contacts = 0;
-  double closest_before = report_.closest_before, closest_after = thickness;
+  double closest_before = report_.closest_before, closest_after = thickness, fastest = 0.0;
   for (int sweep = 0; sweep < kSweeps; ++sweep)
   {
     ++report_.position_sweeps;
@@ -629,7 +642,6 @@ void SelfCollision::sweepPositions(const Eigen::VectorXd& x_start, Eigen::Vector
         closest_after = std::min(closest_after, gap);
         continue;
       }
-      touched[k] = 1;
       // Positions: push apart to the thickness, Coulomb on the pair's relative slip over the step with
       // the push as the normal bound (as the colliders).
       const double push = thickness - gap;
@@ -638,6 +650,16 @@ void SelfCollision::sweepPositions(const Eigen::VectorXd& x_start, Eigen::Vector
       apply(xs, t, push * n + coulomb(slip - slip.dot(n) * n, friction * push));
       if (push > settled)
         stir(stirred_at, t, sweep);
+      if (sweep > 0)
+      {
+        touched[k] = std::max<char>(touched[k], 1);  // its first velocity push still to come
+        continue;
+      }
+      touched[k] = 2;
+      const double approach = pushVelocity(vs, t, friction);
+      fastest = std::max(fastest, approach);
+      if (approach * dt > settled)
+        stir(velocity_stirred_at, t, 0);
     }
     if (largest <= settled)
       break;
@@ -645,37 +667,31 @@ void SelfCollision::sweepPositions(const Eigen::VectorXd& x_start, Eigen::Vector
   report_.contacts += contacts;
   report_.closest_before = closest_before;
   report_.closest_after = closest_after;
+  sweepVelocities(v, dt, fastest);
 }
 
-void SelfCollision::sweepVelocities(Eigen::VectorXd& v, double dt)
+void SelfCollision::sweepVelocities(Eigen::VectorXd& v, double dt, double fastest)
 {
   double* const vs = v.data();
   const Touch* const touches = swept_.data();
   const char* const touched = touched_.data();
   const int count = static_cast<int>(swept_.size());
-  stirred_.assign(particle_of_.size(), -1);
-  int* const stirred_at = stirred_.data();
+  int* const stirred_at = velocity_stirred_.data();
   const double friction = friction_, settled = settledDistance();
   for (int sweep = 0; sweep < kSweeps; ++sweep)
   {
     ++report_.velocity_sweeps;
-    double largest = 0.0;
+    double largest = sweep == 0 ? fastest : 0.0;
     for (int k = 0; k < count; ++k)
     {
-      if (!touched[k])
+      // The first sweep: the touches a later position sweep touched first.
+      if (touched[k] == 0 || (sweep == 0 && touched[k] == 2))
         continue;
       const Touch& t = touches[k];
       if (sweep > 0 && !stirred(stirred_at, t, sweep))
         continue;
-      // Velocities: remove the approach, Coulomb on the relative tangential velocity.
-      const Eigen::Vector3d n = t.normalVector();
-      const Eigen::Vector3d velocity = relative(vs, t);
-      const double approach = -velocity.dot(n);
-      if (approach <= 0.0)
-        continue;
+      const double approach = pushVelocity(vs, t, friction);
       largest = std::max(largest, approach);
-      const Eigen::Vector3d tangential = velocity + approach * n;
-      apply(vs, t, approach * n + coulomb(tangential, friction * approach));
       if (approach * dt > settled)
         stir(stirred_at, t, sweep);
     }
