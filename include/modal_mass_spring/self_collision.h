@@ -127,10 +127,11 @@ public:
   // closest point's (docs/design.md, "Self-collision").
   static constexpr double kReuse = 0.01;
   // The narrow phase (and the listing) runs only once a particle has moved this fraction of the
-  // thickness since it last ran (or the colliders changed); the steps between sweep the touches it
-  // found, with their closest points and normals. A pair it did not find was no closer than the
-  // thickness then, and its gap has closed by at most twice this fraction since, beyond what one
-  // step closes (docs/design.md, "Self-collision").
+  // thickness since it last ran; the steps between sweep the touches it found, with their kept
+  // closest points and normals, whose particles may then have moved this fraction beyond the reuse
+  // fraction. A pair it did not find was no closer than the thickness then (within the kept closest
+  // points' tolerance), and its gap has closed by at most twice this fraction since
+  // (docs/design.md, "Self-collision", "The lapse").
   static constexpr double kLapse = 0.05;
 
 private:
@@ -167,9 +168,9 @@ private:
   // and normal, and its particles' shares of a push (weigh). The touches are kept from step to step:
   // a group's are found anew only when it is looked at, and they are weighed again when the surfaces
   // change. Those closer than the thickness when the narrow phase ran are swept (swept_) until it
-  // runs again; the sweeps push those closer than the thickness then. In single precision, 48 bytes, so that
-  // a resting fold's touches stay in the cache over the sweeps: the weights' rounding moves a contact
-  // point by less than 1e-7 m in a cloth a metre wide.
+  // runs again; the sweeps push those closer than the thickness then. In single precision, 48 bytes,
+  // so that a resting fold's touches stay in the cache over the sweeps: the weights' rounding moves
+  // a contact point by about 1e-7 of the cell's size, wherever the cloth is (see relative).
   struct Touch
   {
     int p;
@@ -184,7 +185,9 @@ private:
   void addTouch(const Pair& pair, const double* x);
   // Which of the touch's particles take a share of a push along its normal (its weight, 1 for p,
   // times its inverse mass relative to a free particle's: none on a collider when the push is along
-  // the surface's normal, more than 60 degrees from the surface), and its scale.
+  // the surface's normal, more than 60 degrees from the surface; none for a weight of at most
+  // kLeastShare, which would scale the push up without bound when no other shares), and its scale.
+  static constexpr double kLeastShare = 1e-6;
   void weigh(Touch& touch, const double* x);
   // Lists the candidate pairs closer than the thickness plus twice the skin at positions x: every
   // pair when `moved` is empty, else those of the particles in it and of the triangles at them.
@@ -367,6 +370,7 @@ private:
   std::vector<double> travel_;            // per slot: the length of its path over those positions since the start
   std::vector<char> is_moved_, is_anchor_listed_, is_near_moved_;
   std::vector<Touch> touches_, swept_;
+  bool weights_stale_ = false;  // the colliders moved since touches_ were weighed (swept_ are weighed at once)
   std::vector<char> looking_;  // per slot: its group was looked at in this narrow phase
   Eigen::VectorXd looked_at_;  // the free positions when the narrow phase last ran (before the correction)
   std::vector<char> touched_;  // per touch swept: 0 apart, 1 pushed, 2 pushed and its velocity too in the first sweep

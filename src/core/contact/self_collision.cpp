@@ -113,9 +113,12 @@ SelfCollision::Geometry SelfCollision::geometry(const Pair& pair, const double* 
 template <typename Weight>
 inline Eigen::Vector3d SelfCollision::relative(const double* values, int p, const int c[3], const Weight w[3])
 {
-  Eigen::Vector3d r = pointAt(values, p) - w[0] * pointAt(values, c[0]);
+  // Relative to corner 0 (w[0] = 1 - w[1] - w[2]): the weights' rounding then scales the cell's
+  // size, not the positions' distance from the origin.
+  const Eigen::Vector3d c0 = pointAt(values, c[0]);
+  Eigen::Vector3d r = pointAt(values, p) - c0;
   if (c[1] >= 0)
-    r -= w[1] * pointAt(values, c[1]) + w[2] * pointAt(values, c[2]);
+    r -= w[1] * (pointAt(values, c[1]) - c0) + w[2] * (pointAt(values, c[2]) - c0);
   return r;
 }
 
@@ -223,8 +226,8 @@ bool SelfCollision::groupSettled(int p)
     slack = std::min(slack, left);
   }
   // Each of a pair's (at most four) particles travels no farther than its block. No bound when p's
-  // own block went farther than it allows in the last step: it would not hold the next (a falling
-  // cloth's groups), and finding the blocks costs more than it saves.
+  // own block went farther than it allows since the last narrow phase: it would not hold to the next
+  // (a falling cloth's groups), and finding the blocks costs more than it saves.
   bound.slack = -1.0;
   if (0.25 * slack <= block_step_[block_[p]])
     return true;
@@ -398,12 +401,14 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
 {
   report_ = SelfCollisionReport{};
   report_.closest_before = report_.closest_after = thickness_;
-  if (checkSurfaces(contact))
-    for (std::vector<Touch>* touches : {&touches_, &swept_})
-      for (Touch& touch : *touches)
-        weigh(touch, x.data());
+  // A moved collider weighs the touches swept now, and the others at the next narrow phase.
+  const bool colliders_moved = checkSurfaces(contact);
+  weights_stale_ = weights_stale_ || colliders_moved;
   if (!lookDue(x))
   {
+    if (colliders_moved)
+      for (Touch& touch : swept_)
+        weigh(touch, x.data());
     report_.looked = false;
     sweep(x_start, x, v, dt);
     report_.reused = report_.contacts;
@@ -416,7 +421,7 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
     // After positions that were not finite (a step that diverged, its state then put back): every
     // margin is forgotten with a listing anew.
     travel_.assign(particles, 0.0);
-    surface_travel_.clear();
+    surface_travel_.assign(particles, std::numeric_limits<double>::quiet_NaN());  // every surface found again
     all = true;
     moved_.clear();
   }
@@ -424,6 +429,10 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
   if (report_.relisted > 0)
     listCandidates(x, moved_);
   findTouches(x_start, x);
+  if (weights_stale_)
+    for (Touch& touch : touches_)
+      weigh(touch, x.data());
+  weights_stale_ = false;
   looked_at_ = x;
   measureTouches(x);
   sweep(x_start, x, v, dt);
@@ -547,7 +556,7 @@ void SelfCollision::weigh(Touch& touch, const double* x)
   double sum = 0.0;
   touch.shares = 0;
   for (int k = 0; k < 4; ++k)
-    if (slots[k] >= 0 && weights[k] != 0.0 && std::abs(surfaceOf(slots[k], x).dot(normal)) <= 0.5)
+    if (slots[k] >= 0 && weights[k] > kLeastShare && std::abs(surfaceOf(slots[k], x).dot(normal)) <= 0.5)
     {
       touch.shares |= 1 << k;
       sum += weights[k] * weights[k];

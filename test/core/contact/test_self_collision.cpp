@@ -464,6 +464,43 @@ TEST(SelfCollision, ANarrowPhaseThatWaitsForTheLapseKeepsTheLayersAsOneEveryStep
   EXPECT_LT((waits.points() - every.points()).colwise().norm().maxCoeff(), thickness);
 }
 
+// Positions that are not finite (a diverged step's, corrected before the simulation puts its last
+// good state back), then finite ones again: the correction finds everything anew, with the table's
+// surfaces, and corrects as a fresh one does; the step that was not finite leaves the others finite.
+TEST(SelfCollision, AfterPositionsNotFiniteItCorrectsAsAFreshOne)
+{
+  const GridParams g = towel(26, 10, 0.02);
+  const double thickness = 0.01, flat = 10 * g.spacing, rho = 0.05, dt = 5e-4;
+  Simulation sim(g, onTableUncorrected(dt, thickness));
+  place(sim, folded(sim.grid(), flat, rho));
+  const Grid& grid = sim.grid();
+  const Eigen::VectorXd reference = grid.gatherFree(sim.linearizationPositions());
+  SelfCollision kept(grid, thickness, 0.5);
+  for (int k = 0; k < 2000; ++k)  // to rest on the lower half
+  {
+    const Eigen::VectorXd start = grid.gatherFree(sim.positions());
+    ASSERT_FALSE(sim.step().diverged);
+    Eigen::VectorXd x = grid.gatherFree(sim.positions()), v = sim.velocity();
+    kept.correct(start, x, v, dt, sim.contact());
+    sim.setPhysicalState(x - reference, v);
+  }
+  const Eigen::VectorXd start = grid.gatherFree(sim.positions());
+  Eigen::VectorXd broken = start, v = sim.velocity();
+  broken[3 * (grid.numFreeDofs() / 6)] = std::numeric_limits<double>::quiet_NaN();
+  kept.correct(start, broken, v, dt, sim.contact());
+  ASSERT_FALSE(sim.step().diverged);
+  const Eigen::VectorXd end = grid.gatherFree(sim.positions());
+  Eigen::VectorXd x = end, x_fresh = end, v_kept = sim.velocity(), v_fresh = sim.velocity();
+  kept.correct(start, x, v_kept, dt, sim.contact());
+  EXPECT_TRUE(kept.report().looked);
+  SelfCollision fresh(grid, thickness, 0.5);
+  fresh.correct(start, x_fresh, v_fresh, dt, sim.contact());
+  EXPECT_GT(fresh.report().contacts, 100);
+  EXPECT_EQ(kept.report().contacts, fresh.report().contacts);
+  EXPECT_TRUE(x.allFinite() && v_kept.allFinite());
+  EXPECT_LT((x - x_fresh).cwiseAbs().maxCoeff(), 2.0 * SelfCollision::kReuse * thickness);
+}
+
 TEST(SelfCollision, BadParametersAreRefusedByName)
 {
   const GridParams g = towel(10, 10, 0.02);
