@@ -102,7 +102,6 @@ public:
   {
     thickness_ = thickness;
     built_at_.resize(0);  // the candidates were listed for the old thickness (and the summaries' allowances found)
-    looked_at_.resize(0);
   }
   void setFriction(double friction) { friction_ = friction; }
 
@@ -372,7 +371,6 @@ private:
   std::vector<Touch> touches_, swept_;
   bool weights_stale_ = false;  // the colliders moved since touches_ were weighed (swept_ are weighed at once)
   std::vector<char> looking_;  // per slot: its group was looked at in this narrow phase
-  Eigen::VectorXd looked_at_;  // the free positions when the narrow phase last ran (before the correction)
   std::vector<char> touched_;  // per touch swept: 0 apart, 1 pushed, 2 pushed and its velocity too in the first sweep
   // Per slot: the last sweep that pushed it by more than the settled distance (positions, velocities).
   std::vector<int> stirred_, velocity_stirred_;

@@ -433,20 +433,19 @@ void SelfCollision::correct(const Eigen::VectorXd& x_start, Eigen::VectorXd& x, 
     for (Touch& touch : touches_)
       weigh(touch, x.data());
   weights_stale_ = false;
-  looked_at_ = x;
   measureTouches(x);
   sweep(x_start, x, v, dt);
 }
 
-
 bool SelfCollision::lookDue(const Eigen::VectorXd& x) const
 {
-  if (!(lapse_ > 0.0) || looked_at_.size() != x.size())
+  // last_x_: where the narrow phase last ran; no listing yet (or a new thickness): due.
+  if (!(lapse_ > 0.0) || last_x_.size() != x.size() || built_at_.size() != x.size())
     return true;
   const double limit2 = lapse_ * lapse_ * thickness_ * thickness_;
   for (Eigen::Index i = 0; i < x.size(); i += 3)
   {
-    const double dx = x[i] - looked_at_[i], dy = x[i + 1] - looked_at_[i + 1], dz = x[i + 2] - looked_at_[i + 2];
+    const double dx = x[i] - last_x_[i], dy = x[i + 1] - last_x_[i + 1], dz = x[i + 2] - last_x_[i + 2];
     if (!(dx * dx + dy * dy + dz * dz <= limit2))  // NaN too
       return true;
   }
@@ -513,7 +512,7 @@ bool SelfCollision::checkSurfaces(const Contact* contact)
     same_colliders = surface_active_[i] == contact->active(i) && surface_poses_[i].matrix() == contact->pose(i).matrix();
   if (same_colliders)
     return false;
-  // Every touch is weighed anew (correct).
+  // The touches are weighed anew (correct).
   surface_normal_.assign(particle_of_.size(), Eigen::Vector3d::Zero());
   surface_travel_.assign(particle_of_.size(), std::numeric_limits<double>::quiet_NaN());
   surface_contact_ = contact != nullptr;
