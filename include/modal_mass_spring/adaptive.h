@@ -111,8 +111,10 @@ private:
   int futile_returns_ = 0;           // returns in a row that fell back at their first check
   static constexpr int kMaxBackOff = 6;
   Eigen::VectorXd handle_reference_;  // the handle dofs' positions at zero displacement
-  std::shared_ptr<const Eigen::VectorXd> recorded_force_;  // the external force the last motion kept
-  long recorded_force_changes_ = -1;                       // and Simulation::externalForceChanges() then
+  // The external force the simulation holds (the last motion kept, or the last applied), and
+  // Simulation::externalForceChanges() then.
+  std::shared_ptr<const Eigen::VectorXd> recorded_force_;
+  long recorded_force_changes_ = -1;
 };
 
 }  // namespace modal_mass_spring

@@ -125,8 +125,11 @@ FullMethod::FullMethod(Method method, const LinearizedGrid& linearized, const In
 MassDamping FullMethod::massDamping(double alpha, double beta) const
 {
   // Rayleigh damping with the constant K of the linearization point. Without beta, K's pattern of
-  // zeros would go into every product with C and into the implicit inertia (its blocks, J p).
-  SparseMatrix damping = alpha * diagonalMatrix(lin_.mass) + beta * lin_.stiffness;
+  // zeros would go into every product with C and into the implicit inertia (its blocks, J p); nor is
+  // the sum formed (it was most of a switch to `full`: docs/results.md, "The adaptive method").
+  SparseMatrix damping = alpha * diagonalMatrix(lin_.mass);
+  if (beta != 0.0)
+    damping = damping + beta * lin_.stiffness;
   damping.prune(0.0);
   return MassDamping{lin_.mass, damping};
 }
