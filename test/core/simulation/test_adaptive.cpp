@@ -43,6 +43,16 @@ AdaptiveSettings stepsOf5ms()
   return adaptiveSettings(p);
 }
 
+// Settings whose first check fails (a tolerance no estimate meets): `full` from the start, the
+// steps before it taken again.
+AdaptiveSettings fullFromTheStart(Method reduced)
+{
+  AdaptiveSettings settings = stepsOf5ms();
+  settings.reduced = reduced;
+  settings.tolerance = 1e-15;
+  return settings;
+}
+
 // The top row's positions at step k of a motion `move(start, k)`.
 using Motion = std::function<Eigen::VectorXd(const Eigen::VectorXd& start, int k)>;
 
@@ -237,10 +247,7 @@ TEST(Adaptive, AFallBackRetakesEachStepWithItsExternalForce)
   Simulation full(topRowHeld(), heldParams(Method::Full, BasisKind::LinearModes));
   Simulation unpushed(topRowHeld(), heldParams(Method::Full, BasisKind::LinearModes));
   Simulation adaptive_sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
-  AdaptiveSettings settings = stepsOf5ms();
-  settings.reduced = Method::Physical;
-  settings.tolerance = 1e-15;  // its first check fails: `full` from the start
-  AdaptiveStepper adaptive(adaptive_sim, settings);
+  AdaptiveStepper adaptive(adaptive_sim, fullFromTheStart(Method::Physical));
   const Eigen::VectorXd none = Eigen::VectorXd::Zero(full.externalForce().size());
   Eigen::VectorXd push = none;
   push[3 * 95 + 1] = 0.5;  // N on a particle of the bottom row, along y
@@ -265,10 +272,7 @@ TEST(Adaptive, AnImplicitFallBackRetakesTheStepsAsFullTakesThem)
 {
   Simulation full(topRowHeld(), heldParams(Method::Full, BasisKind::LinearModes));
   Simulation adaptive_sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
-  AdaptiveSettings settings = stepsOf5ms();
-  settings.reduced = Method::Physical;
-  settings.tolerance = 1e-15;  // its first check fails: `full` from the start
-  AdaptiveStepper adaptive(adaptive_sim, settings);
+  AdaptiveStepper adaptive(adaptive_sim, fullFromTheStart(Method::Physical));
   run(full, turn, 60);
   run(adaptive_sim, turn, 60, &adaptive);
   EXPECT_EQ(adaptive.reducedShare(), 0.0);
@@ -376,10 +380,7 @@ TEST(Adaptive, AFallBackOntoATableRetakesTheStepsAsFullTakesThem)
   s.method = Method::Coarse;
   s.coarse_cols = 4;
   Simulation adaptive_sim(g, s);
-  AdaptiveSettings settings = stepsOf5ms();
-  settings.reduced = Method::Coarse;
-  settings.tolerance = 1e-15;  // its first check fails: `full` from the start
-  AdaptiveStepper adaptive(adaptive_sim, settings);
+  AdaptiveStepper adaptive(adaptive_sim, fullFromTheStart(Method::Coarse));
   for (int k = 1; k <= 200; ++k)
   {
     ASSERT_FALSE(full.step().diverged);
