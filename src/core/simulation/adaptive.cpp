@@ -94,8 +94,9 @@ void AdaptiveStepper::apply(const Motion& m)
   for (size_t i = 0; i < m.colliders.size(); ++i)
     if (m.active[i])
       sim_.setColliderPose(static_cast<int>(i), m.colliders[i]);
-  // Not when the simulation holds that force already (recorded, unchanged since): setting it
-  // evaluates the energy twice, as much as a step of a small grid.
+  // Not when the simulation holds that force already (recorded, unchanged since): setting a force
+  // starts the integrator afresh from the state's forces, and the implicit one would no longer take
+  // the steps as `full` did; it also evaluates the energy twice, as much as a step of a small grid.
   if (m.external_force != recorded_force_ || sim_.externalForceChanges() != recorded_force_changes_)
   {
     sim_.setExternalForce(*m.external_force);
