@@ -123,6 +123,18 @@ SimulationParams onTableUncorrected(double dt, double thickness)
   return s;
 }
 
+// One step of `sim`, its end corrected by `self` (after the table), the simulation going on from
+// that correction.
+void stepCorrectedBy(Simulation& sim, SelfCollision& self, double dt)
+{
+  const Grid& grid = sim.grid();
+  const Eigen::VectorXd start = grid.gatherFree(sim.positions());
+  ASSERT_FALSE(sim.step().diverged);
+  Eigen::VectorXd x = grid.gatherFree(sim.positions()), v = sim.velocity();
+  self.correct(start, x, v, dt, sim.contact());
+  sim.setPhysicalState(x - grid.gatherFree(sim.linearizationPositions()), v);
+}
+
 }  // namespace
 
 TEST(SelfCollision, PairsMoreThanTwoSpringsApartAreThoseOfChebyshevDistanceAboveTwo)
@@ -436,21 +448,13 @@ TEST(SelfCollision, ANarrowPhaseThatWaitsForTheLapseKeepsTheLayersAsOneEveryStep
   place(waits, folded(waits.grid(), flat, rho));
   place(every, folded(every.grid(), flat, rho));
   const Grid& grid = waits.grid();
-  const Eigen::VectorXd reference = grid.gatherFree(waits.linearizationPositions());
   SelfCollision lapsed(grid, thickness, 0.5), looking(grid, thickness, 0.5, SelfPrimitive::Triangles, 0.0);
-  auto step = [&](Simulation& sim, SelfCollision& self) {
-    const Eigen::VectorXd start = grid.gatherFree(sim.positions());
-    EXPECT_FALSE(sim.step().diverged);
-    Eigen::VectorXd x = grid.gatherFree(sim.positions()), v = sim.velocity();
-    self.correct(start, x, v, dt, sim.contact());
-    sim.setPhysicalState(x - reference, v);
-  };
   int skipped = 0;
   double closest = std::numeric_limits<double>::infinity();
   for (int k = 0; k < 2000; ++k)
   {
-    step(waits, lapsed);
-    step(every, looking);
+    stepCorrectedBy(waits, lapsed, dt);
+    stepCorrectedBy(every, looking, dt);
     skipped += !lapsed.report().looked;
     closest = std::min(closest, closestSeparatedDistance(grid, waits.positions(), thickness));
   }
@@ -474,16 +478,9 @@ TEST(SelfCollision, AfterPositionsNotFiniteItCorrectsAsAFreshOne)
   Simulation sim(g, onTableUncorrected(dt, thickness));
   place(sim, folded(sim.grid(), flat, rho));
   const Grid& grid = sim.grid();
-  const Eigen::VectorXd reference = grid.gatherFree(sim.linearizationPositions());
   SelfCollision kept(grid, thickness, 0.5);
   for (int k = 0; k < 2000; ++k)  // to rest on the lower half
-  {
-    const Eigen::VectorXd start = grid.gatherFree(sim.positions());
-    ASSERT_FALSE(sim.step().diverged);
-    Eigen::VectorXd x = grid.gatherFree(sim.positions()), v = sim.velocity();
-    kept.correct(start, x, v, dt, sim.contact());
-    sim.setPhysicalState(x - reference, v);
-  }
+    stepCorrectedBy(sim, kept, dt);
   const Eigen::VectorXd start = grid.gatherFree(sim.positions());
   Eigen::VectorXd broken = start, v = sim.velocity();
   broken[3 * (grid.numFreeDofs() / 6)] = std::numeric_limits<double>::quiet_NaN();
