@@ -40,6 +40,10 @@ struct AdaptiveSettings
   // the distance grows before the indicator shows it (docs/results.md, "The adaptive method").
   double safe_share = 1.0 / 3.0;
   int max_rollback_checks = 10;  // and never more checks back than this: the motions kept are bounded
+  // A check far from a switch (reduced: within safe_share of the tolerance; `full`: more than
+  // twice the tolerance from the span, or touching a collider) doubles the steps to the next, up
+  // to this many times check_steps; any other check, and a switch, resets them to check_steps.
+  int max_check_stretch = 4;
 };
 
 // The error indicator's calibration for method `reduced`: the distance to `full` it stands for per
@@ -53,7 +57,7 @@ AdaptiveSettings adaptiveSettings(const SimulationParams& params);
 // Throws std::invalid_argument naming a setting out of its range: a tolerance not positive and
 // finite, a dwell negative or not finite, check_steps < 1, a reduced method that is `full` or
 // `linear` (whose forces do not see the span's error), an indicator_scale not positive, a safe_share
-// outside (0, 1], max_rollback_checks < 1.
+// outside (0, 1], max_rollback_checks or max_check_stretch < 1.
 void validateAdaptiveSettings(const AdaptiveSettings& settings);
 
 class AdaptiveStepper
@@ -64,10 +68,11 @@ public:
   // One step of the active method, then the check when one is due (and the switch it calls for).
   StepResult step();
   bool reduced() const { return sim_.method() != Method::Full; }
-  // The share of the steps taken so far in the reduced method, the switches, the last check's
+  // The share of the steps taken so far in the reduced method, the switches, the checks, the last check's
   // estimate (m: the indicator times its scale while reduced, the distance to the span under full).
   double reducedShare() const { return steps_ > 0 ? static_cast<double>(reduced_steps_) / steps_ : 1.0; }
   int switches() const { return switches_; }
+  int checks() const { return checks_; }
   double lastEstimate() const { return last_estimate_; }
   // Why the last switch happened (empty before the first).
   const std::string& lastSwitch() const { return last_switch_; }
@@ -83,7 +88,8 @@ private:
     std::vector<bool> active;
     std::shared_ptr<const Eigen::VectorXd> external_force;
   };
-  Motion motion();
+  // Records the motion of the step just taken (since_check_).
+  void record();
   void apply(const Motion& m);
   // Back to the checkpoint, then the steps since again under `full`.
   StepResult fallBack(std::ostringstream& why);
@@ -92,6 +98,8 @@ private:
   // each return in a row that fell back at its first check: a coarse grid left within its span drifts
   // to its own hanging shape within a check, and going back and forth costs both methods' steps.
   double dwell() const;
+  // The next check after this one: `far` from a switch, twice as many steps (up to the stretch), else check_steps.
+  void scheduleNextCheck(bool far);
   // How deep the particle deepest inside a collider is (m; 0: none, or no colliders).
   double insideColliders() const;
   // Whether a particle touched a collider in the last step.
@@ -100,13 +108,16 @@ private:
   Simulation& sim_;
   AdaptiveSettings settings_;
   long steps_ = 0, reduced_steps_ = 0;
-  int switches_ = 0;
+  int switches_ = 0, checks_ = 0;
   double last_estimate_ = 0.0;
   double within_since_ = -1.0;  // under full: the time the state came within tolerance of the span (-1: not)
   std::string last_switch_;
   SimulationState checkpoint_;       // the reduced state at the last safe check
-  std::vector<Motion> since_check_;  // the motions of the reduced steps since
+  std::vector<Motion> since_check_;  // the motions of the reduced steps since: the first recorded_
+  size_t recorded_ = 0;              // (the storage kept: up to max_check_stretch checks' worth of motions)
   int checks_since_ = 0;             // checks passed since it
+  int check_interval_ = 0;           // steps from a check to the next (settings_.max_check_stretch)
+  long next_check_ = 0;              // the step count at which the next check is due
   bool first_check_ = false;         // the next check is the first since a return to the reduced method
   int futile_returns_ = 0;           // returns in a row that fell back at their first check
   static constexpr int kMaxBackOff = 6;

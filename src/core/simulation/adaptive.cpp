@@ -50,6 +50,8 @@ void validateAdaptiveSettings(const AdaptiveSettings& s)
     rejectParameter("safe_share", s.safe_share, "must be in (0, 1]");
   if (s.max_rollback_checks < 1)
     rejectParameter("max_rollback_checks", s.max_rollback_checks, "must be an integer >= 1");
+  if (s.max_check_stretch < 1)
+    rejectParameter("max_check_stretch", s.max_check_stretch, "must be an integer >= 1");
 }
 
 AdaptiveStepper::AdaptiveStepper(Simulation& sim, const AdaptiveSettings& settings) : sim_(sim), settings_(settings)
@@ -61,23 +63,34 @@ AdaptiveStepper::AdaptiveStepper(Simulation& sim, const AdaptiveSettings& settin
   if (sim_.handleMotion().displacement.size() > 0)
     handle_reference_ -= sim_.handleMotion().displacement;
   checkpoint_ = sim_.saveState();
+  check_interval_ = settings_.check_steps;
+  next_check_ = check_interval_;
 }
 
-AdaptiveStepper::Motion AdaptiveStepper::motion()
+void AdaptiveStepper::record()
 {
   if (!recorded_force_ || recorded_force_changes_ != sim_.externalForceChanges())
   {
     recorded_force_ = std::make_shared<const Eigen::VectorXd>(sim_.externalForce());
     recorded_force_changes_ = sim_.externalForceChanges();
   }
-  Motion m{sim_.handleMotion(), sim_.frameMotion(), {}, {}, recorded_force_};
+  if (recorded_ == since_check_.size())
+    since_check_.emplace_back();
+  // Over the one recorded there before: the same sizes, so no allocation.
+  Motion& m = since_check_[recorded_++];
+  m.handles.displacement = sim_.handleMotion().displacement;
+  m.handles.velocity = sim_.handleMotion().velocity;
+  m.handles.acceleration = sim_.handleMotion().acceleration;
+  m.frame = sim_.frameMotion();
+  m.colliders.clear();
+  m.active.clear();
   if (const Contact* contact = sim_.contact())
     for (int i = 0; i < static_cast<int>(contact->colliders().size()); ++i)
     {
       m.colliders.push_back(contact->pose(i));
       m.active.push_back(contact->active(i));
     }
-  return m;
+  m.external_force = recorded_force_;
 }
 
 void AdaptiveStepper::apply(const Motion& m)
@@ -115,11 +128,18 @@ StepResult AdaptiveStepper::step()
   if (was_reduced)
   {
     ++reduced_steps_;
-    since_check_.push_back(motion());
+    record();
   }
-  if (steps_ % settings_.check_steps == 0)
+  if (steps_ >= next_check_)
     result = check();
   return result;
+}
+
+void AdaptiveStepper::scheduleNextCheck(bool far)
+{
+  const long longest = static_cast<long>(settings_.max_check_stretch) * settings_.check_steps;
+  check_interval_ = far ? static_cast<int>(std::min<long>(2L * check_interval_, longest)) : settings_.check_steps;
+  next_check_ = steps_ + check_interval_;
 }
 
 double AdaptiveStepper::insideColliders() const
@@ -150,22 +170,23 @@ StepResult AdaptiveStepper::fallBack(std::ostringstream& why)
   sim_.restoreState(checkpoint_);
   sim_.setMethod(Method::Full);
   StepResult result;
-  for (const Motion& m : since_check_)
+  for (size_t k = 0; k < recorded_; ++k)
   {
-    apply(m);
+    apply(since_check_[k]);
     result = sim_.step();
     --reduced_steps_;
     if (result.diverged)
       break;
   }
-  why << "; its last " << since_check_.size() << " steps taken again under full";
-  since_check_.clear();
+  why << "; its last " << recorded_ << " steps taken again under full";
+  recorded_ = 0;
   checks_since_ = 0;
   return result;
 }
 
 StepResult AdaptiveStepper::check()
 {
+  ++checks_;
   std::ostringstream why;
   StepResult result;
   if (reduced())
@@ -179,13 +200,14 @@ StepResult AdaptiveStepper::check()
     {
       if (first_check)
         futile_returns_ = 0;
-      if (last_estimate_ <= settings_.safe_share * settings_.tolerance ||
-          ++checks_since_ >= settings_.max_rollback_checks)
+      const bool safe = last_estimate_ <= settings_.safe_share * settings_.tolerance;
+      if (safe || ++checks_since_ >= settings_.max_rollback_checks)
       {
         checkpoint_ = sim_.saveState();
-        since_check_.clear();
+        recorded_ = 0;
         checks_since_ = 0;
       }
+      scheduleNextCheck(safe);
       return result;
     }
     why << "to full at t = " << sim_.time() << " s: ";
@@ -198,13 +220,16 @@ StepResult AdaptiveStepper::check()
       ++futile_returns_;
     result = fallBack(why);
     within_since_ = -1.0;
+    scheduleNextCheck(false);
   }
   else
   {
     // Back only where the reduced method could pass its first check: close to its span, and with
     // no more force outside it than the tolerance allows.
     last_estimate_ = sim_.spanDistance(settings_.reduced);
-    if (last_estimate_ > settings_.tolerance || touching() ||
+    const bool touches = touching();
+    scheduleNextCheck(touches || last_estimate_ > 2.0 * settings_.tolerance);
+    if (last_estimate_ > settings_.tolerance || touches ||
         settings_.indicator_scale * sim_.errorIndicator(settings_.reduced) > settings_.tolerance)
     {
       within_since_ = -1.0;
@@ -222,7 +247,7 @@ StepResult AdaptiveStepper::check()
     sim_.setMethod(settings_.reduced);
     first_check_ = true;
     checkpoint_ = sim_.saveState();
-    since_check_.clear();
+    recorded_ = 0;
     checks_since_ = 0;
   }
   ++switches_;

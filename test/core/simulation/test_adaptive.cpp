@@ -108,6 +108,7 @@ TEST(Adaptive, BadSettingsAreRefusedByName)
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.check_steps = 0; }), "'adaptive_check_steps' = 0"));
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.safe_share = 0.0; }), "'safe_share' = 0"));
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.max_rollback_checks = 0; }), "'max_rollback_checks' = 0"));
+  EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.max_check_stretch = 0; }), "'max_check_stretch' = 0"));
   EXPECT_TRUE(
       contains(refusedSetting([](AdaptiveSettings& s) { s.reduced = Method::Linear; }), "must be one of physical, cubature, coarse"));
   EXPECT_EQ(sim.method(), Method::Full);  // nothing changed
@@ -166,7 +167,7 @@ TEST(Adaptive, AFallBackGoesBackToTheLastCheckSafelyWithinTheTolerance)
 {
   // The turn that six linear modes cannot follow: the estimate rises over several checks before it
   // crosses the tolerance, so how far back a fallback goes depends on the safe share.
-  auto stepsAgain = [](double safe_share, int max_rollback_checks) {
+  auto stepsAgain = [](double safe_share, int max_rollback_checks, int max_check_stretch = 1) {
     Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
     AdaptiveSettings settings = stepsOf5ms();
     settings.reduced = Method::Physical;
@@ -174,6 +175,7 @@ TEST(Adaptive, AFallBackGoesBackToTheLastCheckSafelyWithinTheTolerance)
     settings.check_steps = 5;
     settings.safe_share = safe_share;
     settings.max_rollback_checks = max_rollback_checks;
+    settings.max_check_stretch = max_check_stretch;
     AdaptiveStepper adaptive(sim, settings);
     run(sim, turn, 200, &adaptive);
     EXPECT_GE(adaptive.switches(), 1);
@@ -184,6 +186,39 @@ TEST(Adaptive, AFallBackGoesBackToTheLastCheckSafelyWithinTheTolerance)
   const int bounded = stepsAgain(1e-9, 2);
   EXPECT_GE(bounded, 5);
   EXPECT_LE(bounded, 10);                // but never more than two checks back
+  // Safe checks stretch the steps between them (5, 10, then 20 at four times): the last one is 20 back.
+  EXPECT_EQ(stepsAgain(1.0, 10, 4), 20);
+}
+
+TEST(Adaptive, ChecksFarFromASwitchComeLessOften)
+{
+  // 200 steps, a check every 5 at the least: 40 checks unstretched. Stretched to at most four times
+  // (5, 10, 20, 20, ...): 11 checks where every check is far from a switch, 12 under `full` (its
+  // first check falls back, and the stretch starts again).
+  auto checks = [](const AdaptiveSettings& settings, BasisKind basis, const Motion& move) {
+    Simulation sim(topRowHeld(), heldParams(settings.reduced, basis));
+    AdaptiveStepper adaptive(sim, settings);
+    run(sim, move, 200, &adaptive);
+    EXPECT_EQ(adaptive.reduced(), settings.tolerance > 1e-9);
+    return adaptive.checks();
+  };
+  AdaptiveSettings reduced = stepsOf5ms();  // reduced throughout: the skinning span follows the translation
+  reduced.reduced = Method::Physical;
+  reduced.check_steps = 5;
+  AdaptiveSettings full = fullFromTheStart(Method::Physical);  // under `full`, never within 1e-15 m of the span
+  full.check_steps = 5;
+  for (AdaptiveSettings* settings : {&reduced, &full})
+  {
+    settings->max_check_stretch = 1;
+    EXPECT_EQ(checks(*settings, BasisKind::Skinning, translate), 40);
+    settings->max_check_stretch = 4;
+    EXPECT_EQ(checks(*settings, BasisKind::Skinning, translate), settings == &full ? 12 : 11);
+  }
+  // Checks within the tolerance but not safely (six linear modes leave a force outside their span
+  // on the turn, above 1e-9 of a 1 m tolerance) do not stretch.
+  reduced.tolerance = 1.0;
+  reduced.safe_share = 1e-9;
+  EXPECT_EQ(checks(reduced, BasisKind::LinearModes, turn), 40);
 }
 
 TEST(Adaptive, StaysReducedWhereTheSpanFollows)
