@@ -616,7 +616,8 @@ void BM_CoarseTurn(benchmark::State& state)
 BENCHMARK(BM_CoarseTurn)->ArgsProduct({{50, 100, 200}, {0, 1}})->Unit(benchmark::kMicrosecond);
 
 // The same turn at `full`'s step, every clamp particle's motion: range(1) = 0, `coarse` alone; 1,
-// through the adaptive stepper (its check every 0.1 s, the motions it keeps for a fall back).
+// through the adaptive stepper (its check every 0.1 s, stretched up to 0.4 s while safely within the
+// tolerance, and the motions it keeps for a fallback).
 void BM_AdaptiveCoarseTurn(benchmark::State& state)
 {
   turnCoarse(state, static_cast<int>(state.range(0)), false, false, state.range(1) == 1);

@@ -113,10 +113,14 @@ private:
   double within_since_ = -1.0;  // under full: the time the state came within tolerance of the span (-1: not)
   std::string last_switch_;
   SimulationState checkpoint_;       // the reduced state at the last safe check
-  std::vector<Motion> since_check_;  // the motions of the reduced steps since: the first recorded_
-  size_t recorded_ = 0;              // (the storage kept: up to max_check_stretch checks' worth of motions)
+  // The motions of the reduced steps since: the first recorded_, the storage kept for the next
+  // (at most max_check_stretch + max_rollback_checks - 1 checks' worth) until a fallback.
+  std::vector<Motion> since_check_;
+  size_t recorded_ = 0;
+  // A checkpoint: none of the steps since is needed any more (their external forces let go).
+  void forgetMotions();
   int checks_since_ = 0;             // checks passed since it
-  int check_interval_ = 0;           // steps from a check to the next (settings_.max_check_stretch)
+  long check_interval_ = 0;          // steps from a check to the next: check_steps, up to max_check_stretch times it
   long next_check_ = 0;              // the step count at which the next check is due
   bool first_check_ = false;         // the next check is the first since a return to the reduced method
   int futile_returns_ = 0;           // returns in a row that fell back at their first check

@@ -78,9 +78,7 @@ void AdaptiveStepper::record()
     since_check_.emplace_back();
   // Over the one recorded there before: the same sizes, so no allocation.
   Motion& m = since_check_[recorded_++];
-  m.handles.displacement = sim_.handleMotion().displacement;
-  m.handles.velocity = sim_.handleMotion().velocity;
-  m.handles.acceleration = sim_.handleMotion().acceleration;
+  m.handles = sim_.handleMotion();
   m.frame = sim_.frameMotion();
   m.colliders.clear();
   m.active.clear();
@@ -138,8 +136,15 @@ StepResult AdaptiveStepper::step()
 void AdaptiveStepper::scheduleNextCheck(bool far)
 {
   const long longest = static_cast<long>(settings_.max_check_stretch) * settings_.check_steps;
-  check_interval_ = far ? static_cast<int>(std::min<long>(2L * check_interval_, longest)) : settings_.check_steps;
+  check_interval_ = far ? std::min(2 * check_interval_, longest) : settings_.check_steps;
   next_check_ = steps_ + check_interval_;
+}
+
+void AdaptiveStepper::forgetMotions()
+{
+  for (size_t k = 0; k < recorded_; ++k)
+    since_check_[k].external_force.reset();
+  recorded_ = 0;
 }
 
 double AdaptiveStepper::insideColliders() const
@@ -179,6 +184,7 @@ StepResult AdaptiveStepper::fallBack(std::ostringstream& why)
       break;
   }
   why << "; its last " << recorded_ << " steps taken again under full";
+  since_check_.clear();  // none recorded under `full`
   recorded_ = 0;
   checks_since_ = 0;
   return result;
@@ -204,7 +210,7 @@ StepResult AdaptiveStepper::check()
       if (safe || ++checks_since_ >= settings_.max_rollback_checks)
       {
         checkpoint_ = sim_.saveState();
-        recorded_ = 0;
+        forgetMotions();
         checks_since_ = 0;
       }
       scheduleNextCheck(safe);
@@ -247,7 +253,7 @@ StepResult AdaptiveStepper::check()
     sim_.setMethod(settings_.reduced);
     first_check_ = true;
     checkpoint_ = sim_.saveState();
-    recorded_ = 0;
+    forgetMotions();
     checks_since_ = 0;
   }
   ++switches_;

@@ -186,8 +186,43 @@ TEST(Adaptive, AFallBackGoesBackToTheLastCheckSafelyWithinTheTolerance)
   const int bounded = stepsAgain(1e-9, 2);
   EXPECT_GE(bounded, 5);
   EXPECT_LE(bounded, 10);                // but never more than two checks back
-  // Safe checks stretch the steps between them (5, 10, then 20 at four times): the last one is 20 back.
+  // Safe checks stretch the steps between them (checks at 5, 15, 35, ...): the turn passes the
+  // first two and falls back at a later one, 20 steps back.
   EXPECT_EQ(stepsAgain(1.0, 10, 4), 20);
+}
+
+// A fallback after safe checks takes its steps again from motions recorded over earlier ones: with
+// a push on one of them, it ends where `full` from the last safe check ends.
+TEST(Adaptive, AFallBackAfterSafeChecksRetakesTheStepsAsFullTakesThem)
+{
+  AdaptiveSettings settings = stepsOf5ms();
+  settings.reduced = Method::Physical;
+  settings.tolerance = 0.01;
+  settings.check_steps = 5;
+  settings.safe_share = 1.0;  // checks at 5, 15, 35: the turn passes the first two, safely
+  Simulation adaptive_sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
+  Simulation reference(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
+  AdaptiveStepper adaptive(adaptive_sim, settings);
+  const Eigen::VectorXd start = adaptive_sim.handlePositions();
+  const Eigen::VectorXd none = Eigen::VectorXd::Zero(adaptive_sim.externalForce().size());
+  Eigen::VectorXd push = none;
+  push[3 * 95 + 1] = 0.5;  // N on a particle of the bottom row, along y, at step 20
+  for (int k = 1; k <= 35; ++k)
+  {
+    if (k == 16)
+      reference.setMethod(Method::Full);  // where the last safe check leaves the reduced method
+    for (Simulation* sim : {&adaptive_sim, &reference})
+    {
+      sim->setHandleMotion(turn(start, k));
+      sim->setExternalForce(k == 20 ? push : none);
+    }
+    ASSERT_FALSE(reference.step().diverged);
+    ASSERT_FALSE(adaptive.step().diverged);
+  }
+  ASSERT_EQ(adaptive.switches(), 1) << adaptive.lastSwitch();
+  EXPECT_FALSE(adaptive.reduced());
+  EXPECT_EQ(stepsTakenAgain(adaptive.lastSwitch()), 20) << adaptive.lastSwitch();
+  EXPECT_LT(largestParticleDistance(adaptive_sim, reference.positions()), 1e-9);
 }
 
 TEST(Adaptive, ChecksFarFromASwitchComeLessOften)
