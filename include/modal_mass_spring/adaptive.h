@@ -90,6 +90,8 @@ private:
   };
   // Records the motion of the step just taken (since_check_).
   void record();
+  // At a checkpoint: no step since is needed any more (their external forces let go).
+  void forgetMotions();
   void apply(const Motion& m);
   // Back to the checkpoint, then the steps since again under `full`.
   StepResult fallBack(std::ostringstream& why);
@@ -98,7 +100,8 @@ private:
   // each return in a row that fell back at its first check: a coarse grid left within its span drifts
   // to its own hanging shape within a check, and going back and forth costs both methods' steps.
   double dwell() const;
-  // The next check after this one: `far` from a switch, twice as many steps (up to the stretch), else check_steps.
+  // The next check after this one: `far` from a switch, twice as many steps as the last time (up to
+  // the stretch), else check_steps.
   void scheduleNextCheck(bool far);
   // How deep the particle deepest inside a collider is (m; 0: none, or no colliders).
   double insideColliders() const;
@@ -117,8 +120,6 @@ private:
   // (at most max_check_stretch + max_rollback_checks - 1 checks' worth) until a fallback.
   std::vector<Motion> since_check_;
   size_t recorded_ = 0;
-  // A checkpoint: none of the steps since is needed any more (their external forces let go).
-  void forgetMotions();
   int checks_since_ = 0;             // checks passed since it
   long check_interval_ = 0;          // steps from a check to the next: check_steps, up to max_check_stretch times it
   long next_check_ = 0;              // the step count at which the next check is due
