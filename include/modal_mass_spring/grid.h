@@ -69,6 +69,8 @@ public:
   int particleIndex(int row, int col) const { return row * params_.cols + col; }
 
   const std::vector<Spring>& springs() const { return springs_; }
+  // Spring s's rest length changed (a coarse grid fitted to a finer grid's shape).
+  void setRestLength(int s, double rest_length) { springs_[static_cast<size_t>(s)].rest_length = rest_length; }
   int numStructuralSprings() const { return num_structural_; }
   int numShearSprings() const { return num_shear_; }
   int numBendingSprings() const { return num_bending_; }

@@ -205,6 +205,65 @@ CoarseGrid::CoarseGrid(const Grid& fine, int coarse_cols) : grid(coarseGridParam
     throw std::runtime_error("coarse grid: its interpolation's Gram matrix could not be factorised");
 }
 
+bool CoarseGrid::fitRestLengths(const Eigen::VectorXd& x_fine)
+{
+  const int dim = grid.dimension();
+  // The coarse positions: the free particles sampled, the held ones where the coarse method holds them.
+  Eigen::VectorXd x = grid.initialPositions();
+  const Eigen::VectorXd sampled = sampling * x_fine;
+  for (int dof : grid.freeDofs())
+    x[dof] = sampled[dof];
+  Eigen::VectorXd f_fine, f_coarse;
+  springForces(fine_, x_fine, f_fine);
+  springForces(grid, x, f_coarse);
+  f_fine += fine_.gravityForce();
+  f_coarse += grid.gravityForce();
+  const Eigen::VectorXd target = grid.gatherFree(interpolation.transpose() * fine_.gatherFree(f_fine));
+  const Eigen::VectorXd residual = grid.gatherFree(f_coarse) - target;
+
+  // A spring's force on i is k (l - l0) d/l: d/dl0 is -k d/l on i, +k d/l on j. A = d(f_free)/d(l0).
+  const std::vector<Spring>& springs = grid.springs();
+  std::vector<Eigen::Triplet<double>> entries;
+  entries.reserve(springs.size() * 2 * dim);
+  for (size_t s = 0; s < springs.size(); ++s)
+  {
+    const Spring& spring = springs[s];
+    const Eigen::VectorXd d = x.segment(dim * spring.j, dim) - x.segment(dim * spring.i, dim);
+    const double length = d.norm();
+    if (length == 0.0)
+      continue;
+    for (int c = 0; c < dim; ++c)
+    {
+      const double a = spring.stiffness * d[c] / length;
+      if (const int fi = grid.freeIndex(dim * spring.i + c); fi >= 0)
+        entries.emplace_back(fi, static_cast<int>(s), -a);
+      if (const int fj = grid.freeIndex(dim * spring.j + c); fj >= 0)
+        entries.emplace_back(fj, static_cast<int>(s), a);
+    }
+  }
+  SparseMatrix a(grid.numFreeDofs(), static_cast<Eigen::Index>(springs.size()));
+  a.setFromTriplets(entries.begin(), entries.end());
+  // The least change: l0 += A^T y with A A^T y = -residual. A direction no spring acts in (across a
+  // flat sheet) has no force to balance either: a small shift keeps A A^T invertible there.
+  SparseMatrix normal = a * a.transpose();
+  const double shift = 1e-12 * normal.diagonal().maxCoeff();
+  for (int k = 0; k < normal.rows(); ++k)
+    normal.coeffRef(k, k) += shift;
+  Eigen::SimplicialLDLT<SparseMatrix> solver(normal);
+  if (solver.info() != Eigen::Success)
+    throw std::runtime_error("coarse grid: its rest lengths could not be fitted");
+  const Eigen::VectorXd change = a.transpose() * solver.solve(-residual);
+  for (size_t s = 0; s < springs.size(); ++s)
+    if (!(springs[s].rest_length + change[static_cast<Eigen::Index>(s)] > 0.0))
+      return false;
+  for (size_t s = 0; s < springs.size(); ++s)
+    grid.setRestLength(static_cast<int>(s), springs[s].rest_length + change[static_cast<Eigen::Index>(s)]);
+  stiffness = tangentStiffness(grid, x_ref, CompressedSprings::Drop);
+  if (grid.numHandleDofs() > 0)
+    handle_coupling = handleCoupling(grid, x_ref);
+  return true;
+}
+
 Eigen::VectorXd CoarseGrid::missed(const Eigen::VectorXd& x) const
 {
   return fine_.gatherFree(x) - interpolation * (sampling * x);

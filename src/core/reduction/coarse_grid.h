@@ -3,7 +3,8 @@
 // not depend on its spacing; docs/design.md has what softening the bending springs did), so its
 // particles are heavier and further apart and it is stable at a larger explicit step. The fine
 // particles follow it by bilinear interpolation in material coordinates; the fine grid's fixed and
-// handle particles hold the coarse particles nearest them.
+// handle particles hold the coarse particles nearest them. Where the grid has a hanging
+// equilibrium, the coarse springs' rest lengths are fitted to hold it (fitRestLengths).
 #pragma once
 
 #include "modal_mass_spring/grid.h"
@@ -47,6 +48,13 @@ struct CoarseGrid
   // Per coarse handle dof (Grid::handleDofs() order): the fine handle dof (an index into the fine
   // grid's handleDofs()) whose motion it copies, that of the fine handle particle nearest it.
   std::vector<int> handle_source;
+
+  // Fits the springs' rest lengths so that the coarse grid, at the fine positions x_fine sampled, is
+  // in the balance the fine grid is in there (their forces restricted, P^T f): the change smallest in
+  // norm. At a fine equilibrium the coarse grid then hangs in its shape, not its own sag, and keeps
+  // it as it turns (a rest length turns with its spring). K and K_ib are assembled again. False, and
+  // nothing changed, where the fit would take a rest length to zero or below (or is not finite).
+  bool fitRestLengths(const Eigen::VectorXd& x_fine);
 
   // What the interpolation misses of fine positions x (every fine dof), on the fine free dofs:
   // x less its interpolation from the coarse particles sampled from it, P R x. A switch to the coarse

@@ -372,7 +372,11 @@ void Simulation::buildFor(Method method)
   if (isModal(method))
     buildBasis();
   if (method == Method::Coarse && !coarse_)
+  {
     coarse_ = std::make_unique<CoarseGrid>(grid_, params_.coarse_cols);
+    if (equilibrium_.size() > 0)
+      coarse_->fitRestLengths(equilibrium_);
+  }
 }
 
 void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::VectorXd& v, Remainder remainder)

@@ -398,3 +398,49 @@ TEST(Coarse, GripsCarryTheClothsWeight)
   coarse.setExternalForce(force);
   EXPECT_NEAR(coarse.handleForces()[1].z() - by_coarse[1].z(), -1.0, 1e-12);
 }
+
+TEST(CoarseGrid, FittedRestLengthsBalanceItAtTheFineGridsShape)
+{
+  const GridParams g = heldCloth({{0, 1, 2}, {7, 8, 9}}, 10);
+  SimulationParams s = methodParams(Method::Full, 4, 1e-3);
+  s.initial_state = InitialState::Equilibrium;
+  const Simulation full(g, s);
+  const Eigen::VectorXd x_fine = full.positions();
+  const Grid& fine = full.grid();
+  CoarseGrid coarse(fine, 4);
+  // The coarse particles at the fine equilibrium sampled, the held ones where the method holds them.
+  Eigen::VectorXd x = coarse.grid.initialPositions();
+  const Eigen::VectorXd sampled = coarse.sampling * x_fine;
+  for (int dof : coarse.grid.freeDofs())
+    x[dof] = sampled[dof];
+  auto unbalanced = [&] {
+    Eigen::VectorXd f;
+    springForces(coarse.grid, x, f);
+    f += coarse.grid.gravityForce();
+    return coarse.grid.gatherFree(f).cwiseAbs().maxCoeff();
+  };
+  const double weight = g.mass * 9.81 * fine.numParticles() / coarse.grid.numParticles();
+  // Its own sag differs from the fine grid's: at the fine shape a coarse particle is pulled by a good
+  // part of its weight.
+  const double before = unbalanced();
+  EXPECT_GT(before, 0.05 * weight);
+  const Eigen::VectorXd stiffness_before = coarse.stiffness.toDense().diagonal();
+  ASSERT_TRUE(coarse.fitRestLengths(x_fine));
+  EXPECT_LT(unbalanced(), 1e-6 * weight) << "before the fit: " << before;
+  // K (its tension part) is the fitted grid's.
+  EXPECT_GT((coarse.stiffness.toDense().diagonal() - stiffness_before).cwiseAbs().maxCoeff(), 0.0);
+  EXPECT_LT((coarse.stiffness - tangentStiffness(coarse.grid, coarse.x_ref, CompressedSprings::Drop)).norm(), 1e-12);
+}
+
+TEST(Coarse, HangsStillInTheFineGridsShape)
+{
+  const GridParams g = heldCloth({{0, 1, 2}, {7, 8, 9}}, 10);
+  SimulationParams s = coarseParams(4);
+  s.initial_state = InitialState::Equilibrium;
+  Simulation coarse(g, s);
+  const Eigen::VectorXd start = coarse.positions();
+  ASSERT_FALSE(coarse.step(500).diverged);
+  // Fitted to the fine equilibrium, the coarse grid stays where it started: without the fit it sank
+  // to its own sag, centimetres lower (docs/results.md).
+  EXPECT_LT(rmsDistance(coarse.positions(), start, 3), 1e-6);
+}
