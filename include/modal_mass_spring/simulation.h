@@ -164,6 +164,7 @@ struct SimulationState
   long step_count = 0;     // the time is step_count x time_step
   State coordinates;       // the method's q, v, a
   Eigen::VectorXd offset;  // a modal method's or `coarse`'s frozen offset (free dofs); empty for `full`
+  double indicator_max = 0.0;  // Simulation::errorIndicator()'s largest so far (0: none yet)
   HandleMotion handles;    // the handles' motion the state was stepped to
   FrameMotion frame;       // B's (at rest without a moving frame)
   // Per collider: its pose (grid coordinates), whether it is active (a frame's before its first pose
@@ -329,12 +330,14 @@ public:
   double projectionError() const { return projection_error_; }
   // How far the current state is estimated to be from what `full` would do from it (m, an RMS over
   // the free particles): the displacement that balances the full model's force outside the
-  // method's span, the modes' or the coarse grid's interpolation (reduction/error_indicator.h). 0
-  // for `full`. O(springs + n r) (`coarse`: O(springs)) and sparse solves; the first call factorises
-  // the springs' Laplacian.
+  // method's span, the modes' or the coarse grid's interpolation (reduction/error_indicator.h), the
+  // largest of the calls since the method's state was last set whole (a start, reset, switch or
+  // restored state): what that force does goes into the distance and stays there (docs/results.md,
+  // "The coarse grid's indicator"). 0 for `full`. O(springs + n r) (`coarse`: O(springs)) and
+  // sparse solves; the first call factorises the springs' Laplacian.
   double errorIndicator();
-  // The same for the span of method `span` at the current positions, whatever the method: what that
-  // method's indicator would be right after a switch to it (which moves no particle). Its basis or
+  // The same for the span of method `span` at the current positions alone, whatever the method: what
+  // that method's indicator would be right after a switch to it (which moves no particle). Its basis or
   // coarse grid must be built (std::logic_error).
   double errorIndicator(Method span);
   // How far the current state is from the span of method `reduced` (m, an RMS over the free
@@ -509,6 +512,7 @@ private:
   double start_energy_ = 0.0;  // the method's energy at the start of the run, carried over switches
   double projection_error_ = 0.0;
   std::unique_ptr<ErrorIndicator> error_indicator_;  // built at the first errorIndicator()
+  double indicator_max_ = 0.0;  // errorIndicator()'s largest since the state was last set whole
   std::unique_ptr<CoarseGrid> coarse_;               // built at the first use of `coarse`
   Eigen::VectorXd external_force_;  // on every dof; zero: none
   long external_force_changes_ = 0;

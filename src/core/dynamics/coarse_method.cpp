@@ -88,14 +88,8 @@ double CoarseMethod::assign(const Eigen::VectorXd& u, const Eigen::VectorXd& v, 
   const Eigen::VectorXd q = sampleDisplacement(u, fine_motion_.displacement);
   offset_.resize(0);
   FullMethod::assign(q, sampleVelocity(v, fine_motion_.velocity), remainder);
-  const Eigen::VectorXd missed = u - displacement(state());
-  if (remainder == Remainder::Keep)
-  {
-    offset_ = missed;
-    return 0.0;
-  }
-  const int dim = fine_.grid.dimension();
-  return missed.size() == 0 ? 0.0 : std::sqrt(missed.reshaped(dim, missed.size() / dim).colwise().squaredNorm().maxCoeff());
+  offset_ = u - displacement(state());
+  return 0.0;
 }
 
 Eigen::VectorXd CoarseMethod::displacement(const State& s) const

@@ -411,6 +411,7 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
     model_->setFrameForces(frameForcesOf(frame_current_));
   model_->setExternalForce(grid_.gatherFree(external_force_));
   projection_error_ = model_->assign(u, v, remainder);
+  indicator_max_ = 0.0;
   model_->setAnchor(anchor_, anchor_handles_);
   diverged_ = false;
   divergence_message_.clear();

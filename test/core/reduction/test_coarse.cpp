@@ -444,3 +444,25 @@ TEST(Coarse, HangsStillInTheFineGridsShape)
   // to its own sag, centimetres lower (docs/results.md).
   EXPECT_LT(rmsDistance(coarse.positions(), start, 3), 1e-6);
 }
+
+TEST(Coarse, StartsWhereItIsPutWithTheDetailItsGridMisses)
+{
+  // A start keeps what the interpolation misses frozen, as a switch does: the hanging cloth starts
+  // where `full` starts, and a state set from outside is where it was set.
+  const GridParams g = heldCloth({{0, 1, 2}, {7, 8, 9}}, 10);
+  SimulationParams s = coarseParams(4);
+  s.initial_state = InitialState::Equilibrium;
+  Simulation coarse(g, s);
+  s.method = Method::Full;
+  const Simulation full(g, s);
+  EXPECT_EQ(coarse.projectionError(), 0.0);
+  EXPECT_LT((coarse.positions() - full.positions()).cwiseAbs().maxCoeff(), 1e-12);
+
+  Eigen::VectorXd u = Eigen::VectorXd::Zero(coarse.grid().numFreeDofs());
+  for (Eigen::Index k = 0; k < u.size(); ++k)
+    u[k] = 0.01 * std::sin(1.7 * static_cast<double>(k));
+  coarse.setPhysicalState(u, Eigen::VectorXd::Zero(u.size()));
+  const Eigen::VectorXd expected = coarse.grid().gatherFree(coarse.linearizationPositions()) + u;
+  EXPECT_LT((coarse.grid().gatherFree(coarse.positions()) - expected).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_EQ(coarse.projectionError(), 0.0);
+}

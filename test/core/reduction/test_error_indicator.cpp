@@ -82,3 +82,37 @@ TEST(ErrorIndicator, SeesTheTurnSixModesCannotHoldAndTheSkinningSpanCan)
   EXPECT_GT(modes.errorIndicator(), 1e-3);
   EXPECT_LT(skinning.errorIndicator(), 1e-3 * modes.errorIndicator());
 }
+
+TEST(ErrorIndicator, IsTheLargestSinceTheStateWasLastSetWhole)
+{
+  // Four modes on the sheet swinging down: the force outside the span comes and goes with the swing,
+  // the indicator keeps its largest until a reset, a switch or a restored state sets the state anew.
+  SimulationParams s = methodParams(Method::Physical, 4, 5e-3, IntegratorKind::Implicit);
+  Simulation sim(turnedSheet(), s);
+  double largest = 0.0;
+  bool fell = false;
+  for (int k = 0; k < 60; ++k)
+  {
+    ASSERT_FALSE(sim.step(5).diverged);
+    const double now = sim.errorIndicator(Method::Physical);
+    fell = fell || now < largest;
+    largest = std::max(largest, now);
+    EXPECT_EQ(sim.errorIndicator(), largest) << "after " << 5 * (k + 1) << " steps";
+  }
+  ASSERT_TRUE(fell) << "the force outside the span never fell: the test would not tell a maximum from the value";
+  const SimulationState saved = sim.saveState();
+  EXPECT_EQ(saved.indicator_max, largest);
+  sim.reset();
+  EXPECT_EQ(sim.errorIndicator(), sim.errorIndicator(Method::Physical));
+  sim.restoreState(saved);
+  EXPECT_EQ(sim.errorIndicator(), largest);
+  sim.setMethod(Method::Cubature);
+  EXPECT_EQ(sim.errorIndicator(), sim.errorIndicator(Method::Cubature));
+
+  SimulationState bad = saved;
+  bad.indicator_max = -1.0;
+  const std::string refused = refusal([&] { sim.restoreState(bad); });
+  EXPECT_NE(refused.find("state.indicator_max"), std::string::npos) << refused;
+  bad.indicator_max = std::nan("");
+  EXPECT_NE(refusal([&] { sim.restoreState(bad); }).find(">= 0"), std::string::npos);
+}
