@@ -47,8 +47,24 @@ struct AdaptiveSettings
 };
 
 // The error indicator's calibration for method `reduced`: the distance to `full` it stands for per
-// unit of Simulation::errorIndicator.
+// unit of the largest Simulation::errorIndicator since the state was set (IndicatorMaximum).
 double indicatorScale(Method reduced);
+
+// The largest error indicator read from a simulation since its state was last set whole
+// (Simulation::stateSets): the force outside the span comes and goes with the swing, what it did to
+// the motion stays (docs/results.md, "The largest since the state was set whole"). Each reader keeps
+// its own, so that how often one reads does not change what another sees.
+class IndicatorMaximum
+{
+public:
+  // Takes `value`, read from `sim`'s current state, and returns the largest since that state was set
+  // (a value that is not finite is returned as it is).
+  double operator()(const Simulation& sim, double value);
+
+private:
+  long sets_ = -1;
+  double largest_ = 0.0;
+};
 
 // The settings a simulation's parameters give (adaptive_method, error_tolerance, adaptive_dwell,
 // adaptive_check_steps, 0 resolved to the steps of kAdaptiveCheckPeriod at time_step).
@@ -131,6 +147,7 @@ private:
   // Simulation::externalForceChanges() then.
   std::shared_ptr<const Eigen::VectorXd> recorded_force_;
   long recorded_force_changes_ = -1;
+  IndicatorMaximum indicator_max_;  // of the checks' readings
 };
 
 }  // namespace modal_mass_spring

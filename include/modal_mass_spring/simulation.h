@@ -164,7 +164,6 @@ struct SimulationState
   long step_count = 0;     // the time is step_count x time_step
   State coordinates;       // the method's q, v, a
   Eigen::VectorXd offset;  // a modal method's or `coarse`'s frozen offset (free dofs); empty for `full`
-  double indicator_max = 0.0;  // Simulation::errorIndicator()'s largest so far (0: none yet)
   HandleMotion handles;    // the handles' motion the state was stepped to
   FrameMotion frame;       // B's (at rest without a moving frame)
   // Per collider: its pose (grid coordinates), whether it is active (a frame's before its first pose
@@ -322,22 +321,21 @@ public:
   const SparseMatrix& handleCoupling() const { return handle_coupling_; }
   // True while the energy check is off because handles moved since the start of the run.
   bool energyCheckSuspended() const { return handles_moved_; }
-  // Sets the state from free-dof displacements (from the linearization point) and velocities, with no
-  // frozen offset. A
-  // modal method takes their M-orthogonal projection; projectionError() then says how far (m, the
-  // largest particle distance) the projected positions are from the requested ones.
+  // Sets the state from free-dof displacements (from the linearization point) and velocities. A
+  // modal method takes their M-orthogonal projection, with no frozen offset; projectionError() then
+  // says how far (m, the largest particle distance) the projected positions are from the requested
+  // ones. `coarse` keeps what its interpolation misses frozen, and is where it is put.
   void setPhysicalState(const Eigen::VectorXd& displacement, const Eigen::VectorXd& velocity);
   double projectionError() const { return projection_error_; }
   // How far the current state is estimated to be from what `full` would do from it (m, an RMS over
   // the free particles): the displacement that balances the full model's force outside the
-  // method's span, the modes' or the coarse grid's interpolation (reduction/error_indicator.h), the
-  // largest of the calls since the method's state was last set whole (a start, reset, switch or
-  // restored state): what that force does goes into the distance and stays there (docs/results.md,
-  // "The coarse grid's indicator"). 0 for `full`. O(springs + n r) (`coarse`: O(springs)) and
-  // sparse solves; the first call factorises the springs' Laplacian.
+  // method's span, the modes' or the coarse grid's interpolation (reduction/error_indicator.h), at
+  // the current state; its users keep its largest since the state was set (IndicatorMaximum,
+  // adaptive.h). 0 for `full`. O(springs + n r) (`coarse`: O(springs)) and sparse solves; the first
+  // call factorises the springs' Laplacian.
   double errorIndicator();
-  // The same for the span of method `span` at the current positions alone, whatever the method: what
-  // that method's indicator would be right after a switch to it (which moves no particle). Its basis or
+  // The same for the span of method `span` at the current positions, whatever the method: what that
+  // method's indicator would be right after a switch to it (which moves no particle). Its basis or
   // coarse grid must be built (std::logic_error).
   double errorIndicator(Method span);
   // How far the current state is from the span of method `reduced` (m, an RMS over the free
@@ -346,6 +344,10 @@ public:
   // of the state sampled at its particles misses; either is what a switch to it keeps frozen. The
   // basis or the coarse grid must be built (std::logic_error).
   double spanDistance(Method reduced) const;
+  // How many times the state has been set whole: at the start, a reset, a method switch, a state set
+  // or restored, a handle set teleported (every install of a method's state). A maximum of the error
+  // indicator is taken since the last.
+  long stateSets() const { return state_sets_; }
   const LinearizationInfo& linearization() const { return linearization_; }
   // x_ref: the initial positions (rest) or the static equilibrium.
   const Eigen::VectorXd& linearizationPositions() const { return x_ref_; }
@@ -512,7 +514,7 @@ private:
   double start_energy_ = 0.0;  // the method's energy at the start of the run, carried over switches
   double projection_error_ = 0.0;
   std::unique_ptr<ErrorIndicator> error_indicator_;  // built at the first errorIndicator()
-  double indicator_max_ = 0.0;  // errorIndicator()'s largest since the state was last set whole
+  long state_sets_ = 0;  // stateSets()
   std::unique_ptr<CoarseGrid> coarse_;               // built at the first use of `coarse`
   Eigen::VectorXd external_force_;  // on every dof; zero: none
   long external_force_changes_ = 0;

@@ -85,7 +85,8 @@ void SimulationNode::refreshErrorEstimate(Track& track)
   track.estimate_wall = now;
   try
   {
-    const double estimate = indicatorScale(simulation.method()) * simulation.errorIndicator();
+    const double estimate =
+        indicatorScale(simulation.method()) * track.indicator_max(simulation, simulation.errorIndicator());
     track.error_estimate = std::isfinite(estimate) ? estimate : 0.0;
   }
   catch (const std::exception& error)

@@ -90,9 +90,10 @@ private:
     std::unique_ptr<AdaptiveStepper> adaptive;
     int logged_switches = 0;
     // A reduced method's estimated RMS distance to full (m; the stepper's last check under adaptive),
-    // and the wall time it was last refreshed.
+    // the wall time it was last refreshed, and the largest indicator read since the state was set.
     double error_estimate = 0.0;
     double estimate_wall = -1.0;
+    IndicatorMaximum indicator_max;
     // After a state, a simulation or colliders the stepper's checkpoints do not know: made again at
     // the next step, the estimate measured again.
     void restartAdaptive()

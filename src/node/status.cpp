@@ -423,7 +423,8 @@ void SimulationNode::diagnose(diagnostic_updater::DiagnosticStatusWrapper& statu
                           (lockstep() ? track.name + ": " : "") + "estimated distance to full " +
                               formatDistance(track.error_estimate) + " above error_tolerance " +
                               formatDistance(config_.simulation.error_tolerance) +
-                              ": the reduced span may not follow this motion (method adaptive falls back to full)");
+                              " since the state was last set: the reduced span may not follow this motion "
+                              "(method adaptive falls back to full)");
   status.add("state", stateName(first));
   if (training_)
     status.add("cubature training", trainingProgress());

@@ -77,6 +77,7 @@ struct AccuracyRun
   double step_seconds = 0.0, step_cpu_seconds = 0.0;
   std::unique_ptr<HandleDriver> driver = nullptr;  // moves the handles of a handle scenario, one step at a time
   std::unique_ptr<AdaptiveStepper> adaptive = nullptr;  // steps `sim` for method "adaptive"
+  IndicatorMaximum indicator_max{};  // of the samples' readings
 
   void advance(const std::string& variant, std::vector<std::string>& messages)
   {
@@ -195,7 +196,7 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
 }
 
 // One run at one step against the reference's points; no distances once either has diverged.
-ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, const AccuracyRun& run, const std::string& method,
+ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, AccuracyRun& run, const std::string& method,
                    long step, const Eigen::Matrix3Xd& reference, bool reference_diverged)
 {
   ErrorSample e;
@@ -225,10 +226,11 @@ ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, const Accurac
   {
     e.reduced_share = run.adaptive->reducedShare();
     e.switches = run.adaptive->switches();
-    e.error_indicator = run.adaptive->reduced() ? run.sim->errorIndicator() : std::numeric_limits<double>::quiet_NaN();
+    e.error_indicator = run.adaptive->reduced() ? run.indicator_max(*run.sim, run.sim->errorIndicator())
+                                                : std::numeric_limits<double>::quiet_NaN();
   }
   else if (run.sim->method() != Method::Full)
-    e.error_indicator = run.sim->errorIndicator();
+    e.error_indicator = run.indicator_max(*run.sim, run.sim->errorIndicator());
   return e;
 }
 
@@ -275,7 +277,7 @@ AccuracyResult runAccuracy(const ExperimentSetup& setup, const AccuracyOptions& 
   std::vector<std::vector<ErrorSample>> errors(runs.size());
   std::vector<std::pair<size_t, Snapshot>> snapshots;  // with the run's index, for the order below
   auto record = [&](size_t k, long step, const Eigen::Matrix3Xd& reference, bool reference_diverged) {
-    const AccuracyRun& run = runs[k];
+    AccuracyRun& run = runs[k];
     errors[k].push_back(sample(setup, grid, run, run.name, step, reference, reference_diverged));
     const bool snapshot = options.snapshots && (step % options.interval == 0 || step == options.steps);
     if (snapshot && !errors[k].back().diverged)

@@ -509,7 +509,7 @@ std::vector<AccuracySummary> notBuiltSummaries(const std::string& variant, const
 void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummary>& rows)
 {
   precise(out) << "variant,method,mean_rms,max_rms,mean_max,final_rms,step_seconds_median,step_seconds_mean,"
-                  "step_cpu_seconds_median,cpu_per_simulated_second,real_time_factor,diverged,not_built,"
+                  "step_cpu_seconds_mean,step_cpu_seconds_median,cpu_per_simulated_second,real_time_factor,diverged,not_built,"
                   "indicator_rank_correlation,reduced_share,switches,time_step,deepest,mean_surface\n";
   for (const AccuracySummary& s : rows)
   {
@@ -519,7 +519,7 @@ void writeAccuracySummaryCsv(std::ostream& out, const std::vector<AccuracySummar
       reason += c == '"' ? std::string("\"\"") : std::string(1, c);
     out << s.variant << ',' << s.method << ',' << Field{s.mean_rms} << ',' << Field{s.max_rms} << ','
         << Field{s.mean_max} << ',' << Field{s.final_rms} << ',' << Field{s.step_seconds_median} << ','
-        << Field{s.step_seconds_mean} << ',' << Field{s.step_cpu_seconds_median} << ','
+        << Field{s.step_seconds_mean} << ',' << Field{s.step_cpu_seconds_mean} << ',' << Field{s.step_cpu_seconds_median} << ','
         << Field{s.cpu_per_simulated_second} << ',' << Field{s.real_time_factor} << ',' << (s.diverged ? 1 : 0) << ",\"" << reason << "\","
         << Field{s.indicator_rank_correlation} << ',' << Field{s.reduced_share} << ','
         << (s.switches >= 0 ? std::to_string(s.switches) : std::string()) << ',' << Field{s.time_step} << ','

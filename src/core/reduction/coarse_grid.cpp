@@ -254,13 +254,13 @@ bool CoarseGrid::fitRestLengths(const Eigen::VectorXd& x_fine)
     throw std::runtime_error("coarse grid: its rest lengths could not be fitted");
   const Eigen::VectorXd change = a.transpose() * solver.solve(-residual);
   for (size_t s = 0; s < springs.size(); ++s)
-    if (!(springs[s].rest_length + change[static_cast<Eigen::Index>(s)] > 0.0))
+  {
+    const double length = springs[s].rest_length + change[static_cast<Eigen::Index>(s)];
+    if (!(std::isfinite(length) && length > 0.0))
       return false;
+  }
   for (size_t s = 0; s < springs.size(); ++s)
     grid.setRestLength(static_cast<int>(s), springs[s].rest_length + change[static_cast<Eigen::Index>(s)]);
-  stiffness = tangentStiffness(grid, x_ref, CompressedSprings::Drop);
-  if (grid.numHandleDofs() > 0)
-    handle_coupling = handleCoupling(grid, x_ref);
   return true;
 }
 

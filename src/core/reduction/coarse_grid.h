@@ -52,8 +52,9 @@ struct CoarseGrid
   // Fits the springs' rest lengths so that the coarse grid, at the fine positions x_fine sampled, is
   // in the balance the fine grid is in there (their forces restricted, P^T f): the change smallest in
   // norm. At a fine equilibrium the coarse grid then hangs in its shape, not its own sag, and keeps
-  // it as it turns (a rest length turns with its spring). K and K_ib are assembled again. False, and
-  // nothing changed, where the fit would take a rest length to zero or below (or is not finite).
+  // it as it turns (a rest length turns with its spring). K and K_ib stay those of the unfitted grid
+  // (Rayleigh damping, the handles' damping load, the step limit: as before the fit). False, and
+  // nothing changed, where the fit would take a rest length to zero or below, or not finite.
   bool fitRestLengths(const Eigen::VectorXd& x_fine);
 
   // What the interpolation misses of fine positions x (every fine dof), on the fine free dofs:

@@ -24,6 +24,19 @@ double indicatorScale(Method reduced)
   }
 }
 
+double IndicatorMaximum::operator()(const Simulation& sim, double value)
+{
+  if (sim.stateSets() != sets_)
+  {
+    sets_ = sim.stateSets();
+    largest_ = 0.0;
+  }
+  if (!std::isfinite(value))
+    return value;
+  largest_ = std::max(largest_, value);
+  return largest_;
+}
+
 AdaptiveSettings adaptiveSettings(const SimulationParams& p)
 {
   AdaptiveSettings s;
@@ -205,7 +218,7 @@ StepResult AdaptiveStepper::check()
   StepResult result;
   if (reduced())
   {
-    last_estimate_ = settings_.indicator_scale * sim_.errorIndicator();
+    last_estimate_ = settings_.indicator_scale * indicator_max_(sim_, sim_.errorIndicator());
     const double inside = insideColliders();
     const double thickness = sim_.contact() ? sim_.contact()->thickness() : 0.0;
     const bool first_check = first_check_;
@@ -225,7 +238,7 @@ StepResult AdaptiveStepper::check()
       return result;
     }
     why << "to full at t = " << sim_.time() << " s: ";
-    if (last_estimate_ > settings_.tolerance)
+    if (!(last_estimate_ <= settings_.tolerance))
       why << "estimated distance " << last_estimate_ << " m above error_tolerance " << settings_.tolerance << " m";
     else
       why << "a particle " << inside << " m inside a collider, deeper than the contact thickness " << thickness

@@ -373,9 +373,11 @@ void Simulation::buildFor(Method method)
     buildBasis();
   if (method == Method::Coarse && !coarse_)
   {
-    coarse_ = std::make_unique<CoarseGrid>(grid_, params_.coarse_cols);
+    // Unfitted where the fit fails (a rest length that would not stay positive): `coarse` as before.
+    auto coarse = std::make_unique<CoarseGrid>(grid_, params_.coarse_cols);
     if (equilibrium_.size() > 0)
-      coarse_->fitRestLengths(equilibrium_);
+      coarse->fitRestLengths(equilibrium_);
+    coarse_ = std::move(coarse);
   }
 }
 
@@ -411,7 +413,7 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
     model_->setFrameForces(frameForcesOf(frame_current_));
   model_->setExternalForce(grid_.gatherFree(external_force_));
   projection_error_ = model_->assign(u, v, remainder);
-  indicator_max_ = 0.0;
+  ++state_sets_;
   model_->setAnchor(anchor_, anchor_handles_);
   diverged_ = false;
   divergence_message_.clear();

@@ -9,7 +9,6 @@
 #include "reduction/error_indicator.h"
 #include "solvers/equilibrium.h"
 
-#include <algorithm>
 #include <chrono>
 #include <time.h>
 #include <cmath>
@@ -26,7 +25,6 @@ SimulationState Simulation::saveState() const
   s.step_count = step_count_;
   s.coordinates = model_->state();
   s.offset = model_->offset();
-  s.indicator_max = indicator_max_;
   s.handles = handle_current_;
   s.frame = frame_current_;
   if (contact_)
@@ -90,8 +88,6 @@ void Simulation::restoreState(const SimulationState& s)
       rejectParameter("state.collider_poses[" + std::to_string(i) + "]", "a non-finite value", "must be finite");
   if (s.step_count < 0)
     rejectParameter("state.step_count", s.step_count, "must be >= 0");
-  if (!(std::isfinite(s.indicator_max) && s.indicator_max >= 0.0))
-    rejectParameter("state.indicator_max", s.indicator_max, "must be a finite number >= 0 (m)");
 
   if (s.time_step != params_.time_step)
     setTimeStep(s.time_step);
@@ -113,7 +109,7 @@ void Simulation::restoreState(const SimulationState& s)
   if (formulation_ == HandleFormulation::MovingFrame)
     model_->setFrameForces(frameForcesOf(frame_current_));
   model_->restore(s.coordinates, s.offset);
-  indicator_max_ = s.indicator_max;
+  ++state_sets_;
   anchor_ = s.anchor;
   anchor_handles_ = s.anchor_handles;
   model_->setAnchor(anchor_, anchor_handles_);
@@ -226,11 +222,7 @@ Eigen::VectorXd Simulation::worldPositions(Eigen::VectorXd x) const
   return x;
 }
 
-double Simulation::errorIndicator()
-{
-  indicator_max_ = std::max(indicator_max_, errorIndicator(params_.method));
-  return indicator_max_;
-}
+double Simulation::errorIndicator() { return errorIndicator(params_.method); }
 
 double Simulation::errorIndicator(Method span)
 {

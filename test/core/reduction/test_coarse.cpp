@@ -424,12 +424,8 @@ TEST(CoarseGrid, FittedRestLengthsBalanceItAtTheFineGridsShape)
   // part of its weight.
   const double before = unbalanced();
   EXPECT_GT(before, 0.05 * weight);
-  const Eigen::VectorXd stiffness_before = coarse.stiffness.toDense().diagonal();
   ASSERT_TRUE(coarse.fitRestLengths(x_fine));
   EXPECT_LT(unbalanced(), 1e-6 * weight) << "before the fit: " << before;
-  // K (its tension part) is the fitted grid's.
-  EXPECT_GT((coarse.stiffness.toDense().diagonal() - stiffness_before).cwiseAbs().maxCoeff(), 0.0);
-  EXPECT_LT((coarse.stiffness - tangentStiffness(coarse.grid, coarse.x_ref, CompressedSprings::Drop)).norm(), 1e-12);
 }
 
 TEST(Coarse, HangsStillInTheFineGridsShape)
@@ -455,7 +451,6 @@ TEST(Coarse, StartsWhereItIsPutWithTheDetailItsGridMisses)
   Simulation coarse(g, s);
   s.method = Method::Full;
   const Simulation full(g, s);
-  EXPECT_EQ(coarse.projectionError(), 0.0);
   EXPECT_LT((coarse.positions() - full.positions()).cwiseAbs().maxCoeff(), 1e-12);
 
   Eigen::VectorXd u = Eigen::VectorXd::Zero(coarse.grid().numFreeDofs());
@@ -464,5 +459,4 @@ TEST(Coarse, StartsWhereItIsPutWithTheDetailItsGridMisses)
   coarse.setPhysicalState(u, Eigen::VectorXd::Zero(u.size()));
   const Eigen::VectorXd expected = coarse.grid().gatherFree(coarse.linearizationPositions()) + u;
   EXPECT_LT((coarse.grid().gatherFree(coarse.positions()) - expected).cwiseAbs().maxCoeff(), 1e-12);
-  EXPECT_EQ(coarse.projectionError(), 0.0);
 }

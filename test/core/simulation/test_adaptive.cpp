@@ -277,8 +277,8 @@ TEST(Adaptive, GoesBackToTheSpanOnceTheStateIsWithinToleranceForTheDwell)
 {
   // Sent to `full` by the turn six modes cannot follow, then held still with a tolerance five times
   // the state's distance to their span and the estimate their indicator would make (both swing up
-  // and down as the cloth does): after the dwell it is reduced again, the state carried over (no
-  // particle jumps at the switch).
+  // and down as the cloth does, the distance to more than three times where it was here): after the
+  // dwell it is reduced again, the state carried over (no particle jumps at the switch).
   Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
   AdaptiveSettings settings = stepsOf5ms();
   settings.reduced = Method::Physical;
