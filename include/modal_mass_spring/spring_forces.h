@@ -18,6 +18,11 @@ using SparseMatrix = Eigen::SparseMatrix<double>;
 // the spring energy, from the same lengths at little extra cost.
 void springForces(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f, double* energy = nullptr);
 
+// The springs' force plus gravity on every dof at positions x: the grid's own force, what balances
+// at its equilibrium. `spring_energy` as springForces.
+void springAndGravityForces(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f,
+                            double* spring_energy = nullptr);
+
 // The round-off of the spring forces on one dof at positions x (N): a spring's force
 // k (l - l0) d / l is computed from coordinates of size |x|, so it carries an error of about
 // k |x| eps, and a particle sums up to 12 of them. No iteration brings an unbalanced force below it.

@@ -30,9 +30,8 @@ void FullForceModel::force(const Eigen::VectorXd& u, Eigen::VectorXd& f)
 {
   setPositions(u);
   double spring_energy = 0.0;
-  springForces(grid_, x_, f_all_, &spring_energy);
+  springAndGravityForces(grid_, x_, f_all_, &spring_energy);
   cache_.store(u, spring_energy + gravityEnergy(grid_, x_));
-  f_all_ += grid_.gravityForce();
   f.resize(u.size());
   const std::vector<int>& free = grid_.freeDofs();
   for (size_t k = 0; k < free.size(); ++k)
@@ -82,8 +81,7 @@ LinearModalForceModel::LinearModalForceModel(const Grid& grid, const ModalBasis&
 void LinearModalForceModel::setReference(const Eigen::VectorXd& x_ref)
 {
   Eigen::VectorXd f;
-  springForces(grid_, x_ref, f);
-  f += grid_.gravityForce();
+  springAndGravityForces(grid_, x_ref, f);
   reference_ = basis_.phi.transpose() * grid_.gatherFree(f);
   reference_energy_ = springEnergy(grid_, x_ref) + gravityEnergy(grid_, x_ref);
 }
@@ -129,9 +127,8 @@ void PhysicalModalForceModel::force(const Eigen::VectorXd& modal, Eigen::VectorX
 {
   setPositions(modal);
   double spring_energy = 0.0;
-  springForces(grid_, x_, f_all_, &spring_energy);
+  springAndGravityForces(grid_, x_, f_all_, &spring_energy);
   cache_.store(modal, spring_energy + gravityEnergy(grid_, x_));
-  f_all_ += grid_.gravityForce();
   const std::vector<int>& free = grid_.freeDofs();
   for (size_t k = 0; k < free.size(); ++k)
     f_free_[k] = f_all_[free[k]];

@@ -46,18 +46,18 @@ Eigen::VectorXd Integrator::dampingForce(const Eigen::VectorXd& v) const
 
 ExplicitNewmark::ExplicitNewmark(MassDamping system, double dt) : Integrator(std::move(system), dt)
 {
-  SparseMatrix mass(system_.mass.size(), system_.mass.size());
-  mass.setIdentity();
-  mass = system_.mass.asDiagonal() * mass;
-  const SparseMatrix lhs = mass + (0.5 * dt_) * system_.damping;
-  diagonal_ = isDiagonal(lhs);
+  // M is diagonal, so M + dt/2 C is where C is (Rayleigh's alpha alone): inverted without forming it.
+  diagonal_ = isDiagonal(system_.damping);
   if (diagonal_)
   {
-    inverse_diagonal_ = lhs.diagonal().cwiseInverse();
+    inverse_diagonal_ = (system_.mass + (0.5 * dt_) * Eigen::VectorXd(system_.damping.diagonal())).cwiseInverse();
   }
   else
   {
-    ldlt_.compute(lhs);
+    SparseMatrix mass(system_.mass.size(), system_.mass.size());
+    mass.setIdentity();
+    mass = system_.mass.asDiagonal() * mass;
+    ldlt_.compute(SparseMatrix(mass + (0.5 * dt_) * system_.damping));
     if (ldlt_.info() != Eigen::Success)
       throw std::runtime_error("explicit Newmark: M + dt/2 C is not positive definite");
   }

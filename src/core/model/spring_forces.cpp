@@ -334,6 +334,12 @@ void springForces(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f
     springForcesDim<3>(grid, x, f, energy);
 }
 
+void springAndGravityForces(const Grid& grid, const Eigen::VectorXd& x, Eigen::VectorXd& f, double* spring_energy)
+{
+  springForces(grid, x, f, spring_energy);
+  f += grid.gravityForce();
+}
+
 double springForceRoundoff(const Grid& grid, const Eigen::VectorXd& x)
 {
   const GridParams& p = grid.params();

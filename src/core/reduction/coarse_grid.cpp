@@ -214,10 +214,8 @@ bool CoarseGrid::fitRestLengths(const Eigen::VectorXd& x_fine)
   for (int dof : grid.freeDofs())
     x[dof] = sampled[dof];
   Eigen::VectorXd f_fine, f_coarse;
-  springForces(fine_, x_fine, f_fine);
-  springForces(grid, x, f_coarse);
-  f_fine += fine_.gravityForce();
-  f_coarse += grid.gravityForce();
+  springAndGravityForces(fine_, x_fine, f_fine);
+  springAndGravityForces(grid, x, f_coarse);
   const Eigen::VectorXd target = grid.gatherFree(interpolation.transpose() * fine_.gatherFree(f_fine));
   const Eigen::VectorXd residual = grid.gatherFree(f_coarse) - target;
 
@@ -252,15 +250,13 @@ bool CoarseGrid::fitRestLengths(const Eigen::VectorXd& x_fine)
   Eigen::SimplicialLDLT<SparseMatrix> solver(normal);
   if (solver.info() != Eigen::Success)
     throw std::runtime_error("coarse grid: its rest lengths could not be fitted");
-  const Eigen::VectorXd change = a.transpose() * solver.solve(-residual);
+  Eigen::VectorXd lengths = a.transpose() * solver.solve(-residual);
   for (size_t s = 0; s < springs.size(); ++s)
-  {
-    const double length = springs[s].rest_length + change[static_cast<Eigen::Index>(s)];
-    if (!(std::isfinite(length) && length > 0.0))
-      return false;
-  }
+    lengths[static_cast<Eigen::Index>(s)] += springs[s].rest_length;
+  if (!(lengths.allFinite() && (lengths.array() > 0.0).all()))
+    return false;
   for (size_t s = 0; s < springs.size(); ++s)
-    grid.setRestLength(static_cast<int>(s), springs[s].rest_length + change[static_cast<Eigen::Index>(s)]);
+    grid.setRestLength(static_cast<int>(s), lengths[static_cast<Eigen::Index>(s)]);
   return true;
 }
 

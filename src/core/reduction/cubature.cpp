@@ -48,8 +48,7 @@ void CubatureForceModel::setReference(const Eigen::VectorXd& x_ref)
   // The exact force and energy at the reference, minus what the cubature gives there.
   Eigen::VectorXd f_all;
   double spring_energy = 0.0;
-  springForces(grid_, x_ref, f_all, &spring_energy);
-  f_all += grid_.gravityForce();
+  springAndGravityForces(grid_, x_ref, f_all, &spring_energy);
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(size());
   Eigen::VectorXd at_zero;
   const double cubature_energy = weightedSprings(zero, &at_zero);

@@ -20,8 +20,7 @@ ErrorIndicator::ErrorIndicator(const Grid& grid, const Eigen::VectorXd& mass) : 
 Eigen::VectorXd ErrorIndicator::force(const Eigen::VectorXd& x, const Eigen::VectorXd& external) const
 {
   Eigen::VectorXd f_all;
-  springForces(grid_, x, f_all);
-  f_all += grid_.gravityForce();
+  springAndGravityForces(grid_, x, f_all);
   if (external.size() == f_all.size())
     f_all += external;
   return grid_.gatherFree(f_all);

@@ -84,8 +84,7 @@ AdaptiveStepper::AdaptiveStepper(Simulation& sim, const AdaptiveSettings& settin
   if (sim_.handleMotion().displacement.size() > 0)
     handle_reference_ -= sim_.handleMotion().displacement;
   checkpoint_ = sim_.saveState();
-  check_interval_ = settings_.check_steps;
-  next_check_ = check_interval_;
+  scheduleNextCheck(false);
 }
 
 void AdaptiveStepper::record()
@@ -253,11 +252,12 @@ StepResult AdaptiveStepper::check()
   {
     // Back only where the reduced method could pass its first check: close to its span, and with
     // no more force outside it than the tolerance allows.
+    // A check that finds it not back stretches the next: the dwell only counts from one that does.
     last_estimate_ = sim_.spanDistance(settings_.reduced);
-    const bool touches = touching();
-    scheduleNextCheck(touches || last_estimate_ > 2.0 * settings_.tolerance);
-    if (last_estimate_ > settings_.tolerance || touches ||
-        settings_.indicator_scale * sim_.errorIndicator(settings_.reduced) > settings_.tolerance)
+    const bool within = last_estimate_ <= settings_.tolerance && !touching() &&
+                        settings_.indicator_scale * sim_.errorIndicator(settings_.reduced) <= settings_.tolerance;
+    scheduleNextCheck(!within);
+    if (!within)
     {
       within_since_ = -1.0;
       return result;

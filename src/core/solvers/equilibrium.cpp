@@ -29,8 +29,8 @@ double potential(const Grid& grid, const Eigen::VectorXd& x)
 Eigen::VectorXd unbalanced(const Grid& grid, const Eigen::VectorXd& x)
 {
   Eigen::VectorXd f;
-  springForces(grid, x, f);
-  return grid.gatherFree(f + grid.gravityForce());
+  springAndGravityForces(grid, x, f);
+  return grid.gatherFree(f);
 }
 
 // Newton's direction K^-1 r. CHOLMOD's supernodal LLT (BLAS) factorises a 100 x 100 cloth's tangent
