@@ -40,9 +40,10 @@ struct AdaptiveSettings
   // the distance grows before the indicator shows it (docs/results.md, "The adaptive method").
   double safe_share = 1.0 / 3.0;
   int max_rollback_checks = 10;  // and never more checks back than this: the motions kept are bounded
-  // A check far from a switch (reduced: within safe_share of the tolerance; `full`: not back
-  // within the tolerance, so no dwell counts yet) doubles the steps to the next, up to this many
-  // times check_steps; any other check, and a switch, resets them to check_steps.
+  // A check far from a switch (reduced: within safe_share of the tolerance; `full`: the state not
+  // back, its distance to the span or the estimate there above the tolerance, or touching a
+  // collider, so no dwell counts yet) doubles the steps to the next, up to this many times
+  // check_steps; any other check, and a switch, resets them to check_steps.
   int max_check_stretch = 4;
 };
 

@@ -46,7 +46,8 @@ Eigen::VectorXd Integrator::dampingForce(const Eigen::VectorXd& v) const
 
 ExplicitNewmark::ExplicitNewmark(MassDamping system, double dt) : Integrator(std::move(system), dt)
 {
-  // M is diagonal, so M + dt/2 C is where C is (Rayleigh's alpha alone): inverted without forming it.
+  // M is diagonal, so M + dt/2 C is diagonal where C is (Rayleigh's alpha alone): inverted entrywise,
+  // without forming the sum.
   diagonal_ = isDiagonal(system_.damping);
   if (diagonal_)
   {

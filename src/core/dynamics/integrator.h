@@ -73,7 +73,7 @@ private:
   static constexpr int kMaxIterations = 100;
   // (M + dt/2 C)^-1 rhs
   Eigen::VectorXd solve(const Eigen::VectorXd& rhs) const;
-  bool diagonal_;                       // modal methods: M + dt/2 C is diagonal, solve by division
+  bool diagonal_;                       // C diagonal (modal methods, or alpha alone): solve by division
   Eigen::VectorXd inverse_diagonal_;
   Eigen::SimplicialLDLT<SparseMatrix> ldlt_;
   Eigen::VectorXd force_, rhs_, gyroscopic_force_, velocity_;

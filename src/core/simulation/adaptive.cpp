@@ -252,7 +252,7 @@ StepResult AdaptiveStepper::check()
   {
     // Back only where the reduced method could pass its first check: close to its span, and with
     // no more force outside it than the tolerance allows.
-    // A check that finds it not back stretches the next: the dwell only counts from one that does.
+    // A check that does not find it back stretches the next: the dwell only counts from one that does.
     last_estimate_ = sim_.spanDistance(settings_.reduced);
     const bool within = last_estimate_ <= settings_.tolerance && !touching() &&
                         settings_.indicator_scale * sim_.errorIndicator(settings_.reduced) <= settings_.tolerance;

@@ -242,8 +242,8 @@ TEST(Adaptive, ChecksFarFromASwitchComeLessOften)
   reduced.check_steps = 5;
   AdaptiveSettings full = fullFromTheStart(Method::Physical);  // under `full`, never within 1e-15 m of the span
   full.check_steps = 5;
-  // Under `full` within the tolerance of the span, but with an estimate no indicator stays within:
-  // not back either, so no dwell counts, and its checks stretch as well.
+  // Under `full` within the 1 m tolerance of the span, but with a scale (1e15) that puts any
+  // indicator above it: not back, so no dwell counts, and its checks stretch as well.
   AdaptiveSettings near = stepsOf5ms();
   near.reduced = Method::Physical;
   near.check_steps = 5;
@@ -261,7 +261,7 @@ TEST(Adaptive, ChecksFarFromASwitchComeLessOften)
   // on the turn, above 1e-9 of a 1 m tolerance) do not stretch.
   reduced.tolerance = 1.0;
   reduced.safe_share = 1e-9;
-  EXPECT_EQ(checks(reduced, BasisKind::LinearModes, turn).first, 40);
+  EXPECT_EQ(checks(reduced, BasisKind::LinearModes, turn), std::make_pair(40, true));
 }
 
 TEST(Adaptive, StaysReducedWhereTheSpanFollows)
