@@ -7,8 +7,8 @@
 // max_rollback_checks checks back) are taken again under `full` from the state saved there (with the
 // handle and collider motions they had), so that the error that grew before the check found it is not
 // carried into `full`. Under `full`, it switches back once the state has stayed within `tolerance` of the
-// reduced span (Simulation::spanDistance), with an indicator for that span within it too (else the
-// first check would send it back), for `dwell` seconds (twice as long after each return in a row
+// reduced span (Simulation::spanDistance), with an estimate for that span safely within it too (else
+// the first check, which reads the largest over its steps, would send it back), for `dwell` seconds (twice as long after each return in a row
 // that fell back at its first check, up to 64 times), touching no collider; the part outside
 // the span is then kept frozen, as every switch does (Simulation::setMethod), and a frozen part
 // dragged along a collider would go into it.
@@ -37,13 +37,14 @@ struct AdaptiveSettings
   // The indicator times this is the distance it stands for (indicatorScale(reduced)).
   double indicator_scale;
   // A fallback goes back to the last check whose estimate was within this share of the tolerance:
-  // the distance grows before the indicator shows it (docs/results.md, "The adaptive method").
+  // the distance grows before the indicator shows it (docs/results.md, "The adaptive method"). A
+  // return asks the same of the estimate at the state.
   double safe_share = 1.0 / 3.0;
   int max_rollback_checks = 10;  // and never more checks back than this: the motions kept are bounded
   // A check far from a switch (reduced: within safe_share of the tolerance; `full`: the state not
-  // back, its distance to the span or the estimate there above the tolerance, or touching a
-  // collider, so no dwell counts yet) doubles the steps to the next, up to this many times
-  // check_steps; any other check, and a switch, resets them to check_steps.
+  // back, its distance to the span above the tolerance, the estimate there above safe_share of it,
+  // or touching a collider, so no dwell counts yet) doubles the steps to the next, up to this many
+  // times check_steps; any other check, and a switch, resets them to check_steps.
   int max_check_stretch = 4;
 };
 

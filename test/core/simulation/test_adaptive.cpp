@@ -258,8 +258,8 @@ TEST(Adaptive, ChecksFarFromASwitchComeLessOften)
               std::make_pair(settings == &reduced ? 11 : 12, settings == &reduced));
   }
   // Checks within the tolerance but not safely (six linear modes leave a force outside their span
-  // on the turn, above 1e-9 of a 1 m tolerance) do not stretch.
-  reduced.tolerance = 1.0;
+  // on the turn, above 1e-9 of a 10 m tolerance, and within it) do not stretch.
+  reduced.tolerance = 10.0;
   reduced.safe_share = 1e-9;
   EXPECT_EQ(checks(reduced, BasisKind::LinearModes, turn), std::make_pair(40, true));
 }
@@ -281,23 +281,37 @@ TEST(Adaptive, StaysReducedWhereTheSpanFollows)
   EXPECT_EQ(adaptive_sim.positions(), physical.positions());
 }
 
-TEST(Adaptive, GoesBackToTheSpanOnceTheStateIsWithinToleranceForTheDwell)
+namespace
 {
-  // Sent to `full` by the turn six modes cannot follow, then held still with a tolerance five times
-  // the state's distance to their span and the estimate their indicator would make (both swing up
-  // and down as the cloth does, the distance to more than three times where it was here): after the
-  // dwell it is reduced again, the state carried over (no particle jumps at the switch).
-  Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
+
+// Sends `sim` (six linear modes) to `full` with the turn they cannot follow, and returns settings whose
+// tolerance's safe share (a third) is five times the state's distance to their span and the estimate
+// their indicator would make there (both swing up and down as the cloth does, the distance to more
+// than three times where it was here), with a dwell of 0.1 s.
+AdaptiveSettings sentToFullByTheTurn(Simulation& sim)
+{
   AdaptiveSettings settings = stepsOf5ms();
   settings.reduced = Method::Physical;
   settings.tolerance = 0.01;
   AdaptiveStepper first(sim, settings);
   run(sim, turn, 100, &first);
-  ASSERT_FALSE(first.reduced());
+  EXPECT_FALSE(first.reduced());
   const double distance = sim.spanDistance(Method::Physical);
-  ASSERT_GT(distance, settings.tolerance);
-  settings.tolerance = 5.0 * std::max(distance, settings.indicator_scale * sim.errorIndicator(Method::Physical));
+  EXPECT_GT(distance, settings.tolerance);
+  settings.tolerance = 5.0 / settings.safe_share *
+                       std::max(distance, settings.indicator_scale * sim.errorIndicator(Method::Physical));
   settings.dwell = 0.1;
+  return settings;
+}
+
+}  // namespace
+
+TEST(Adaptive, GoesBackToTheSpanOnceTheStateIsWithinToleranceForTheDwell)
+{
+  // Held still after the turn: after the dwell it is reduced again, the state carried over (no
+  // particle jumps at the switch).
+  Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
+  const AdaptiveSettings settings = sentToFullByTheTurn(sim);
   AdaptiveStepper second(sim, settings);
   sim.setMethod(Method::Full);  // the stepper starts reduced: back to where the first one left it
   const Eigen::VectorXd held = sim.handlePositions();
@@ -316,6 +330,25 @@ TEST(Adaptive, GoesBackToTheSpanOnceTheStateIsWithinToleranceForTheDwell)
   EXPECT_GE(switched_at * 5e-3, settings.dwell - 1e-9);
   EXPECT_TRUE(contains(second.lastSwitch(), "to physical at t = ")) << second.lastSwitch();
   EXPECT_LT(jump, 0.01);  // the step's own motion: the switch moved nothing
+}
+
+TEST(Adaptive, GoesBackOnlyWithAnEstimateSafelyWithinTheTolerance)
+{
+  // The same hold, but no share of the tolerance is safe: the estimate within it is not enough, and
+  // over 100 steps (five times the dwell) it stays under `full`.
+  Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
+  AdaptiveSettings settings = sentToFullByTheTurn(sim);
+  settings.safe_share = 1e-9;
+  AdaptiveStepper second(sim, settings);
+  sim.setMethod(Method::Full);
+  const Eigen::VectorXd held = sim.handlePositions();
+  for (int k = 1; k <= 100; ++k)
+  {
+    sim.setHandleMotion(held);
+    ASSERT_FALSE(second.step().diverged);
+  }
+  EXPECT_FALSE(second.reduced()) << second.lastSwitch();
+  EXPECT_EQ(second.switches(), 0);
 }
 
 // A fall back takes its steps again with the external force each had: a push on one step of the
