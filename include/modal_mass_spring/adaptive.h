@@ -6,12 +6,12 @@
 // steps since the last check that was safely within it (a third of `tolerance`, at most
 // max_rollback_checks checks back) are taken again under `full` from the state saved there (with the
 // handle and collider motions they had), so that the error that grew before the check found it is not
-// carried into `full`. Under `full`, it switches back once the state has stayed within `tolerance` of the
-// reduced span (Simulation::spanDistance), with an estimate for that span safely within it too (else
-// the first check, which reads the largest over its steps, would send it back), for `dwell` seconds (twice as long after each return in a row
-// that fell back at its first check, up to 64 times), touching no collider; the part outside
-// the span is then kept frozen, as every switch does (Simulation::setMethod), and a frozen part
-// dragged along a collider would go into it.
+// carried into `full`. Under `full`, it switches back once the state has stayed within `tolerance` of
+// the reduced span (Simulation::spanDistance), with an estimate for that span safely within it too
+// (else the first check, a check later, after the reduced method has drifted, would send it back),
+// for `dwell` seconds (twice as long after each return in a row that fell back at its first check,
+// up to 64 times), touching no collider; the part outside the span is then kept frozen, as every
+// switch does (Simulation::setMethod), and a frozen part dragged along a collider would go into it.
 #pragma once
 
 #include "modal_mass_spring/options.h"

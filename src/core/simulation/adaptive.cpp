@@ -251,9 +251,9 @@ StepResult AdaptiveStepper::check()
   else
   {
     // Back only where the reduced method could pass its first check: close to its span, and with
-    // its estimate there safely within the tolerance, since that check reads the largest over its
-    // steps, which grows from there. A check that does not find it back stretches the next: the
-    // dwell only counts from one that does.
+    // its estimate there safely within the tolerance, since that check reads it a check later, after
+    // the reduced method has drifted from the state. A check that does not find it back stretches
+    // the next: the dwell only counts from one that does.
     last_estimate_ = sim_.spanDistance(settings_.reduced);
     const bool within = last_estimate_ <= settings_.tolerance && !touching() &&
                         settings_.indicator_scale * sim_.errorIndicator(settings_.reduced) <=

@@ -349,6 +349,7 @@ TEST(Adaptive, GoesBackOnlyWithAnEstimateSafelyWithinTheTolerance)
   }
   EXPECT_FALSE(second.reduced()) << second.lastSwitch();
   EXPECT_EQ(second.switches(), 0);
+  EXPECT_LE(second.lastEstimate(), settings.tolerance);  // the distance to the span was not what held it
 }
 
 // A fall back takes its steps again with the external force each had: a push on one step of the
