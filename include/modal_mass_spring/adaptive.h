@@ -6,12 +6,13 @@
 // steps since the last check that was safely within it (a third of `tolerance`, at most
 // max_rollback_checks checks back) are taken again under `full` from the state saved there (with the
 // handle and collider motions they had), so that the error that grew before the check found it is not
-// carried into `full`. Under `full`, it switches back once the state has stayed within `tolerance` of
-// the reduced span (Simulation::spanDistance), with an estimate for that span safely within it too
-// (else the first check, a check later, after the reduced method has drifted, would send it back),
-// for `dwell` seconds (twice as long after each return in a row that fell back at its first check,
-// up to 64 times), touching no collider; the part outside the span is then kept frozen, as every
-// switch does (Simulation::setMethod), and a frozen part dragged along a collider would go into it.
+// carried into `full`. Under `full`, it switches back once the state has stayed safely within
+// `tolerance` of the reduced span (Simulation::spanDistance) for `dwell` seconds (twice as long after
+// each return in a row whose fallback took every reduced step since it again, up to 64 times),
+// touching no collider, and an estimate for that span, read then, is safely within it too (else the
+// first check, a check later, after the reduced method has drifted, would send it back); the part
+// outside the span is then kept frozen, as every switch does (Simulation::setMethod), and a frozen
+// part dragged along a collider would go into it.
 #pragma once
 
 #include "modal_mass_spring/options.h"
@@ -115,8 +116,9 @@ private:
   StepResult fallBack(std::ostringstream& why);
   StepResult check();
   // The time within tolerance before a return: `dwell`, doubled (from a check period at least) for
-  // each return in a row that fell back at its first check: a coarse grid left within its span drifts
-  // to its own hanging shape within a check, and going back and forth costs both methods' steps.
+  // each return in a row that kept no reduced step (its fallback took them all again): a coarse grid
+  // left within its span drifts to its own hanging shape within a check or two, and going back and
+  // forth costs both methods' steps.
   double dwell() const;
   // The next check after this one: `far` from a switch, twice as many steps as the last time (up to
   // the stretch), else check_steps.
@@ -141,8 +143,8 @@ private:
   int checks_since_ = 0;             // checks passed since it
   long check_interval_ = 0;          // steps from a check to the next: check_steps, up to max_check_stretch times it
   long next_check_ = 0;              // the step count at which the next check is due
-  bool first_check_ = false;         // the next check is the first since a return to the reduced method
-  int futile_returns_ = 0;           // returns in a row that fell back at their first check
+  bool at_return_ = false;           // the checkpoint is still the state a return to the reduced method set
+  int futile_returns_ = 0;           // returns in a row whose fallback took every reduced step again
   static constexpr int kMaxBackOff = 6;
   Eigen::VectorXd handle_reference_;  // the handle dofs' positions at zero displacement
   // The external force the simulation holds (the last motion kept, or the last applied), and

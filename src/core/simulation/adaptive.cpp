@@ -220,15 +220,14 @@ StepResult AdaptiveStepper::check()
     last_estimate_ = settings_.indicator_scale * indicator_max_(sim_, sim_.errorIndicator());
     const double inside = insideColliders();
     const double thickness = sim_.contact() ? sim_.contact()->thickness() : 0.0;
-    const bool first_check = first_check_;
-    first_check_ = false;
     if (last_estimate_ <= settings_.tolerance && inside <= thickness)
     {
-      if (first_check)
-        futile_returns_ = 0;
       const bool safe = last_estimate_ <= settings_.safe_share * settings_.tolerance;
       if (safe || ++checks_since_ >= settings_.max_rollback_checks)
       {
+        if (at_return_)
+          futile_returns_ = 0;
+        at_return_ = false;
         checkpoint_ = sim_.saveState();
         forgetMotions();
         checks_since_ = 0;
@@ -242,8 +241,9 @@ StepResult AdaptiveStepper::check()
     else
       why << "a particle " << inside << " m inside a collider, deeper than the contact thickness " << thickness
           << " m";
-    if (first_check)
+    if (at_return_)
       ++futile_returns_;
+    at_return_ = false;
     result = fallBack(why);
     within_since_ = -1.0;
     scheduleNextCheck(false);
@@ -252,29 +252,31 @@ StepResult AdaptiveStepper::check()
   {
     // Back only where the reduced method could pass its first check: close to its span, and with
     // its estimate there safely within the tolerance, since that check reads it a check later, after
-    // the reduced method has drifted from the state. A check that does not find it back stretches
-    // the next: the dwell only counts from one that does.
+    // the reduced method has drifted from the state. The dwell counts from a check that finds the
+    // state close; the estimate, which costs about a step of `full`, is read only once it is over.
+    // A check that does not find the state back stretches the next.
+    const double safe = settings_.safe_share * settings_.tolerance;
     last_estimate_ = sim_.spanDistance(settings_.reduced);
-    const bool within = last_estimate_ <= settings_.tolerance && !touching() &&
-                        settings_.indicator_scale * sim_.errorIndicator(settings_.reduced) <=
-                            settings_.safe_share * settings_.tolerance;
-    scheduleNextCheck(!within);
-    if (!within)
+    if (!(last_estimate_ <= safe) || touching())
     {
       within_since_ = -1.0;
+      scheduleNextCheck(true);
       return result;
     }
     if (within_since_ < 0.0)
       within_since_ = sim_.time();
-    if (sim_.time() - within_since_ < dwell())
+    const bool dwelt = sim_.time() - within_since_ >= dwell();
+    const bool back = dwelt && settings_.indicator_scale * sim_.errorIndicator(settings_.reduced) <= safe;
+    scheduleNextCheck(dwelt && !back);
+    if (!back)
       return result;
     why << "to " << toString(settings_.reduced) << " at t = " << sim_.time() << " s: within "
         << last_estimate_ << " m of its span for " << sim_.time() - within_since_ << " s";
     if (futile_returns_ > 0)
       why << " (" << futile_returns_ << " return" << (futile_returns_ == 1 ? "" : "s")
-          << " before fell back at the first check)";
+          << " before took every reduced step again under full)";
     sim_.setMethod(settings_.reduced);
-    first_check_ = true;
+    at_return_ = true;
     checkpoint_ = sim_.saveState();
     forgetMotions();
     checks_since_ = 0;

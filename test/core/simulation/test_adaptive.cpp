@@ -242,8 +242,9 @@ TEST(Adaptive, ChecksFarFromASwitchComeLessOften)
   reduced.check_steps = 5;
   AdaptiveSettings full = fullFromTheStart(Method::Physical);  // under `full`, never within 1e-15 m of the span
   full.check_steps = 5;
-  // Under `full` within the 1 m tolerance of the span, but with a scale (1e15) that puts any
-  // indicator above it: not back, so no dwell counts, and its checks stretch as well.
+  // Under `full` within the safe share of the 1 m tolerance of the span, but with a scale (1e15)
+  // that puts any indicator above it: the dwell (0.2 s) counts from the check at step 10 without the
+  // estimate, then each check reads it and, not back, stretches the next (5, then 50, 60, 80, ..., 200: 18).
   AdaptiveSettings near = stepsOf5ms();
   near.reduced = Method::Physical;
   near.check_steps = 5;
@@ -255,7 +256,7 @@ TEST(Adaptive, ChecksFarFromASwitchComeLessOften)
     EXPECT_EQ(checks(*settings, BasisKind::Skinning, translate), std::make_pair(40, settings == &reduced));
     settings->max_check_stretch = 4;
     EXPECT_EQ(checks(*settings, BasisKind::Skinning, translate),
-              std::make_pair(settings == &reduced ? 11 : 12, settings == &reduced));
+              std::make_pair(settings == &reduced ? 11 : settings == &full ? 12 : 18, settings == &reduced));
   }
   // Checks within the tolerance but not safely (six linear modes leave a force outside their span
   // on the turn, above 1e-9 of a 10 m tolerance, and within it) do not stretch.
@@ -332,24 +333,79 @@ TEST(Adaptive, GoesBackToTheSpanOnceTheStateIsWithinToleranceForTheDwell)
   EXPECT_LT(jump, 0.01);  // the step's own motion: the switch moved nothing
 }
 
-TEST(Adaptive, GoesBackOnlyWithAnEstimateSafelyWithinTheTolerance)
+TEST(Adaptive, GoesBackOnlyWithinTheSafeShareOfTheTolerance)
 {
-  // The same hold, but no share of the tolerance is safe: the estimate within it is not enough, and
-  // over 100 steps (five times the dwell) it stays under `full`.
-  Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
-  AdaptiveSettings settings = sentToFullByTheTurn(sim);
-  settings.safe_share = 1e-9;
-  AdaptiveStepper second(sim, settings);
-  sim.setMethod(Method::Full);
-  const Eigen::VectorXd held = sim.handlePositions();
-  for (int k = 1; k <= 100; ++k)
+  // The same hold, with the state's distance to the span within the tolerance but not within the
+  // (now tiny) safe share of it, then with the distance within the safe share and the estimate not
+  // (a scale that puts any indicator above the tolerance): over 100 steps (five times the dwell)
+  // `full` keeps it either way.
+  auto heldUnder = [](const std::function<void(AdaptiveSettings&)>& change) {
+    Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
+    AdaptiveSettings settings = sentToFullByTheTurn(sim);
+    change(settings);
+    AdaptiveStepper second(sim, settings);
+    sim.setMethod(Method::Full);
+    const Eigen::VectorXd held = sim.handlePositions();
+    for (int k = 1; k <= 100; ++k)
+    {
+      sim.setHandleMotion(held);
+      EXPECT_FALSE(second.step().diverged);
+    }
+    EXPECT_FALSE(second.reduced()) << second.lastSwitch();
+    EXPECT_EQ(second.switches(), 0);
+    return std::make_pair(second.lastEstimate(), settings);
+  };
+  const auto [distance, by_distance] = heldUnder([](AdaptiveSettings& s) {
+    s.safe_share = 1e-9;
+    s.indicator_scale = 1e-15;
+  });
+  EXPECT_LE(distance, by_distance.tolerance);
+  const auto [close, by_estimate] = heldUnder([](AdaptiveSettings& s) { s.indicator_scale = 1e15; });
+  EXPECT_LE(close, by_estimate.safe_share * by_estimate.tolerance);
+}
+
+// A return whose fallback takes every reduced step since it again kept nothing: the dwell before
+// the next doubles (its reason counts such returns in a row), whichever check fell back. The coarse
+// grid held still after the turn leaves the state within its first check, or within its second.
+TEST(Adaptive, AReturnThatKeepsNoReducedStepDoublesTheDwell)
+{
+  SimulationParams params = heldParams(Method::Coarse, BasisKind::LinearModes);
+  params.coarse_cols = 4;
+  Simulation sim(topRowHeld(), params);
+  AdaptiveSettings settings = stepsOf5ms();
+  settings.reduced = Method::Coarse;
+  settings.indicator_scale = indicatorScale(Method::Coarse);
+  settings.tolerance = 0.01;
+  settings.dwell = 0.1;
+  AdaptiveStepper adaptive(sim, settings);
+  const Eigen::VectorXd start = sim.handlePositions();
+  int switches = 0, returned_at = -1, futile_in_a_row = 0, futile_after_a_passed_check = 0;
+  for (int k = 1; k <= 1400; ++k)
   {
-    sim.setHandleMotion(held);
-    ASSERT_FALSE(second.step().diverged);
+    sim.setHandleMotion(turn(start, k));
+    ASSERT_FALSE(adaptive.step().diverged) << "step " << k;
+    if (adaptive.switches() == switches)
+      continue;
+    switches = adaptive.switches();
+    const std::string& why = adaptive.lastSwitch();
+    if (adaptive.reduced())
+    {
+      const double dwell = settings.dwell * std::pow(2.0, futile_in_a_row);
+      const double within = std::stod(why.substr(why.find(" for ") + 5));
+      EXPECT_GE(within, dwell - 1e-9) << why;
+      EXPECT_EQ(contains(why, "(" + std::to_string(futile_in_a_row) + " return"), futile_in_a_row > 0) << why;
+      returned_at = k;
+      continue;
+    }
+    if (returned_at < 0)
+      continue;  // the first fallback, from the start
+    const bool futile = stepsTakenAgain(why) == k - returned_at;
+    futile_in_a_row = futile ? futile_in_a_row + 1 : 0;
+    if (futile && k - returned_at > settings.check_steps)
+      ++futile_after_a_passed_check;
   }
-  EXPECT_FALSE(second.reduced()) << second.lastSwitch();
-  EXPECT_EQ(second.switches(), 0);
-  EXPECT_LE(second.lastEstimate(), settings.tolerance);  // the distance to the span was not what held it
+  EXPECT_GE(futile_after_a_passed_check, 1);
+  EXPECT_GE(switches, 5);
 }
 
 // A fall back takes its steps again with the external force each had: a push on one step of the
