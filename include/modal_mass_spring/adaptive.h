@@ -33,19 +33,20 @@ struct AdaptiveSettings
 {
   Method reduced;    // the reduced method it steps where it may
   double tolerance;  // m, the RMS distance to `full` it accepts
-  double dwell;      // s within tolerance of the span before it goes back
+  double dwell;      // s within safe_share of the tolerance of the span before it goes back
   int check_steps;   // steps between two checks
   // The indicator times this is the distance it stands for (indicatorScale(reduced)).
   double indicator_scale;
   // A fallback goes back to the last check whose estimate was within this share of the tolerance:
   // the distance grows before the indicator shows it (docs/results.md, "The adaptive method"). A
-  // return asks the same of the estimate at the state.
+  // return asks the same of the state's distance to the span and of the estimate at the state.
   double safe_share = 1.0 / 3.0;
   int max_rollback_checks = 10;  // and never more checks back than this: the motions kept are bounded
-  // A check far from a switch (reduced: within safe_share of the tolerance; `full`: the state not
-  // back, its distance to the span above the tolerance, the estimate there above safe_share of it,
-  // or touching a collider, so no dwell counts yet) doubles the steps to the next, up to this many
-  // times check_steps; any other check, and a switch, resets them to check_steps.
+  // A check far from a switch (reduced: within safe_share of the tolerance; `full`: the state's
+  // distance to the span above safe_share of the tolerance, or touching a collider, so no dwell
+  // counts, or, once the dwell is over, the estimate there above safe_share of it) doubles the steps
+  // to the next, up to this many times check_steps; any other check, and a switch, resets them to
+  // check_steps.
   int max_check_stretch = 4;
 };
 
@@ -115,7 +116,7 @@ private:
   // Back to the checkpoint, then the steps since again under `full`.
   StepResult fallBack(std::ostringstream& why);
   StepResult check();
-  // The time within tolerance before a return: `dwell`, doubled (from a check period at least) for
+  // The time within the safe share of the tolerance before a return: `dwell`, doubled (from a check period at least) for
   // each return in a row that kept no reduced step (its fallback took them all again): a coarse grid
   // left within its span drifts to its own hanging shape within a check or two, and going back and
   // forth costs both methods' steps.
@@ -133,7 +134,7 @@ private:
   long steps_ = 0, reduced_steps_ = 0;
   int switches_ = 0, checks_ = 0;
   double last_estimate_ = 0.0;
-  double within_since_ = -1.0;  // under full: the time the state came within tolerance of the span (-1: not)
+  double within_since_ = -1.0;  // under full: the time the state came within safe_share of the tolerance of the span (-1: not)
   std::string last_switch_;
   SimulationState checkpoint_;       // the reduced state at the last safe check
   // The motions of the reduced steps since: the first recorded_, the storage kept for the next

@@ -254,7 +254,8 @@ StepResult AdaptiveStepper::check()
     // its estimate there safely within the tolerance, since that check reads it a check later, after
     // the reduced method has drifted from the state. The dwell counts from a check that finds the
     // state close; the estimate, which costs about a step of `full`, is read only once it is over.
-    // A check that does not find the state back stretches the next.
+    // A check that finds the state far, or after the dwell the estimate above the safe share,
+    // stretches the next.
     const double safe = settings_.safe_share * settings_.tolerance;
     last_estimate_ = sim_.spanDistance(settings_.reduced);
     if (!(last_estimate_ <= safe) || touching())

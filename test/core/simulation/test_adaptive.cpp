@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -244,7 +245,8 @@ TEST(Adaptive, ChecksFarFromASwitchComeLessOften)
   full.check_steps = 5;
   // Under `full` within the safe share of the 1 m tolerance of the span, but with a scale (1e15)
   // that puts any indicator above it: the dwell (0.2 s) counts from the check at step 10 without the
-  // estimate, then each check reads it and, not back, stretches the next (5, then 50, 60, 80, ..., 200: 18).
+  // estimate, then each check reads it and, not back, stretches the next: 5 (the fallback), 10, ...,
+  // 50 (9), then 60, 80, ..., 200 (8): 18.
   AdaptiveSettings near = stepsOf5ms();
   near.reduced = Method::Physical;
   near.check_steps = 5;
@@ -379,7 +381,9 @@ TEST(Adaptive, AReturnThatKeepsNoReducedStepDoublesTheDwell)
   settings.dwell = 0.1;
   AdaptiveStepper adaptive(sim, settings);
   const Eigen::VectorXd start = sim.handlePositions();
-  int switches = 0, returned_at = -1, futile_in_a_row = 0, futile_after_a_passed_check = 0;
+  int switches = 0, returned_at = -1, futile_in_a_row = 0;
+  bool passed_a_check = false;  // one of the futile returns in a row fell back after passing a check
+  int returns_after_such = 0;
   for (int k = 1; k <= 1400; ++k)
   {
     sim.setHandleMotion(turn(start, k));
@@ -394,6 +398,7 @@ TEST(Adaptive, AReturnThatKeepsNoReducedStepDoublesTheDwell)
       const double within = std::stod(why.substr(why.find(" for ") + 5));
       EXPECT_GE(within, dwell - 1e-9) << why;
       EXPECT_EQ(contains(why, "(" + std::to_string(futile_in_a_row) + " return"), futile_in_a_row > 0) << why;
+      returns_after_such += passed_a_check ? 1 : 0;
       returned_at = k;
       continue;
     }
@@ -401,11 +406,9 @@ TEST(Adaptive, AReturnThatKeepsNoReducedStepDoublesTheDwell)
       continue;  // the first fallback, from the start
     const bool futile = stepsTakenAgain(why) == k - returned_at;
     futile_in_a_row = futile ? futile_in_a_row + 1 : 0;
-    if (futile && k - returned_at > settings.check_steps)
-      ++futile_after_a_passed_check;
+    passed_a_check = futile && (passed_a_check || k - returned_at > settings.check_steps);
   }
-  EXPECT_GE(futile_after_a_passed_check, 1);
-  EXPECT_GE(switches, 5);
+  EXPECT_GE(returns_after_such, 1);
 }
 
 // A fall back takes its steps again with the external force each had: a push on one step of the
