@@ -112,14 +112,16 @@ private:
   void record();
   // At a checkpoint: no step since is needed any more (their external forces let go).
   void forgetMotions();
+  // The state now is the checkpoint a fallback goes back to.
+  void setCheckpoint();
   void apply(const Motion& m);
   // Back to the checkpoint, then the steps since again under `full`.
   StepResult fallBack(std::ostringstream& why);
   StepResult check();
-  // The time within the safe share of the tolerance before a return: `dwell`, doubled (from a check period at least) for
-  // each return in a row that kept no reduced step (its fallback took them all again): a coarse grid
-  // left within its span drifts to its own hanging shape within a check or two, and going back and
-  // forth costs both methods' steps.
+  // The time within the safe share of the tolerance before a return: `dwell`, doubled (from a check
+  // period at least) for each return in a row that kept no reduced step (its fallback took them all
+  // again): a coarse grid left within its span drifts to its own hanging shape within a check or
+  // two, and going back and forth costs both methods' steps.
   double dwell() const;
   // The next check after this one: `far` from a switch, twice as many steps as the last time (up to
   // the stretch), else check_steps.
@@ -134,7 +136,8 @@ private:
   long steps_ = 0, reduced_steps_ = 0;
   int switches_ = 0, checks_ = 0;
   double last_estimate_ = 0.0;
-  double within_since_ = -1.0;  // under full: the time the state came within safe_share of the tolerance of the span (-1: not)
+  // Under full: the time the state came within safe_share of the tolerance of the span (-1: not).
+  double within_since_ = -1.0;
   std::string last_switch_;
   SimulationState checkpoint_;       // the reduced state at the last safe check
   // The motions of the reduced steps since: the first recorded_, the storage kept for the next

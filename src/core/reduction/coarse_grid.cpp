@@ -250,9 +250,10 @@ bool CoarseGrid::fitRestLengths(const Eigen::VectorXd& x_fine)
   Eigen::SimplicialLDLT<SparseMatrix> solver(normal);
   if (solver.info() != Eigen::Success)
     throw std::runtime_error("coarse grid: its rest lengths could not be fitted");
-  Eigen::VectorXd lengths = a.transpose() * solver.solve(-residual);
+  Eigen::VectorXd lengths(static_cast<Eigen::Index>(springs.size()));
   for (size_t s = 0; s < springs.size(); ++s)
-    lengths[static_cast<Eigen::Index>(s)] += springs[s].rest_length;
+    lengths[static_cast<Eigen::Index>(s)] = springs[s].rest_length;
+  lengths += a.transpose() * solver.solve(-residual);
   if (!(lengths.allFinite() && (lengths.array() > 0.0).all()))
     return false;
   for (size_t s = 0; s < springs.size(); ++s)

@@ -83,7 +83,7 @@ AdaptiveStepper::AdaptiveStepper(Simulation& sim, const AdaptiveSettings& settin
   handle_reference_ = sim_.handlePositions();
   if (sim_.handleMotion().displacement.size() > 0)
     handle_reference_ -= sim_.handleMotion().displacement;
-  checkpoint_ = sim_.saveState();
+  setCheckpoint();
   scheduleNextCheck(false);
 }
 
@@ -167,6 +167,13 @@ void AdaptiveStepper::forgetMotions()
   recorded_ = 0;
 }
 
+void AdaptiveStepper::setCheckpoint()
+{
+  checkpoint_ = sim_.saveState();
+  forgetMotions();
+  checks_since_ = 0;
+}
+
 double AdaptiveStepper::insideColliders() const
 {
   const Contact* contact = sim_.contact();
@@ -228,9 +235,7 @@ StepResult AdaptiveStepper::check()
         if (at_return_)
           futile_returns_ = 0;
         at_return_ = false;
-        checkpoint_ = sim_.saveState();
-        forgetMotions();
-        checks_since_ = 0;
+        setCheckpoint();
       }
       scheduleNextCheck(safe);
       return result;
@@ -278,9 +283,7 @@ StepResult AdaptiveStepper::check()
           << " before took every reduced step again under full)";
     sim_.setMethod(settings_.reduced);
     at_return_ = true;
-    checkpoint_ = sim_.saveState();
-    forgetMotions();
-    checks_since_ = 0;
+    setCheckpoint();
   }
   ++switches_;
   last_switch_ = why.str();
