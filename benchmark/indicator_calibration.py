@@ -3,9 +3,11 @@
 
     indicator_calibration.py handles_*_error.csv accuracy_*_error.csv
 
-For each method: Spearman's rank correlation of error_indicator with rms_distance over every sample
-after step 0 of every file (pooled), the same over the scenarios' means, the median ratio of the
-distance to the indicator, and each scenario's means.
+For each method: Spearman's rank correlation of error_indicator (the largest since the state was set)
+with rms_distance over every sample after step 0 of every file (pooled), the same over the scenarios'
+means, the median ratio of the distance to the indicator (the scale that calibrates it), each
+scenario's means; then the same rank correlation and median ratio for error_estimate, the calibrated
+estimate that `adaptive` holds against its tolerance (a ratio near 1 when the calibration holds).
 """
 import csv
 import math
@@ -36,18 +38,19 @@ def spearman(a, b):
 
 
 def main(paths):
-    samples = {}  # method -> scenario -> [(indicator, distance)]
+    samples = {}  # method -> scenario -> [(indicator, distance, estimate)]
     for path in paths:
         name = path.rsplit("/", 1)[-1].replace("_error.csv", "")
         for row in csv.DictReader(open(path)):
             if row["step"] == "0" or not row.get("error_indicator") or row["diverged"] == "1":
                 continue
             scenario = name + "/" + row["variant"]
-            pair = (float(row["error_indicator"]), float(row["rms_distance"]))
+            estimate = float(row["error_estimate"]) if row.get("error_estimate") else math.nan
+            pair = (float(row["error_indicator"]), float(row["rms_distance"]), estimate)
             samples.setdefault(row["method"], {}).setdefault(scenario, []).append(pair)
     for method, scenarios in samples.items():
-        pairs = [p for s in scenarios.values() for p in s]
-        means = [(statistics.fmean(i for i, _ in s), statistics.fmean(d for _, d in s)) for s in scenarios.values()]
+        pairs = [p[:2] for s in scenarios.values() for p in s]
+        means = [(statistics.fmean(p[0] for p in s), statistics.fmean(p[1] for p in s)) for s in scenarios.values()]
         ratios = [d / i for i, d in pairs if i > 0]
         print(f"{method}: {len(pairs)} samples in {len(scenarios)} scenarios; rank correlation pooled "
               f"{spearman([i for i, _ in pairs], [d for _, d in pairs]):.3f}, over the scenarios' means "
@@ -55,6 +58,10 @@ def main(paths):
               f"{statistics.median(ratios):.3g}")
         for scenario, (i, d) in zip(scenarios, means):
             print(f"  {scenario:40s} indicator {i:.2e} m  RMS distance {d:.2e} m")
+        estimates = [(p[2], p[1]) for s in scenarios.values() for p in s if not math.isnan(p[2])]
+        if estimates:
+            print(f"  estimate: rank correlation pooled {spearman([e for e, _ in estimates], [d for _, d in estimates]):.3f}; "
+                  f"distance / estimate median {statistics.median(d / e for e, d in estimates if e > 0):.3g}")
 
 
 if __name__ == "__main__":

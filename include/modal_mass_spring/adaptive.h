@@ -35,8 +35,10 @@ struct AdaptiveSettings
   double tolerance;  // m, the RMS distance to `full` it accepts
   double dwell;      // s within safe_share of the tolerance of the span before it goes back
   int check_steps;   // steps between two checks
-  // The indicator times this is the distance it stands for (indicatorScale(reduced)).
+  // The estimate is the largest indicator since the state was set times indicator_scale, plus
+  // swing_drift times the swing since then (errorEstimate; indicatorScale(reduced), swingDrift(reduced)).
   double indicator_scale;
+  double swing_drift;
   // A fallback goes back to the last check whose estimate was within this share of the tolerance:
   // the distance grows before the indicator shows it (docs/results.md, "The adaptive method"). A
   // return asks the same of the state's distance to the span and of the estimate at the state.
@@ -53,6 +55,18 @@ struct AdaptiveSettings
 // The error indicator's calibration for method `reduced`: the distance to `full` it stands for per
 // unit of the largest Simulation::errorIndicator since the state was set (IndicatorMaximum).
 double indicatorScale(Method reduced);
+// How far the reduced method's swing drifts from `full`'s per metre the particles travel relative to
+// one another (swingDistance): `coarse`'s lowest frequencies are not the grid's, so the two swings
+// run out of phase; a modal span's lowest modes are the grid's own. 0 for the modal methods.
+double swingDrift(Method reduced);
+// How far the free particles have swung since the state was set whole (m): their speed relative to
+// their mean velocity (Simulation::relativeSpeed) times the time since the set, as the mass damping
+// remembers it: a driven or decaying swing forgets where it started at the rate alpha / 2, so the
+// time counts up to 2 / alpha at most.
+double swingDistance(const Simulation& sim);
+// The estimated distance to `full` (m) of `sim`'s reduced state: scale times the largest indicator
+// since the state was set, plus drift times swingDistance(sim).
+double errorEstimate(const Simulation& sim, double largest_indicator, double scale, double drift);
 
 // The largest error indicator read from a simulation since its state was last set whole
 // (Simulation::stateSets): the force outside the span comes and goes with the swing, what it did to
@@ -76,7 +90,8 @@ AdaptiveSettings adaptiveSettings(const SimulationParams& params);
 
 // Throws std::invalid_argument naming a setting out of its range: a tolerance not positive and
 // finite, a dwell negative or not finite, check_steps < 1, a reduced method that is `full` or
-// `linear` (whose forces do not see the span's error), an indicator_scale not positive, a safe_share
+// `linear` (whose forces do not see the span's error), an indicator_scale not positive, a swing_drift
+// negative, a safe_share
 // outside (0, 1], max_rollback_checks or max_check_stretch < 1.
 void validateAdaptiveSettings(const AdaptiveSettings& settings);
 
@@ -89,7 +104,7 @@ public:
   StepResult step();
   bool reduced() const { return sim_.method() != Method::Full; }
   // The share of the steps taken so far in the reduced method, the switches, the checks, the last check's
-  // estimate (m: the indicator times its scale while reduced, the distance to the span under full).
+  // estimate (m: errorEstimate while reduced, the distance to the span under full).
   double reducedShare() const { return steps_ > 0 ? static_cast<double>(reduced_steps_) / steps_ : 1.0; }
   int switches() const { return switches_; }
   int checks() const { return checks_; }

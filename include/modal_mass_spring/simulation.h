@@ -348,6 +348,8 @@ public:
   // or restored, a handle set teleported (every install of a method's state). A maximum of the error
   // indicator is taken since the last.
   long stateSets() const { return state_sets_; }
+  // The simulated time stepped since then (s).
+  double timeSinceStateSet() const { return time_since_set_; }
   const LinearizationInfo& linearization() const { return linearization_; }
   // x_ref: the initial positions (rest) or the static equilibrium.
   const Eigen::VectorXd& linearizationPositions() const { return x_ref_; }
@@ -435,6 +437,9 @@ public:
 
   // Of the world velocities.
   double kineticEnergy() const;
+  // The free particles' RMS speed relative to their mean velocity (m/s, mass-weighted): their motion
+  // less a translation.
+  double relativeSpeed() const;
   // Kinetic + spring + gravity potential energy, from the physical positions; the second form takes
   // positions() already reconstructed (O(n r) for a modal method).
   double totalEnergy() const;
@@ -515,6 +520,7 @@ private:
   double projection_error_ = 0.0;
   std::unique_ptr<ErrorIndicator> error_indicator_;  // built at the first errorIndicator()
   long state_sets_ = 0;  // stateSets()
+  double time_since_set_ = 0.0;  // timeSinceStateSet()
   std::unique_ptr<CoarseGrid> coarse_;               // built at the first use of `coarse`
   Eigen::VectorXd external_force_;  // on every dof; zero: none
   long external_force_changes_ = 0;

@@ -85,8 +85,9 @@ void SimulationNode::refreshErrorEstimate(Track& track)
   track.estimate_wall = now;
   try
   {
-    const double estimate =
-        indicatorScale(simulation.method()) * track.indicator_max(simulation, simulation.errorIndicator());
+    const Method method = simulation.method();
+    const double estimate = errorEstimate(simulation, track.indicator_max(simulation, simulation.errorIndicator()),
+                                          indicatorScale(method), swingDrift(method));
     track.error_estimate = std::isfinite(estimate) ? estimate : 0.0;
   }
   catch (const std::exception& error)

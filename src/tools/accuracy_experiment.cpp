@@ -226,11 +226,14 @@ ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, AccuracyRun& 
   {
     e.reduced_share = run.adaptive->reducedShare();
     e.switches = run.adaptive->switches();
-    e.error_indicator = run.adaptive->reduced() ? run.indicator_max(*run.sim, run.sim->errorIndicator())
-                                                : std::numeric_limits<double>::quiet_NaN();
   }
-  else if (run.sim->method() != Method::Full)
+  const Method method_now = run.sim->method();
+  if (method_now != Method::Full)
+  {
     e.error_indicator = run.indicator_max(*run.sim, run.sim->errorIndicator());
+    e.error_estimate =
+        errorEstimate(*run.sim, e.error_indicator, indicatorScale(method_now), swingDrift(method_now));
+  }
   return e;
 }
 
@@ -419,9 +422,9 @@ std::vector<AccuracySummary> summarizeAccuracy(const std::vector<ErrorSample>& r
       cpu_times[k].push_back(e.step_cpu_seconds);
     s.reduced_share = e.reduced_share;
     s.switches = e.switches;
-    if (!std::isnan(e.error_indicator))
+    if (!std::isnan(e.error_estimate))
     {
-      indicators[k].push_back(e.error_indicator);
+      indicators[k].push_back(e.error_estimate);
       distances[k].push_back(e.rms_distance);
     }
     ++counts[k];

@@ -480,12 +480,13 @@ void writeCostCsv(std::ostream& out, const std::vector<CostRow>& rows)
 void writeErrorCsv(std::ostream& out, const std::vector<ErrorSample>& rows)
 {
   precise(out) << "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds,"
-                  "center_y,error_indicator,surface_distance\n";
+                  "center_y,error_indicator,surface_distance,error_estimate\n";
   for (const ErrorSample& e : rows)
     out << e.variant << ',' << e.method << ',' << e.step << ',' << Field{e.time} << ',' << Field{e.max_distance}
         << ',' << Field{e.rms_distance} << ',' << Field{e.max_displacement} << ',' << Field{e.energy} << ','
         << (e.diverged ? 1 : 0) << ',' << Field{e.step_seconds} << ',' << Field{e.center_y} << ','
-        << Field{e.error_indicator} << ',' << Field{e.surface_distance} << '\n';
+        << Field{e.error_indicator} << ',' << Field{e.surface_distance} << ',' << Field{e.error_estimate}
+        << '\n';
 }
 
 void writeCubatureCsv(std::ostream& out, const std::vector<CubatureRow>& rows)

@@ -127,9 +127,12 @@ struct ErrorSample
   double step_cpu_seconds = 0.0;  // and this thread's CPU time per step, which other processes do not inflate
   // The particles' mean y (m): a swing of a 3D sheet about its top edge (along x) moves it; 0 in 2D.
   double center_y = 0.0;
-  // The method's own estimate of its distance to `full` (Simulation::errorIndicator, m); NaN for
-  // `full` and the reference.
+  // The method's error indicator, the largest since the state was set (Simulation::errorIndicator,
+  // m); NaN for `full` and the reference.
   double error_indicator = std::numeric_limits<double>::quiet_NaN();
+  // The estimate of its distance to `full` made of it (errorEstimate, m: what `adaptive` holds against
+  // error_tolerance); NaN likewise.
+  double error_estimate = std::numeric_limits<double>::quiet_NaN();
   // Method "adaptive": the share of its steps so far taken reduced and its switches (else NaN, -1).
   double reduced_share = std::numeric_limits<double>::quiet_NaN();
   int switches = -1;
@@ -283,7 +286,7 @@ struct AccuracySummary
   double cpu_per_simulated_second = 0.0, real_time_factor = 0.0;
   bool diverged = false;
   std::string not_built;  // why the method could not be built (no samples, distances NaN); empty when it ran
-  // Spearman's rank correlation of the error indicator with the RMS distance over the samples after
+  // Spearman's rank correlation of the error estimate with the RMS distance over the samples after
   // step 0 (NaN for `full`, or with fewer than three samples).
   double indicator_rank_correlation = std::numeric_limits<double>::quiet_NaN();
   // Method "adaptive": its share of reduced steps and its switches over the run (else NaN, -1).

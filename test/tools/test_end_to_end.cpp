@@ -110,7 +110,7 @@ TEST_F(ModalCompareTool, SmallRunEndToEndToPngs)
     ASSERT_TRUE(fs::exists(data / name)) << name;
   EXPECT_EQ(firstLine(data / "accuracy_paper_2d_error.csv"),
             "variant,method,step,time,max_distance,rms_distance,max_displacement,energy,diverged,step_seconds,center_y,"
-            "error_indicator,surface_distance");
+            "error_indicator,surface_distance,error_estimate");
   EXPECT_EQ(firstLine(data / "accuracy_paper_2d_cubature.csv"),
             "variant,springs,grid_springs,training_poses,tolerance,training_error,heldout_error,training_seconds");
   EXPECT_EQ(firstLine(data / "stability_integrators.csv"),

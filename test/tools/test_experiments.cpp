@@ -474,7 +474,7 @@ TEST(Csv, NonFiniteNumbersAreEmptyFields)
       diverged.surface_distance = std::numeric_limits<double>::quiet_NaN();
   std::ostringstream errors;
   writeErrorCsv(errors, {diverged});
-  EXPECT_EQ(errors.str().substr(errors.str().find('\n') + 1), "base,linear,10,0,,,,,1,0,,,\n");
+  EXPECT_EQ(errors.str().substr(errors.str().find('\n') + 1), "base,linear,10,0,,,,,1,0,,,,\n");
 
   StabilityRow row;
   row.variant = "base";

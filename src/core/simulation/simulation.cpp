@@ -414,6 +414,7 @@ void Simulation::install(Method method, const Eigen::VectorXd& u, const Eigen::V
   model_->setExternalForce(grid_.gatherFree(external_force_));
   projection_error_ = model_->assign(u, v, remainder);
   ++state_sets_;
+  time_since_set_ = 0.0;
   model_->setAnchor(anchor_, anchor_handles_);
   diverged_ = false;
   divergence_message_.clear();
@@ -584,6 +585,7 @@ StepResult Simulation::step(int steps)
       frame_pending_ = false;
     }
     ++step_count_;
+    time_since_set_ += params_.time_step;
     ++result.steps_taken;
   }
   return result;

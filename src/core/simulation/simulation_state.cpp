@@ -110,6 +110,7 @@ void Simulation::restoreState(const SimulationState& s)
     model_->setFrameForces(frameForcesOf(frame_current_));
   model_->restore(s.coordinates, s.offset);
   ++state_sets_;
+  time_since_set_ = 0.0;
   anchor_ = s.anchor;
   anchor_handles_ = s.anchor_handles;
   model_->setAnchor(anchor_, anchor_handles_);
@@ -290,6 +291,23 @@ double Simulation::kineticEnergy() const
   if (!frameMoved())
     return model_->kineticEnergy(model_->state());
   return 0.5 * velocity().cwiseAbs2().dot(mass_);
+}
+
+double Simulation::relativeSpeed() const
+{
+  const Eigen::VectorXd v = velocity();
+  const int dim = grid_.dimension();
+  const double mass = mass_.sum() / dim;
+  if (mass <= 0.0)
+    return 0.0;
+  Eigen::VectorXd mean = Eigen::VectorXd::Zero(dim);
+  for (Eigen::Index p = 0; p + dim <= v.size(); p += dim)
+    mean += mass_[p] * v.segment(p, dim);
+  mean /= mass;
+  double sum = 0.0;
+  for (Eigen::Index p = 0; p + dim <= v.size(); p += dim)
+    sum += mass_[p] * (v.segment(p, dim) - mean).squaredNorm();
+  return std::sqrt(sum / mass);
 }
 
 double Simulation::methodEnergy() const { return model_->energy(model_->state()); }

@@ -126,3 +126,53 @@ TEST(ErrorIndicator, ItsMaximumIsTheLargestSinceTheStateWasLastSetWhole)
   ASSERT_FALSE(sim.step(5).diverged);
   EXPECT_EQ(sim.stateSets(), sets);
 }
+
+TEST(ErrorIndicator, TheSwingIsTheSpeedAboutTheMeanTimesTheTimeTheDampingRemembers)
+{
+  // The sheet's 20 free particles given a translation and, on alternate particles, +-w along z: their
+  // speed about their mean velocity is w, whatever the translation.
+  SimulationParams s = methodParams(Method::Full, 6, 5e-3, IntegratorKind::Implicit);
+  s.alpha = 0.0;
+  Simulation sim(turnedSheet(), s);
+  const Eigen::Index free_dofs = sim.displacement().size();
+  ASSERT_EQ(free_dofs, 60);
+  const double w = 0.3;
+  Eigen::VectorXd v(free_dofs);
+  for (Eigen::Index p = 0; p < free_dofs / 3; ++p)
+    v.segment<3>(3 * p) = Eigen::Vector3d(0.5, -0.2, 0.1) + Eigen::Vector3d(0.0, 0.0, p % 2 == 0 ? w : -w);
+  sim.setPhysicalState(sim.displacement(), v);
+  EXPECT_NEAR(sim.relativeSpeed(), w, 1e-12);
+  EXPECT_EQ(sim.timeSinceStateSet(), 0.0);
+  EXPECT_EQ(swingDistance(sim), 0.0);
+  sim.setPhysicalState(sim.displacement(), Eigen::VectorXd::Constant(free_dofs, 0.7));
+  EXPECT_NEAR(sim.relativeSpeed(), 0.0, 1e-12);  // a translation does not swing
+
+  // Without damping the time counts whole; with alpha it counts up to 2 / alpha.
+  ASSERT_FALSE(sim.step(40).diverged);
+  EXPECT_NEAR(sim.timeSinceStateSet(), 0.2, 1e-12);
+  EXPECT_GT(sim.relativeSpeed(), 0.0);
+  EXPECT_NEAR(swingDistance(sim), 0.2 * sim.relativeSpeed(), 1e-12);
+  s.alpha = 2.0;
+  Simulation damped(turnedSheet(), s);
+  ASSERT_FALSE(damped.step(400).diverged);
+  EXPECT_NEAR(swingDistance(damped), (1.0 - std::exp(-2.0)) * damped.relativeSpeed(), 1e-12);
+  EXPECT_LT(swingDistance(damped), 1.0 * damped.relativeSpeed());
+
+  // Every set of the state starts the time again; a step does not.
+  const SimulationState saved = sim.saveState();
+  for (auto set : std::vector<std::function<void()>>{[&] { sim.reset(); }, [&] { sim.restoreState(saved); },
+                                                     [&] { sim.setMethod(Method::Physical); }})
+  {
+    ASSERT_FALSE(sim.step(3).diverged);
+    set();
+    EXPECT_EQ(sim.timeSinceStateSet(), 0.0);
+  }
+
+  // The estimate: the indicator's largest times its scale, plus the drift times the swing.
+  ASSERT_FALSE(damped.step(10).diverged);
+  EXPECT_EQ(errorEstimate(damped, 2e-4, 50.0, 0.0), 50.0 * 2e-4);
+  EXPECT_NEAR(errorEstimate(damped, 2e-4, 50.0, 0.01), 50.0 * 2e-4 + 0.01 * swingDistance(damped), 1e-15);
+  EXPECT_GT(swingDrift(Method::Coarse), 0.0);
+  EXPECT_EQ(swingDrift(Method::Physical), 0.0);
+  EXPECT_EQ(swingDrift(Method::Cubature), 0.0);
+}

@@ -108,6 +108,8 @@ TEST(Adaptive, BadSettingsAreRefusedByName)
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.tolerance = NAN; }), "'error_tolerance'"));
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.dwell = -1.0; }), "'adaptive_dwell' = -1"));
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.check_steps = 0; }), "'adaptive_check_steps' = 0"));
+  EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.swing_drift = -1.0; }), "'swing_drift' = -1"));
+  EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.swing_drift = INFINITY; }), "'swing_drift'"));
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.safe_share = 0.0; }), "'safe_share' = 0"));
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.max_rollback_checks = 0; }), "'max_rollback_checks' = 0"));
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.max_check_stretch = 0; }), "'max_check_stretch' = 0"));
@@ -282,6 +284,40 @@ TEST(Adaptive, StaysReducedWhereTheSpanFollows)
   EXPECT_EQ(adaptive.switches(), 0) << adaptive.lastSwitch();
   EXPECT_EQ(adaptive.reducedShare(), 1.0);
   EXPECT_EQ(adaptive_sim.positions(), physical.positions());
+}
+
+TEST(Adaptive, TheSwingsDriftSendsToFullASwingTheIndicatorAloneWouldKeep)
+{
+  // The same translation as above, whose indicator never nears the tolerance, checked every
+  // check_steps: a drift that puts the largest swing at a check at twice the tolerance sends it to
+  // `full`, one that puts it at half does not.
+  Simulation physical(topRowHeld(), heldParams(Method::Physical, BasisKind::Skinning));
+  AdaptiveSettings settings = stepsOf5ms();
+  settings.reduced = Method::Physical;
+  settings.max_check_stretch = 1;
+  double largest_swing = 0.0;
+  const Eigen::VectorXd start = physical.handlePositions();
+  for (int k = 1; k <= 200; ++k)
+  {
+    physical.setHandleMotion(translate(start, k));
+    ASSERT_FALSE(physical.step().diverged);
+    if (k % settings.check_steps == 0)
+      largest_swing = std::max(largest_swing, swingDistance(physical));
+  }
+  ASSERT_GT(largest_swing, 0.0);
+  auto switchesWithDrift = [&](double drift) {
+    Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::Skinning));
+    AdaptiveSettings with = settings;
+    with.swing_drift = drift;
+    AdaptiveStepper adaptive(sim, with);
+    run(sim, translate, 200, &adaptive);
+    return std::make_pair(adaptive.switches(), adaptive.lastSwitch());
+  };
+  const auto [kept, none] = switchesWithDrift(0.5 * settings.tolerance / largest_swing);
+  EXPECT_EQ(kept, 0) << none;
+  const auto [sent, why] = switchesWithDrift(2.0 * settings.tolerance / largest_swing);
+  EXPECT_GE(sent, 1);
+  EXPECT_TRUE(contains(why, "estimated distance")) << why;
 }
 
 namespace
@@ -475,7 +511,9 @@ TEST(Adaptive, FallsBackFromACoarseGridAndStaysOnTheGridsOwn)
   ASSERT_GT(at_first_check, 1e-4);
   settings.tolerance = 0.5 * at_first_check;
   AdaptiveStepper adaptive(adaptive_sim, settings);
-  AdaptiveStepper same(same_sim, settings);
+  AdaptiveSettings grids_own = settings;
+  grids_own.swing_drift = 0.0;  // the swings of a grid and of itself do not drift apart
+  AdaptiveStepper same(same_sim, grids_own);
   run(full, turn, 200);
   coarse.reset();
   run(coarse, turn, 200);
