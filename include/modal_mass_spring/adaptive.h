@@ -59,8 +59,8 @@ double indicatorScale(Method reduced);
 // one another (swingDistance): `coarse`'s lowest frequencies are not the grid's, so the two swings
 // run out of phase; a modal span's lowest modes are the grid's own. 0 for the modal methods.
 double swingDrift(Method reduced);
-// How far the free particles have swung since the state was set whole (m): their speed relative to
-// their mean velocity (Simulation::relativeSpeed) times the time since the set, as the mass damping
+// How far the free particles have swung since the state was set whole (m): their speed less a rigid
+// motion (Simulation::deformationSpeed) times the time since the set, as the mass damping
 // remembers it: a driven or decaying swing forgets where it started at the rate alpha / 2, so the
 // time counts up to 2 / alpha at most.
 double swingDistance(const Simulation& sim);

@@ -437,9 +437,10 @@ public:
 
   // Of the world velocities.
   double kineticEnergy() const;
-  // The free particles' RMS speed relative to their mean velocity (m/s, mass-weighted): their motion
-  // less a translation.
-  double relativeSpeed() const;
+  // The free particles' RMS speed less the rigid motion that fits their velocities best (m/s,
+  // mass-weighted): less their centre of mass's velocity and the rotation about it that carries their
+  // angular momentum.
+  double deformationSpeed() const;
   // Kinetic + spring + gravity potential energy, from the physical positions; the second form takes
   // positions() already reconstructed (O(n r) for a modal method).
   double totalEnergy() const;

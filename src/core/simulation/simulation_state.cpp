@@ -9,8 +9,12 @@
 #include "reduction/error_indicator.h"
 #include "solvers/equilibrium.h"
 
+#include <Eigen/Geometry>
+#include <Eigen/QR>
+
 #include <chrono>
 #include <time.h>
+
 #include <cmath>
 #include <sstream>
 #include <stdexcept>
@@ -293,20 +297,37 @@ double Simulation::kineticEnergy() const
   return 0.5 * velocity().cwiseAbs2().dot(mass_);
 }
 
-double Simulation::relativeSpeed() const
+double Simulation::deformationSpeed() const
 {
-  const Eigen::VectorXd v = velocity();
   const int dim = grid_.dimension();
-  const double mass = mass_.sum() / dim;
+  const Eigen::VectorXd v = velocity();
+  const Eigen::VectorXd x = grid_.gatherFree(positions());
+  const Eigen::Index n = v.size() / dim;
+  Eigen::Matrix3Xd r = Eigen::Matrix3Xd::Zero(3, n), w = Eigen::Matrix3Xd::Zero(3, n);
+  Eigen::VectorXd m(n);
+  for (Eigen::Index p = 0; p < n; ++p)
+  {
+    r.col(p).head(dim) = x.segment(p * dim, dim);
+    w.col(p).head(dim) = v.segment(p * dim, dim);
+    m[p] = mass_[p * dim];
+  }
+  const double mass = m.sum();
   if (mass <= 0.0)
     return 0.0;
-  Eigen::VectorXd mean = Eigen::VectorXd::Zero(dim);
-  for (Eigen::Index p = 0; p + dim <= v.size(); p += dim)
-    mean += mass_[p] * v.segment(p, dim);
-  mean /= mass;
+  r.colwise() -= r * m / mass;
+  w.colwise() -= w * m / mass;
+  Eigen::Vector3d momentum = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d inertia = Eigen::Matrix3d::Zero();
+  for (Eigen::Index p = 0; p < n; ++p)
+  {
+    momentum += m[p] * r.col(p).cross(w.col(p));
+    inertia += m[p] * (r.col(p).squaredNorm() * Eigen::Matrix3d::Identity() - r.col(p) * r.col(p).transpose());
+  }
+  // Least squares: particles on one line do not fix the rotation about it.
+  const Eigen::Vector3d omega = inertia.completeOrthogonalDecomposition().solve(momentum);
   double sum = 0.0;
-  for (Eigen::Index p = 0; p + dim <= v.size(); p += dim)
-    sum += mass_[p] * (v.segment(p, dim) - mean).squaredNorm();
+  for (Eigen::Index p = 0; p < n; ++p)
+    sum += m[p] * (w.col(p) - omega.cross(r.col(p))).squaredNorm();
   return std::sqrt(sum / mass);
 }
 
