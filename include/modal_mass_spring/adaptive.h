@@ -1,6 +1,6 @@
 // A reduced method that falls back to `full` where its span cannot follow the motion (after Kim and
 // James 2009): every check_steps steps (up to max_check_stretch times as many far from a switch), a
-// reduced step's error indicator (Simulation::errorIndicator) times its calibration decides whether
+// reduced step's error estimate (errorEstimate: its indicator, calibrated) decides whether
 // the motion is still within `tolerance` of `full`, and whether a particle is further inside a
 // collider than the contact thickness (a span too coarse to bend round a table's edge); if not, the
 // steps since the last check that was safely within it (a third of `tolerance`, at most

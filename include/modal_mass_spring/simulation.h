@@ -331,8 +331,8 @@ public:
   // the free particles): the displacement that balances the full model's force outside the
   // method's span, the modes' or the coarse grid's interpolation (reduction/error_indicator.h), at
   // the current state; its users keep its largest since the state was set (IndicatorMaximum,
-  // adaptive.h). 0 for `full`. O(springs + n r) (`coarse`: O(springs)) and sparse solves; the first
-  // call factorises the springs' Laplacian.
+  // adaptive.h), and errorEstimate makes of that an estimate. 0 for `full`. O(springs + n r)
+  // (`coarse`: O(springs)) and sparse solves; the first call factorises the springs' Laplacian.
   double errorIndicator();
   // The same for the span of method `span` at the current positions, whatever the method: what that
   // method's indicator would be right after a switch to it (which moves no particle). Its basis or
@@ -437,9 +437,9 @@ public:
 
   // Of the world velocities.
   double kineticEnergy() const;
-  // The free particles' RMS speed less the rigid motion that fits their velocities best (m/s,
-  // mass-weighted): less their centre of mass's velocity and the rotation about it that carries their
-  // angular momentum.
+  // The free particles' RMS speed less the rigid motion that fits their velocities best (m/s): less
+  // their centre's velocity and the rotation about it that carries their angular momentum. On a
+  // grid larger than 32 x 32, over a lattice of about 32 x 32 of them.
   double deformationSpeed() const;
   // Kinetic + spring + gravity potential energy, from the physical positions; the second form takes
   // positions() already reconstructed (O(n r) for a modal method).

@@ -159,6 +159,22 @@ TEST(ErrorIndicator, TheSwingIsTheSpeedLessARigidMotionTimesTheTimeTheDampingRem
   EXPECT_EQ(sim.timeSinceStateSet(), 0.0);
   EXPECT_EQ(swingDistance(sim), 0.0);
 
+  // A grid of more than 32 x 32 is read over a lattice of its particles: a rigid motion still does
+  // not swing, a rigid motion less on one particle of the lattice does.
+  GridParams large = turnedSheet();
+  large.rows = large.cols = 40;
+  Simulation wide(large, methodParams(Method::Full, 6, 5e-3, IntegratorKind::Implicit));
+  const Eigen::VectorXd wide_x = wide.grid().gatherFree(wide.positions());
+  Eigen::VectorXd wide_v(wide_x.size());
+  for (Eigen::Index p = 0; p < wide_x.size() / 3; ++p)
+    wide_v.segment<3>(3 * p) = velocity + omega.cross(wide_x.segment<3>(3 * p) - pivot);
+  wide.setPhysicalState(wide.displacement(), wide_v);
+  EXPECT_NEAR(wide.deformationSpeed(), 0.0, 1e-12);
+  const int corner = 39 * 40 + 39;  // the last particle, on every lattice
+  wide_v.segment<3>(wide.grid().freeIndex(3 * corner)) += Eigen::Vector3d(0.0, 0.0, 1.0);
+  wide.setPhysicalState(wide.displacement(), wide_v);
+  EXPECT_GT(wide.deformationSpeed(), 0.01);
+
   // Without damping the time counts whole; with alpha it counts up to 2 / alpha.
   ASSERT_FALSE(sim.step(40).diverged);
   EXPECT_NEAR(sim.timeSinceStateSet(), 0.2, 1e-12);
