@@ -571,7 +571,6 @@ void turnCoarse(benchmark::State& state, int size, bool frame, bool own_step, bo
     // What the checks cost on a run that stays reduced: turned back and forth without end, the
     // swing's drift reaches the default tolerance within a few turns, and the run would time `full`.
     settings.tolerance = 1.0;
-    if (getenv("TMP_NODRIFT")) settings.swing_drift = 0.0;
     stepper = std::make_unique<AdaptiveStepper>(sim, settings);
   }
   const std::vector<int>& dofs = sim.grid().handleDofs();
