@@ -7,7 +7,7 @@ For each method: Spearman's rank correlation of error_indicator (the largest sin
 with rms_distance over every sample after step 0 of every file (pooled), the same over the scenarios'
 means, the median ratio of the distance to the indicator (the scale that calibrates it), each
 scenario's means; then the same rank correlation and median ratio for error_estimate, the calibrated
-estimate that `adaptive` holds against its tolerance (a ratio near 1 when the calibration holds).
+estimate that `adaptive` holds against its tolerance.
 """
 import csv
 import math

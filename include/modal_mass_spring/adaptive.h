@@ -1,6 +1,7 @@
 // A reduced method that falls back to `full` where its span cannot follow the motion (after Kim and
 // James 2009): every check_steps steps (up to max_check_stretch times as many far from a switch), a
-// reduced step's error estimate (errorEstimate: its indicator, calibrated) decides whether
+// reduced step's error estimate (errorEstimate: its indicator calibrated, plus the swing's drift)
+// decides whether
 // the motion is still within `tolerance` of `full`, and whether a particle is further inside a
 // collider than the contact thickness (a span too coarse to bend round a table's edge); if not, the
 // steps since the last check that was safely within it (a third of `tolerance`, at most
@@ -55,9 +56,9 @@ struct AdaptiveSettings
 // The error indicator's calibration for method `reduced`: the distance to `full` it stands for per
 // unit of the largest Simulation::errorIndicator since the state was set (IndicatorMaximum).
 double indicatorScale(Method reduced);
-// How far the reduced method's swing drifts from `full`'s per metre the particles travel relative to
-// one another (swingDistance): `coarse`'s lowest frequencies are not the grid's, so the two swings
-// run out of phase; a modal span's lowest modes are the grid's own. 0 for the modal methods.
+// How far the reduced method's swing drifts from `full`'s per metre the particles swing
+// (swingDistance): `coarse`'s lowest frequencies are not the grid's, so the two swings run out of
+// phase. 0 for the modal methods: not fitted, their indicator alone ranks above the target.
 double swingDrift(Method reduced);
 // How far the free particles have swung since the state was set whole (m): their speed less a rigid
 // motion (Simulation::deformationSpeed) times the time since the set, as the mass damping
@@ -65,7 +66,8 @@ double swingDrift(Method reduced);
 // time counts up to 2 / alpha at most.
 double swingDistance(const Simulation& sim);
 // The estimated distance to `full` (m) of `sim`'s reduced state: scale times the largest indicator
-// since the state was set, plus drift times swingDistance(sim).
+// since the state was set, plus drift times swingDistance(sim) (none on a coarse grid that is the
+// grid itself).
 double errorEstimate(const Simulation& sim, double largest_indicator, double scale, double drift);
 
 // The largest error indicator read from a simulation since its state was last set whole
@@ -91,8 +93,7 @@ AdaptiveSettings adaptiveSettings(const SimulationParams& params);
 // Throws std::invalid_argument naming a setting out of its range: a tolerance not positive and
 // finite, a dwell negative or not finite, check_steps < 1, a reduced method that is `full` or
 // `linear` (whose forces do not see the span's error), an indicator_scale not positive, a swing_drift
-// negative, a safe_share
-// outside (0, 1], max_rollback_checks or max_check_stretch < 1.
+// negative or not finite, a safe_share outside (0, 1], max_rollback_checks or max_check_stretch < 1.
 void validateAdaptiveSettings(const AdaptiveSettings& settings);
 
 class AdaptiveStepper

@@ -417,7 +417,7 @@ void runHandlesExperiment(const Options& o, const std::vector<ExperimentSetup>& 
   printTable("handles (" + o.tag + "): distance of the free particles to " + reference +
                  " over every sample after step 0; wall and this thread's CPU time per step while running, the "
                  "CPU time per simulated second and the real-time factor it allows (time_step / CPU per step); "
-                 "the rank correlation of the method's error indicator with that distance; each method's time "
+                 "the rank correlation of the method's error estimate with that distance; each method's time "
                  "step; how deep its deepest free particle went inside a collider over the samples; the distance as "
                  "surfaces (each free particle to the other's triangles and back)",
              table);

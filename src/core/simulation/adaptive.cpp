@@ -34,12 +34,16 @@ double swingDistance(const Simulation& sim)
 {
   const double alpha = sim.params().alpha;
   const double t = sim.timeSinceStateSet();
-  const double remembered = alpha > 0.0 ? (1.0 - std::exp(-0.5 * alpha * t)) * 2.0 / alpha : t;
+  const double remembered = alpha > 0.0 ? -std::expm1(-0.5 * alpha * t) * 2.0 / alpha : t;
   return sim.deformationSpeed() * remembered;
 }
 
 double errorEstimate(const Simulation& sim, double largest_indicator, double scale, double drift)
 {
+  // A coarse grid that is the grid itself swings as the grid does.
+  const Grid* coarse = sim.method() == Method::Coarse ? sim.coarseGrid() : nullptr;
+  if (coarse && coarse->numParticles() == sim.grid().numParticles())
+    drift = 0.0;
   return scale * largest_indicator + (drift > 0.0 ? drift * swingDistance(sim) : 0.0);
 }
 

@@ -159,21 +159,42 @@ TEST(ErrorIndicator, TheSwingIsTheSpeedLessARigidMotionTimesTheTimeTheDampingRem
   EXPECT_EQ(sim.timeSinceStateSet(), 0.0);
   EXPECT_EQ(swingDistance(sim), 0.0);
 
-  // A grid of more than 32 x 32 is read over a lattice of its particles: a rigid motion still does
-  // not swing, a rigid motion less on one particle of the lattice does.
+  // A grid of more than 32 x 32 (40 rows of 50) is read over a lattice of 32 x 32 of its particles
+  // (rows round(k 39 / 31), columns round(k 49 / 31)): a rigid motion still does not swing, nor
+  // does one with a particle off the lattice (row 22, column 23) moved, while one on it (row 19,
+  // column 24) does.
   GridParams large = turnedSheet();
-  large.rows = large.cols = 40;
+  large.rows = 40;
+  large.cols = 50;
   Simulation wide(large, methodParams(Method::Full, 6, 5e-3, IntegratorKind::Implicit));
   const Eigen::VectorXd wide_x = wide.grid().gatherFree(wide.positions());
   Eigen::VectorXd wide_v(wide_x.size());
   for (Eigen::Index p = 0; p < wide_x.size() / 3; ++p)
     wide_v.segment<3>(3 * p) = velocity + omega.cross(wide_x.segment<3>(3 * p) - pivot);
+  auto withMoved = [&](int row, int col) {
+    Eigen::VectorXd moved = wide_v;
+    moved[wide.grid().freeIndex(3 * (row * large.cols + col) + 2)] += 1.0;
+    wide.setPhysicalState(wide.displacement(), moved);
+    return wide.deformationSpeed();
+  };
   wide.setPhysicalState(wide.displacement(), wide_v);
   EXPECT_NEAR(wide.deformationSpeed(), 0.0, 1e-12);
-  const int corner = 39 * 40 + 39;  // the last particle, on every lattice
-  wide_v.segment<3>(wide.grid().freeIndex(3 * corner)) += Eigen::Vector3d(0.0, 0.0, 1.0);
-  wide.setPhysicalState(wide.displacement(), wide_v);
-  EXPECT_GT(wide.deformationSpeed(), 0.01);
+  EXPECT_NEAR(withMoved(22, 23), 0.0, 1e-12);
+  EXPECT_GT(withMoved(19, 24), 0.01);
+
+  // In 2D the rigid motion turns in the plane.
+  SimulationParams flat = methodParams(Method::Full, 6, 5e-3, IntegratorKind::Implicit);
+  Simulation plane(GridParams{}, flat);
+  ASSERT_EQ(plane.grid().dimension(), 2);
+  const Eigen::VectorXd plane_x = plane.grid().gatherFree(plane.positions());
+  Eigen::VectorXd plane_v(plane_x.size());
+  for (Eigen::Index p = 0; p < plane_x.size() / 2; ++p)
+    plane_v.segment<2>(2 * p) = Eigen::Vector2d(0.4, -0.3) + 0.8 * Eigen::Vector2d(-plane_x[2 * p + 1], plane_x[2 * p]);
+  plane.setPhysicalState(plane.displacement(), plane_v);
+  EXPECT_NEAR(plane.deformationSpeed(), 0.0, 1e-12);
+  plane_v[0] += 1.0;
+  plane.setPhysicalState(plane.displacement(), plane_v);
+  EXPECT_GT(plane.deformationSpeed(), 0.01);
 
   // Without damping the time counts whole; with alpha it counts up to 2 / alpha.
   ASSERT_FALSE(sim.step(40).diverged);
@@ -184,7 +205,11 @@ TEST(ErrorIndicator, TheSwingIsTheSpeedLessARigidMotionTimesTheTimeTheDampingRem
   Simulation damped(turnedSheet(), s);
   ASSERT_FALSE(damped.step(400).diverged);
   EXPECT_NEAR(swingDistance(damped), (1.0 - std::exp(-2.0)) * damped.deformationSpeed(), 1e-12);
-  EXPECT_LT(swingDistance(damped), 1.0 * damped.deformationSpeed());
+  // A damping too light for 1 - exp(-alpha t / 2) to be told from 0 in doubles still counts the time.
+  s.alpha = 1e-17;
+  Simulation light(turnedSheet(), s);
+  ASSERT_FALSE(light.step(40).diverged);
+  EXPECT_NEAR(swingDistance(light), 0.2 * light.deformationSpeed(), 1e-12);
 
   // Every set of the state starts the time again; a step does not.
   const SimulationState saved = sim.saveState();

@@ -125,6 +125,9 @@ TEST(Adaptive, BadSettingsAreRefusedByName)
   EXPECT_EQ(adaptiveSettings(p).check_steps, 125);
   p.adaptive_check_steps = 7;
   EXPECT_EQ(adaptiveSettings(p).check_steps, 7);
+  EXPECT_EQ(adaptiveSettings(p).swing_drift, swingDrift(Method::Coarse));
+  p.adaptive_method = Method::Physical;
+  EXPECT_EQ(adaptiveSettings(p).swing_drift, 0.0);
   p.adaptive_check_steps = -1;
   EXPECT_TRUE(contains(refusal([&] { validateAdaptiveSettings(adaptiveSettings(p)); }), "'adaptive_check_steps' = -1"));
 }
@@ -511,9 +514,7 @@ TEST(Adaptive, FallsBackFromACoarseGridAndStaysOnTheGridsOwn)
   ASSERT_GT(at_first_check, 1e-4);
   settings.tolerance = 0.5 * at_first_check;
   AdaptiveStepper adaptive(adaptive_sim, settings);
-  AdaptiveSettings grids_own = settings;
-  grids_own.swing_drift = 0.0;  // the swings of a grid and of itself do not drift apart
-  AdaptiveStepper same(same_sim, grids_own);
+  AdaptiveStepper same(same_sim, settings);
   run(full, turn, 200);
   coarse.reset();
   run(coarse, turn, 200);
