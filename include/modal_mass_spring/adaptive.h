@@ -1,10 +1,9 @@
 // A reduced method that falls back to `full` where its span cannot follow the motion (after Kim and
 // James 2009): every check_steps steps (up to max_check_stretch times as many far from a switch), a
 // reduced step's error estimate (errorEstimate: its indicator calibrated, plus the swing's drift)
-// decides whether
-// the motion is still within `tolerance` of `full`, and whether a particle is further inside a
-// collider than the contact thickness (a span too coarse to bend round a table's edge); if not, the
-// steps since the last check that was safely within it (a third of `tolerance`, at most
+// decides whether the motion is still within `tolerance` of `full`, and whether a particle is further
+// inside a collider than the contact thickness (a span too coarse to bend round a table's edge); if
+// not, the steps since the last check that was safely within it (a third of `tolerance`, at most
 // max_rollback_checks checks back) are taken again under `full` from the state saved there (with the
 // handle and collider motions they had), so that the error that grew before the check found it is not
 // carried into `full`. Under `full`, it switches back once the state has stayed safely within

@@ -439,7 +439,7 @@ public:
   double kineticEnergy() const;
   // The free particles' RMS speed less the rigid motion that fits their velocities best (m/s): less
   // their centre's velocity and the rotation about it that carries their angular momentum. On a
-  // grid larger than 32 x 32, over a lattice of about 32 x 32 of them.
+  // grid with more than 32 rows or columns, over a lattice of at most 32 x 32 of them.
   double deformationSpeed() const;
   // Kinetic + spring + gravity potential energy, from the physical positions; the second form takes
   // positions() already reconstructed (O(n r) for a modal method).
