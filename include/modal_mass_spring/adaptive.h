@@ -68,6 +68,8 @@ double swingDistance(const Simulation& sim);
 // since the state was set, plus drift times swingDistance(sim) (none on a coarse grid that is the
 // grid itself).
 double errorEstimate(const Simulation& sim, double largest_indicator, double scale, double drift);
+// The same with the calibration of `sim`'s own method (indicatorScale, swingDrift).
+double errorEstimate(const Simulation& sim, double largest_indicator);
 
 // The largest error indicator read from a simulation since its state was last set whole
 // (Simulation::stateSets): the force outside the span comes and goes with the swing, what it did to

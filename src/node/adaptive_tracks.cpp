@@ -85,9 +85,8 @@ void SimulationNode::refreshErrorEstimate(Track& track)
   track.estimate_wall = now;
   try
   {
-    const Method method = simulation.method();
-    const double estimate = errorEstimate(simulation, track.indicator_max(simulation, simulation.errorIndicator()),
-                                          indicatorScale(method), swingDrift(method));
+    const double estimate =
+        errorEstimate(simulation, track.indicator_max(simulation, simulation.errorIndicator()));
     track.error_estimate = std::isfinite(estimate) ? estimate : 0.0;
   }
   catch (const std::exception& error)

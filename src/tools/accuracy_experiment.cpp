@@ -227,12 +227,10 @@ ErrorSample sample(const ExperimentSetup& setup, const Grid& grid, AccuracyRun& 
     e.reduced_share = run.adaptive->reducedShare();
     e.switches = run.adaptive->switches();
   }
-  const Method method_now = run.sim->method();
-  if (method_now != Method::Full)
+  if (run.sim->method() != Method::Full)
   {
     e.error_indicator = run.indicator_max(*run.sim, run.sim->errorIndicator());
-    e.error_estimate =
-        errorEstimate(*run.sim, e.error_indicator, indicatorScale(method_now), swingDrift(method_now));
+    e.error_estimate = errorEstimate(*run.sim, e.error_indicator);
   }
   return e;
 }

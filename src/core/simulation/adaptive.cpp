@@ -47,6 +47,11 @@ double errorEstimate(const Simulation& sim, double largest_indicator, double sca
   return scale * largest_indicator + (drift > 0.0 ? drift * swingDistance(sim) : 0.0);
 }
 
+double errorEstimate(const Simulation& sim, double largest_indicator)
+{
+  return errorEstimate(sim, largest_indicator, indicatorScale(sim.method()), swingDrift(sim.method()));
+}
+
 double IndicatorMaximum::operator()(const Simulation& sim, double value)
 {
   if (sim.stateSets() != sets_)

@@ -9,7 +9,6 @@
 #include "reduction/error_indicator.h"
 #include "solvers/equilibrium.h"
 
-#include <Eigen/Geometry>
 #include <Eigen/QR>
 
 #include <chrono>
