@@ -166,6 +166,7 @@ private:
   long next_check_ = 0;              // the step count at which the next check is due
   bool at_return_ = false;           // the checkpoint is still the state a return to the reduced method set
   int futile_returns_ = 0;           // returns in a row whose fallback took every reduced step again
+  long sets_checked_ = -1;           // Simulation::stateSets() at the last check while reduced
   static constexpr int kMaxBackOff = 6;
   Eigen::VectorXd handle_reference_;  // the handle dofs' positions at zero displacement
   // The external force the simulation holds (the last motion kept, or the last applied), and

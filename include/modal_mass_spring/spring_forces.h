@@ -43,6 +43,8 @@ SparseMatrix tangentStiffness(const Grid& grid, const Eigen::VectorXd& x,
 // direction alike): constant, and at least K(x) at every x (a spring's Hessian is k_s along it and
 // k_s (1 - L / l) < k_s across), so an implicit step solved with it in place of K descends.
 SparseMatrix springLaplacian(const Grid& grid);
+// Its diagonal alone, without forming the matrix (each spring's k_s on both ends' free dofs).
+Eigen::VectorXd springLaplacianDiagonal(const Grid& grid);
 
 // K(x) assembled again and again on one grid: its pattern and where each spring's entries land in its
 // values are found once, so an assembly writes the values in place (an assembly from triplets, sorting

@@ -399,4 +399,16 @@ SparseMatrix springLaplacian(const Grid& grid)
   return l;
 }
 
+Eigen::VectorXd springLaplacianDiagonal(const Grid& grid)
+{
+  const int dim = grid.dimension();
+  Eigen::VectorXd d = Eigen::VectorXd::Zero(grid.numFreeDofs());
+  for (const Spring& s : grid.springs())
+    for (int c = 0; c < dim; ++c)
+      for (int end : {s.i, s.j})
+        if (const int k = grid.freeIndex(dim * end + c); k >= 0)
+          d[k] += s.stiffness;
+  return d;
+}
+
 }  // namespace modal_mass_spring

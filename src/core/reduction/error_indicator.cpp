@@ -11,10 +11,7 @@ namespace modal_mass_spring
 ErrorIndicator::ErrorIndicator(const Grid& grid, const Eigen::VectorXd& mass) : grid_(grid), mass_(mass)
 {
   particle_mass_ = mass_.sum() / grid_.dimension();
-  matrix_ = springLaplacian(grid_);
-  for (Eigen::Index k = 0; k < mass_.size(); ++k)
-    matrix_.coeffRef(k, k) += mass_[k] / (kTau * kTau);
-  diagonal_ = matrix_.diagonal();
+  diagonal_ = springLaplacianDiagonal(grid_) + mass_ / (kTau * kTau);
 }
 
 Eigen::VectorXd ErrorIndicator::force(const Eigen::VectorXd& x, const Eigen::VectorXd& external) const
@@ -30,7 +27,12 @@ double ErrorIndicator::balance(const Eigen::VectorXd& r)
 {
   if (!factored_)
   {
-    factor_.compute(matrix_);
+    // Formed here, not with the diagonal: `coarse` needs no more, and on a large grid forming it
+    // costs as much as a dozen checks.
+    Eigen::SparseMatrix<double> matrix = springLaplacian(grid_);
+    for (Eigen::Index k = 0; k < mass_.size(); ++k)
+      matrix.coeffRef(k, k) += mass_[k] / (kTau * kTau);
+    factor_.compute(matrix);
     if (factor_.info() != Eigen::Success)
       throw std::runtime_error("error indicator: the springs' Laplacian plus the mass could not be factorised");
     factored_ = true;

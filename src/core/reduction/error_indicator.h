@@ -40,8 +40,7 @@ private:
   const Grid& grid_;
   Eigen::VectorXd mass_;
   double particle_mass_ = 0.0;  // the free particles' total mass
-  Eigen::SparseMatrix<double> matrix_;  // L + M / tau^2
-  Eigen::VectorXd diagonal_;
+  Eigen::VectorXd diagonal_;  // of L + M / tau^2
   Eigen::SimplicialLLT<Eigen::SparseMatrix<double>> factor_;
   bool factored_ = false;
 };

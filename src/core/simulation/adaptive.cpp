@@ -259,6 +259,9 @@ StepResult AdaptiveStepper::check()
                                    settings_.swing_drift);
     const double inside = insideColliders();
     const double thickness = sim_.contact() ? sim_.contact()->thickness() : 0.0;
+    // The first reading since the state was set tells nothing of how fast the estimate grows.
+    const bool first = sim_.stateSets() != sets_checked_;
+    sets_checked_ = sim_.stateSets();
     if (last_estimate_ <= settings_.tolerance && inside <= thickness)
     {
       const bool safe = last_estimate_ <= settings_.safe_share * settings_.tolerance;
@@ -269,7 +272,7 @@ StepResult AdaptiveStepper::check()
         at_return_ = false;
         setCheckpoint();
       }
-      scheduleNextCheck(safe);
+      scheduleNextCheck(safe && !first);
       return result;
     }
     why << "to full at t = " << sim_.time() << " s: ";

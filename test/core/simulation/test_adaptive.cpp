@@ -193,9 +193,9 @@ TEST(Adaptive, AFallBackGoesBackToTheLastCheckSafelyWithinTheTolerance)
   const int bounded = stepsAgain(1e-9, 2);
   EXPECT_GE(bounded, 5);
   EXPECT_LE(bounded, 10);                // but never more than two checks back
-  // Safe checks stretch the steps between them (checks at 5, 15, 35, ...): the turn passes the
-  // first two and falls back at a later one, 20 steps back.
-  EXPECT_EQ(stepsAgain(1.0, 10, 4), 20);
+  // Safe checks after the first stretch the steps between them (checks at 5, 10, 20, ...): the turn
+  // passes the first two and falls back at the third, 10 steps back.
+  EXPECT_EQ(stepsAgain(1.0, 10, 4), 10);
 }
 
 // A fallback after safe checks takes its steps again from motions recorded over earlier ones: with
@@ -206,37 +206,38 @@ TEST(Adaptive, AFallBackAfterSafeChecksRetakesTheStepsAsFullTakesThem)
   settings.reduced = Method::Physical;
   settings.tolerance = 0.01;
   settings.check_steps = 5;
-  settings.safe_share = 1.0;  // checks at 5, 15, 35: the turn passes the first two, safely
+  settings.safe_share = 1.0;  // checks at 5, 10, 20: the turn passes the first two, safely
   Simulation adaptive_sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
   Simulation reference(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
   AdaptiveStepper adaptive(adaptive_sim, settings);
   const Eigen::VectorXd start = adaptive_sim.handlePositions();
   const Eigen::VectorXd none = Eigen::VectorXd::Zero(adaptive_sim.externalForce().size());
   Eigen::VectorXd push = none;
-  push[3 * 95 + 1] = 0.5;  // N on a particle of the bottom row, along y, at step 20
+  push[3 * 95 + 1] = 0.5;  // N on a particle of the bottom row, along y, at step 15
   for (int k = 1; k <= 35; ++k)
   {
-    if (k == 16)
+    if (k == 11)
       reference.setMethod(Method::Full);  // where the last safe check leaves the reduced method
     for (Simulation* sim : {&adaptive_sim, &reference})
     {
       sim->setHandleMotion(turn(start, k));
-      sim->setExternalForce(k == 20 ? push : none);
+      sim->setExternalForce(k == 15 ? push : none);
     }
     ASSERT_FALSE(reference.step().diverged);
     ASSERT_FALSE(adaptive.step().diverged);
   }
   ASSERT_EQ(adaptive.switches(), 1) << adaptive.lastSwitch();
   EXPECT_FALSE(adaptive.reduced());
-  EXPECT_EQ(stepsTakenAgain(adaptive.lastSwitch()), 20) << adaptive.lastSwitch();
+  EXPECT_EQ(stepsTakenAgain(adaptive.lastSwitch()), 10) << adaptive.lastSwitch();
   EXPECT_LT(largestParticleDistance(adaptive_sim, reference.positions()), 1e-9);
 }
 
 TEST(Adaptive, ChecksFarFromASwitchComeLessOften)
 {
   // 200 steps, a check every 5 at the least: 40 checks unstretched. Stretched to at most four times
-  // (5, 10, 20, 20, ...): 11 checks where every check is far from a switch, 12 under `full` (its
-  // first check falls back, and the stretch starts again).
+  // from the second reading since the state was set (at 5, 10, 20, 40, 60, ...): 12 checks where
+  // every check is far from a switch, 12 under `full` too (its first check falls back, and the
+  // stretch starts again: 5, 10, 20, 40, ...).
   auto checks = [](const AdaptiveSettings& settings, BasisKind basis, const Motion& move) {
     Simulation sim(topRowHeld(), heldParams(settings.reduced, basis));
     AdaptiveStepper adaptive(sim, settings);
@@ -263,7 +264,7 @@ TEST(Adaptive, ChecksFarFromASwitchComeLessOften)
     EXPECT_EQ(checks(*settings, BasisKind::Skinning, translate), std::make_pair(40, settings == &reduced));
     settings->max_check_stretch = 4;
     EXPECT_EQ(checks(*settings, BasisKind::Skinning, translate),
-              std::make_pair(settings == &reduced ? 11 : settings == &full ? 12 : 18, settings == &reduced));
+              std::make_pair(settings == &reduced ? 12 : settings == &full ? 12 : 18, settings == &reduced));
   }
   // Checks within the tolerance but not safely (six linear modes leave a force outside their span
   // on the turn, above 1e-9 of a 10 m tolerance, and within it) do not stretch.
