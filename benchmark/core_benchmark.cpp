@@ -552,39 +552,30 @@ GridParams clampedCloth(int size)
 // of its top two rows, nothing fixed), explicit, the clamp's motion handed over every step as the node
 // and modal_compare hand it: every clamp particle's motion (setHandleMotion), or the clamp's frame
 // (setHandleFrameMotion). At `full`'s largest stable step (0.8 ms x 100 / N) or at coarse's own
-// (coarseStepMultiple times it), alone or through the adaptive stepper. Counter: CPU seconds per
-// simulated second, which compares different steps.
+// (coarseStepMultiple times it), alone or through the adaptive stepper: at `full`'s step it is
+// handed each step's motion and records it, as the node does; at coarse's own it drives each reduced
+// step (reduced_step_span), as modal_compare does. Counter: CPU seconds per simulated second, which
+// compares different steps.
 void turnCoarse(benchmark::State& state, int size, bool frame, bool own_step, bool adaptive)
 {
   const GridParams g = clampedCloth(size);
   SimulationParams s = coarseAtRest();
   s.handle_formulation = HandleFormulation::ConstraintModes;
   s.time_step = 0.0008 * 100.0 / size;
-  if (own_step)
-    s.time_step *= coarseStepMultiple(g, s);
+  const int multiple = own_step ? coarseStepMultiple(g, s) : 1;
+  if (!adaptive)
+    s.time_step *= multiple;
   Simulation sim(g, s);
-  std::unique_ptr<AdaptiveStepper> stepper;
-  if (adaptive)
-  {
-    AdaptiveSettings settings = adaptiveSettings(s);
-    settings.reduced = Method::Coarse;
-    // What the checks cost on a run that stays reduced: turned back and forth without end, the
-    // swing's drift reaches the default tolerance within a few turns, and the run would time `full`.
-    settings.tolerance = 1.0;
-    stepper = std::make_unique<AdaptiveStepper>(sim, settings);
-  }
   const std::vector<int>& dofs = sim.grid().handleDofs();
   Eigen::Matrix3Xd points(3, static_cast<Eigen::Index>(dofs.size()) / 3);
   for (Eigen::Index p = 0; p < points.cols(); ++p)
     points.col(p) = sim.linearizationPositions().segment<3>(dofs[3 * p]);
   const Eigen::Vector3d pivot = points.rowwise().mean(), axis = Eigen::Vector3d::UnitZ();
   const double duration = 1.0, angle = EIGEN_PI / 3.0;
-  const double start_cpu = threadCpuSeconds();
-  const double start_time = sim.time();
-  for (auto _ : state)
-  {
-    // Turned to 60 degrees and back, smoothly, every 2 s: angle (1 - cos(pi t / duration)) / 2.
-    const double t = sim.time() + s.time_step, w = EIGEN_PI / duration;
+  // Turned to 60 degrees and back, smoothly, every 2 s: angle (1 - cos(pi t / duration)) / 2, where
+  // the next step ends.
+  const Drive drive = [&](Simulation& sim) {
+    const double t = static_cast<double>(sim.stepCount() + sim.stepSpan()) * s.time_step, w = EIGEN_PI / duration;
     const double turn = 0.5 * angle * (1.0 - std::cos(w * t)), rate = 0.5 * angle * w * std::sin(w * t);
     const double spin = 0.5 * angle * w * w * std::cos(w * t);
     const FrameMotion m = turnAbout(pivot, axis, turn, rate, spin);
@@ -595,6 +586,25 @@ void turnCoarse(benchmark::State& state, int size, bool frame, bool own_step, bo
       const RigidPointMotion motion = pointMotion(m, points);
       sim.setHandleMotion(motion.position.reshaped(), motion.velocity.reshaped(), motion.acceleration.reshaped());
     }
+  };
+  std::unique_ptr<AdaptiveStepper> stepper;
+  if (adaptive)
+  {
+    AdaptiveSettings settings = adaptiveSettings(s);
+    settings.reduced = Method::Coarse;
+    // What the checks cost on a run that stays reduced: turned back and forth without end, the
+    // swing's drift reaches the default tolerance within a few turns, and the run would time `full`.
+    settings.tolerance = 1.0;
+    settings.reduced_step_span = multiple;
+    stepper = own_step ? std::make_unique<AdaptiveStepper>(sim, settings, drive)
+                       : std::make_unique<AdaptiveStepper>(sim, settings);
+  }
+  const double start_cpu = threadCpuSeconds();
+  const double start_time = sim.time();
+  for (auto _ : state)
+  {
+    if (!(stepper && own_step))
+      drive(sim);
     const StepResult r = stepper ? stepper->step() : sim.step(1);
     if (r.diverged)
     {
@@ -626,6 +636,15 @@ void BM_AdaptiveCoarseTurn(benchmark::State& state)
   turnCoarse(state, static_cast<int>(state.range(0)), false, false, state.range(1) == 1);
 }
 BENCHMARK(BM_AdaptiveCoarseTurn)->ArgsProduct({{50, 100}, {0, 1}})->Unit(benchmark::kMicrosecond);
+
+// The same at coarse's own step: range(1) = 0, `coarse` alone (BM_CoarseTurn); 1, through the
+// adaptive stepper, each reduced step spanning that many of `full`'s steps and driven by it. Compare
+// the CPU per simulated second: its iterations are steps of different lengths.
+void BM_AdaptiveCoarseTurnOwnStep(benchmark::State& state)
+{
+  turnCoarse(state, static_cast<int>(state.range(0)), false, true, state.range(1) == 1);
+}
+BENCHMARK(BM_AdaptiveCoarseTurnOwnStep)->ArgsProduct({{50, 100}, {0, 1}})->Unit(benchmark::kMicrosecond);
 
 // The error indicator of `coarse` (what the adaptive method's check costs while reduced), on the held
 // cloth of BM_CoarseTurn hanging at rest, against one step of `coarse` at its own step.

@@ -1,11 +1,13 @@
 // A reduced method that falls back to `full` where its span cannot follow the motion (after Kim and
-// James 2009): every check_steps steps (up to max_check_stretch times as many far from a switch), a
+// James 2009): every check_steps time steps (up to max_check_stretch times as many far from a
+// switch; the reduced method may take several at once, reduced_step_span), a
 // reduced step's error estimate (errorEstimate: its indicator calibrated, plus the swing's drift)
 // decides whether the motion is still within `tolerance` of `full`, and whether a particle is further
 // inside a collider than the contact thickness (a span too coarse to bend round a table's edge); if
 // not, the steps since the last check that was safely within it (a third of `tolerance`, at most
-// max_rollback_checks checks back) are taken again under `full` from the state saved there (with the
-// handle and collider motions they had), so that the error that grew before the check found it is not
+// max_rollback_checks checks back) are taken again under `full`, a time step at a time, from the state
+// saved there (with the handle and collider motions they had, or as the Drive sets them again), so
+// that the error that grew before the check found it is not
 // carried into `full`. Under `full`, it switches back once the state has stayed safely within
 // `tolerance` of the reduced span (Simulation::spanDistance) for `dwell` seconds (twice as long after
 // each return in a row whose fallback took every reduced step since it again, up to 64 times),
@@ -20,6 +22,7 @@
 
 #include <Eigen/Geometry>
 
+#include <functional>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -50,7 +53,17 @@ struct AdaptiveSettings
   // to the next, up to this many times check_steps; any other check, and a switch, resets them to
   // check_steps.
   int max_check_stretch = 4;
+  // The time steps one reduced step takes (Simulation::setStepSpan): `coarse` at its own step,
+  // coarseStepMultiple. Above 1 it needs a Drive; its steps end on multiples of it (stepCount()),
+  // so that a caller sampling every so many of them finds none half taken.
+  int reduced_step_span = 1;
 };
+
+// Hands `sim` the motion of its handles (and of whatever else the caller moves) at the end of its
+// next step, Simulation::time() plus stepSpan() time steps. An AdaptiveStepper given one calls it
+// before every step it takes, those a fallback takes again included, instead of recording what the
+// caller set.
+using Drive = std::function<void(Simulation& sim)>;
 
 // The error indicator's calibration for method `reduced`: the distance to `full` it stands for per
 // unit of the largest Simulation::errorIndicator since the state was set (IndicatorMaximum).
@@ -94,15 +107,19 @@ AdaptiveSettings adaptiveSettings(const SimulationParams& params);
 // Throws std::invalid_argument naming a setting out of its range: a tolerance not positive and
 // finite, a dwell negative or not finite, check_steps < 1, a reduced method that is `full` or
 // `linear` (whose forces do not see the span's error), an indicator_scale not positive, a swing_drift
-// negative or not finite, a safe_share outside (0, 1], max_rollback_checks or max_check_stretch < 1.
+// negative or not finite, a safe_share outside (0, 1], max_rollback_checks, max_check_stretch or
+// reduced_step_span < 1.
 void validateAdaptiveSettings(const AdaptiveSettings& settings);
 
 class AdaptiveStepper
 {
 public:
   // Puts `sim` in the reduced method (building its basis, or training its cubature, if needed).
-  AdaptiveStepper(Simulation& sim, const AdaptiveSettings& settings);
-  // One step of the active method, then the check when one is due (and the switch it calls for).
+  // Without a drive the caller sets each step's motion before step(), and the stepper records it;
+  // a reduced_step_span above 1 is then refused (std::invalid_argument).
+  AdaptiveStepper(Simulation& sim, const AdaptiveSettings& settings, Drive drive = {});
+  // One step of the active method (with a drive: driven first; reduced: up to the next multiple of
+  // reduced_step_span time steps), then the check when one is due (and the switch it calls for).
   StepResult step();
   bool reduced() const { return sim_.method() != Method::Full; }
   // The share of the steps taken so far in the reduced method, the switches, the checks, the last check's
@@ -150,7 +167,8 @@ private:
 
   Simulation& sim_;
   AdaptiveSettings settings_;
-  long steps_ = 0, reduced_steps_ = 0;
+  Drive drive_;
+  long steps_ = 0, reduced_steps_ = 0;  // time steps
   int switches_ = 0, checks_ = 0;
   double last_estimate_ = 0.0;
   // Under full: the time the state came within safe_share of the tolerance of the span (-1: not).

@@ -260,6 +260,12 @@ public:
   const CacheReport& cacheReport() const { return cache_report_; }
   // Rebuilds the integrators for a new time step (validated as at construction); keeps the state.
   void setTimeStep(double dt);
+  // How many time steps each step() takes at once (1 unless set): the adaptive method steps
+  // `coarse` at its own larger step while keeping `full`'s clock. Rebuilds the integrator when it
+  // changes and keeps the state; stepCount() and time() go on counting time steps. Throws
+  // std::invalid_argument below 1. The caller keeps it within the method's stability.
+  void setStepSpan(int time_steps);
+  int stepSpan() const { return step_span_; }
   // Back to the initial positions, at rest, time 0, the handles at rest at the linearization point.
   // The external force stays.
   void reset();
@@ -512,6 +518,7 @@ private:
   double total_mass_ = 0.0;  // weighs the divergence check into an RMS displacement in metres
   std::unique_ptr<MethodModel> model_;
   long step_count_ = 0;
+  int step_span_ = 1;  // stepSpan()
   bool diverged_ = false;
   std::string divergence_message_;
   double limit_ = 0.0;

@@ -86,12 +86,18 @@ struct AccuracyRun
     const auto start = Clock::now();
     const double cpu_start = threadCpuSeconds();
     StepResult r;
-    if (driver || adaptive)
+    if (adaptive)
+    {
+      // It drives its own steps, which span one time step or several.
+      const long until = sim->stepCount() + steps_per_sample;
+      while (sim->stepCount() < until && !r.diverged)
+        r = adaptive->step();
+    }
+    else if (driver)
       for (int k = 0; k < steps_per_sample && !r.diverged; ++k)
       {
-        if (driver)
-          driver->drive(*sim);
-        r = adaptive ? adaptive->step() : sim->step();
+        driver->drive(*sim);
+        r = sim->step();
       }
     else
       r = sim->step(steps_per_sample);
@@ -174,7 +180,17 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
                       std::make_unique<Simulation>(setup.grid, withMethod(setup.sim, setup.sim.adaptive_method),
                                                    StageFn{}, options.cache),
                       options.sample, true};
-      run.adaptive = std::make_unique<AdaptiveStepper>(*run.sim, adaptiveSettings(setup.sim));
+      if (setup.handle_scenario)
+        run.driver = std::make_unique<HandleDriver>(*setup.handle_scenario, *run.sim);
+      // `coarse` at its own step, as it runs alone.
+      AdaptiveSettings settings = adaptiveSettings(setup.sim);
+      if (settings.reduced == Method::Coarse)
+        settings.reduced_step_span = coarseMultiple();
+      const HandleDriver* driver = run.driver.get();
+      run.adaptive = std::make_unique<AdaptiveStepper>(*run.sim, settings, [driver](Simulation& sim) {
+        if (driver)
+          driver->drive(sim);
+      });
       runs.push_back(std::move(run));
     }
     catch (const std::bad_alloc&)
@@ -188,7 +204,8 @@ std::vector<AccuracyRun> accuracyRuns(const ExperimentSetup& setup, const Accura
   if (setup.handle_scenario)
   {
     for (AccuracyRun& run : runs)
-      run.driver = std::make_unique<HandleDriver>(*setup.handle_scenario, *run.sim);
+      if (!run.driver)
+        run.driver = std::make_unique<HandleDriver>(*setup.handle_scenario, *run.sim);
     if (check)
       check->driver = std::make_unique<HandleDriver>(*setup.handle_scenario, *check->sim);
   }

@@ -104,11 +104,17 @@ void validateAdaptiveSettings(const AdaptiveSettings& s)
     rejectParameter("max_rollback_checks", s.max_rollback_checks, "must be an integer >= 1");
   if (s.max_check_stretch < 1)
     rejectParameter("max_check_stretch", s.max_check_stretch, "must be an integer >= 1");
+  if (s.reduced_step_span < 1)
+    rejectParameter("reduced_step_span", s.reduced_step_span, "must be an integer >= 1 (time steps)");
 }
 
-AdaptiveStepper::AdaptiveStepper(Simulation& sim, const AdaptiveSettings& settings) : sim_(sim), settings_(settings)
+AdaptiveStepper::AdaptiveStepper(Simulation& sim, const AdaptiveSettings& settings, Drive drive)
+  : sim_(sim), settings_(settings), drive_(std::move(drive))
 {
   validateAdaptiveSettings(settings_);
+  if (settings_.reduced_step_span > 1 && !drive_)
+    rejectParameter("reduced_step_span", settings_.reduced_step_span,
+                    "must be 1 without a drive: a fallback takes each time step again with its own motion");
   if (sim_.method() != settings_.reduced)
     sim_.setMethod(settings_.reduced);
   handle_reference_ = sim_.handlePositions();
@@ -170,14 +176,25 @@ void AdaptiveStepper::apply(const Motion& m)
 StepResult AdaptiveStepper::step()
 {
   const bool was_reduced = reduced();
+  if (was_reduced)
+  {
+    const long span = settings_.reduced_step_span;
+    const int to_multiple = static_cast<int>(span - sim_.stepCount() % span);
+    if (sim_.stepSpan() != to_multiple)
+      sim_.setStepSpan(to_multiple);
+  }
+  if (drive_)
+    drive_(sim_);
+  const long before = sim_.stepCount();
   StepResult result = sim_.step();
   if (result.diverged)
     return result;
-  ++steps_;
+  steps_ += sim_.stepCount() - before;
   if (was_reduced)
   {
-    ++reduced_steps_;
-    record();
+    reduced_steps_ += sim_.stepCount() - before;
+    if (!drive_)
+      record();
   }
   if (steps_ >= next_check_)
     result = check();
@@ -230,18 +247,22 @@ bool AdaptiveStepper::touching() const
 
 StepResult AdaptiveStepper::fallBack(std::ostringstream& why)
 {
+  const long now = sim_.stepCount();
   sim_.restoreState(checkpoint_);
+  sim_.setStepSpan(1);  // before `full` is installed: it takes the time step
   sim_.setMethod(Method::Full);
   StepResult result;
-  for (size_t k = 0; k < recorded_; ++k)
+  const long again = drive_ ? std::max(0L, now - sim_.stepCount()) : static_cast<long>(recorded_);
+  for (long k = 0; k < again && !result.diverged; ++k)
   {
-    apply(since_check_[k]);
+    if (drive_)
+      drive_(sim_);
+    else
+      apply(since_check_[static_cast<size_t>(k)]);
     result = sim_.step();
     --reduced_steps_;
-    if (result.diverged)
-      break;
   }
-  why << "; its last " << recorded_ << " steps taken again under full";
+  why << "; its last " << again << " steps taken again under full";
   since_check_.clear();  // none recorded under `full`
   recorded_ = 0;
   checks_since_ = 0;

@@ -333,7 +333,7 @@ void Simulation::setCubature(Cubature cubature)
 
 IntegratorSettings Simulation::integratorSettings() const
 {
-  return IntegratorSettings{params_.integrator, params_.time_step, params_.newton_max_iterations,
+  return IntegratorSettings{params_.integrator, params_.time_step * step_span_, params_.newton_max_iterations,
                             params_.hht_alpha,  params_.alpha,     params_.beta,
                             params_.implicit_solver, params_.tangent_refresh_steps};
 }
@@ -456,6 +456,16 @@ void Simulation::setTimeStep(double dt)
   model_->configure(integratorSettings());
 }
 
+void Simulation::setStepSpan(int time_steps)
+{
+  if (time_steps < 1)
+    rejectParameter("step_span", time_steps, "must be an integer >= 1 (time steps a step takes)");
+  if (time_steps == step_span_)
+    return;
+  step_span_ = time_steps;
+  model_->configure(integratorSettings());
+}
+
 void Simulation::reset()
 {
   // The handles go back to rest at the linearization point with the grid.
@@ -561,8 +571,8 @@ StepResult Simulation::step(int steps)
       diverged_ = true;
       result.diverged = true;
       std::ostringstream msg;
-      msg << "method '" << toString(method()) << "' diverged at step " << step_count_ + 1 << " with time_step "
-          << params_.time_step << " s (" << why << "); the last good state is kept; a smaller time_step"
+      msg << "method '" << toString(method()) << "' diverged at step " << step_count_ + step_span_ << " with time_step "
+          << params_.time_step * step_span_ << " s (" << why << "); the last good state is kept; a smaller time_step"
           << (params_.integrator == IntegratorKind::Explicit ? ", the implicit integrator" : "")
           << (params_.integrator == IntegratorKind::Implicit && params_.hht_alpha == 0.0
                   ? ", hht_alpha below 0 (it damps the highest frequencies that gain energy at large steps)"
@@ -584,8 +594,8 @@ StepResult Simulation::step(int steps)
       frame_current_ = frame_target_;
       frame_pending_ = false;
     }
-    ++step_count_;
-    time_since_set_ += params_.time_step;
+    step_count_ += step_span_;
+    time_since_set_ += params_.time_step * step_span_;
     ++result.steps_taken;
   }
   return result;

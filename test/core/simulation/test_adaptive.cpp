@@ -113,6 +113,9 @@ TEST(Adaptive, BadSettingsAreRefusedByName)
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.safe_share = 0.0; }), "'safe_share' = 0"));
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.max_rollback_checks = 0; }), "'max_rollback_checks' = 0"));
   EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.max_check_stretch = 0; }), "'max_check_stretch' = 0"));
+  EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.reduced_step_span = 0; }), "'reduced_step_span' = 0"));
+  // Several time steps a reduced step only with a drive: the caller's motions come a step at a time.
+  EXPECT_TRUE(contains(refusedSetting([](AdaptiveSettings& s) { s.reduced_step_span = 2; }), "without a drive"));
   EXPECT_TRUE(
       contains(refusedSetting([](AdaptiveSettings& s) { s.reduced = Method::Linear; }), "must be one of physical, cubature, coarse"));
   EXPECT_EQ(sim.method(), Method::Full);  // nothing changed
@@ -605,4 +608,85 @@ TEST(Adaptive, AFallBackOntoATableRetakesTheStepsAsFullTakesThem)
     ASSERT_GT(full.contact()->report().touching[0], 0) << "the cloth must reach the table for the test to mean anything";
     EXPECT_LT(largestParticleDistance(adaptive_sim, full.positions()), 1e-9) << toString(integrator);
   }
+}
+
+// `coarse` at its own step: each reduced step takes reduced_step_span time steps, driven at its end
+// and ending on a multiple of the span. Where it stays reduced the run is the coarse grid's alone at
+// that larger step; a fallback takes each time step again under `full`, as `full` takes them.
+TEST(Adaptive, AReducedStepTakesSeveralTimeStepsOnFullsClock)
+{
+  const int span = 3;
+  auto params = [](Method method, double time_step) {
+    SimulationParams s = heldParams(method, BasisKind::LinearModes);
+    s.coarse_cols = 4;
+    s.time_step = time_step;
+    return s;
+  };
+  // The turn where a simulation's next step ends, counted in the tests' 5 ms steps.
+  auto driveTurn = [](const Eigen::VectorXd& start) {
+    return [start](Simulation& sim) {
+      const double end = static_cast<double>(sim.stepCount() + sim.stepSpan()) * sim.params().time_step;
+      sim.setHandleMotion(turn(start, static_cast<int>(std::lround(end / 5e-3))));
+    };
+  };
+  Simulation alone(topRowHeld(), params(Method::Coarse, span * 5e-3));
+  const Drive alone_drive = driveTurn(alone.handlePositions());
+  for (int k = 0; k < 66; ++k)
+  {
+    alone_drive(alone);
+    ASSERT_FALSE(alone.step().diverged);
+  }
+  Simulation full(topRowHeld(), params(Method::Full, 5e-3));
+  const Drive full_drive = driveTurn(full.handlePositions());
+  for (int k = 0; k < 198; ++k)
+  {
+    full_drive(full);
+    ASSERT_FALSE(full.step().diverged);
+  }
+  for (const bool falls_back : {false, true})
+  {
+    Simulation sim(topRowHeld(), params(Method::Coarse, 5e-3));
+    AdaptiveSettings settings = falls_back ? fullFromTheStart(Method::Coarse) : stepsOf5ms();
+    settings.reduced = Method::Coarse;
+    if (!falls_back)
+      settings.tolerance = 1.0;
+    settings.reduced_step_span = span;
+    AdaptiveStepper adaptive(sim, settings, driveTurn(sim.handlePositions()));
+    while (sim.stepCount() < 198)
+    {
+      const bool was_reduced = adaptive.reduced();
+      ASSERT_FALSE(adaptive.step().diverged);
+      if (was_reduced && adaptive.reduced())
+        ASSERT_EQ(sim.stepCount() % span, 0);
+    }
+    EXPECT_DOUBLE_EQ(sim.time(), 198 * 5e-3);
+    if (falls_back)
+    {
+      // The first check, at 21 time steps (7 reduced steps), goes back to the start.
+      EXPECT_EQ(adaptive.reducedShare(), 0.0);
+      EXPECT_TRUE(contains(adaptive.lastSwitch(), "its last 21 steps taken again")) << adaptive.lastSwitch();
+      EXPECT_LT(largestParticleDistance(sim, full.positions()), 1e-9);
+    }
+    else
+    {
+      EXPECT_EQ(adaptive.switches(), 0) << adaptive.lastSwitch();
+      EXPECT_EQ(adaptive.reducedShare(), 1.0);
+      EXPECT_LT(largestParticleDistance(sim, alone.positions()), 1e-12);
+      // and not `full`'s: the coarse grid does not follow the turn.
+      EXPECT_GT(largestParticleDistance(sim, full.positions()), 1e-3);
+    }
+  }
+  // Reduced from a time step between multiples of the span, as a return may be: a shorter step to
+  // the next multiple first.
+  Simulation late(topRowHeld(), params(Method::Coarse, 5e-3));
+  late.step();
+  AdaptiveSettings settings = stepsOf5ms();
+  settings.reduced = Method::Coarse;
+  settings.tolerance = 1.0;
+  settings.reduced_step_span = span;
+  AdaptiveStepper adaptive(late, settings, driveTurn(late.handlePositions()));
+  ASSERT_FALSE(adaptive.step().diverged);
+  EXPECT_EQ(late.stepCount(), 3);
+  ASSERT_FALSE(adaptive.step().diverged);
+  EXPECT_EQ(late.stepCount(), 6);
 }

@@ -256,6 +256,30 @@ TEST(Simulation, SetTimeStepKeepsTheStateAndTheNewStepIsUsed)
   EXPECT_EQ(sim.params().time_step, 2e-3);
 }
 
+// A step spanning several time steps is one step of their sum, on the same clock: stepCount() and
+// time() count time steps.
+TEST(Simulation, AStepSpanningSeveralTimeStepsIsOneStepOfTheirSum)
+{
+  Simulation spanned(GridParams{}, withMethod(Method::Full, 4, 1e-3));
+  Simulation longer(GridParams{}, withMethod(Method::Full, 4, 3e-3));
+  spanned.setStepSpan(3);
+  EXPECT_EQ(spanned.stepSpan(), 3);
+  spanned.step(50);
+  longer.step(50);
+  EXPECT_LT((spanned.positions() - longer.positions()).cwiseAbs().maxCoeff(), 1e-12);
+  EXPECT_EQ(spanned.stepCount(), 150);
+  EXPECT_DOUBLE_EQ(spanned.time(), 0.15);
+  EXPECT_DOUBLE_EQ(spanned.timeSinceStateSet(), 0.15);
+  EXPECT_EQ(spanned.params().time_step, 1e-3);
+  // Back to one: the next step is a millisecond's.
+  spanned.setStepSpan(1);
+  spanned.step();
+  EXPECT_EQ(spanned.stepCount(), 151);
+  EXPECT_DOUBLE_EQ(spanned.time(), 0.151);
+  EXPECT_TRUE(contains(refusal([&] { spanned.setStepSpan(0); }), "'step_span' = 0"));
+  EXPECT_EQ(spanned.stepSpan(), 1);
+}
+
 // A cubature on the linear modes of a sheet held by two single-particle grips, linearized at rest,
 // has no constraint modes (K_ii is singular: no out-of-plane stiffness): it is refused before its
 // training starts, not after it. Held by the whole top row, the same cubature trains.
