@@ -47,7 +47,8 @@ struct AdaptiveSettings
   // return asks the same of the state's distance to the span and of the estimate at the state.
   double safe_share = 1.0 / 3.0;
   int max_rollback_checks = 10;  // and never more checks back than this: the motions kept are bounded
-  // A check far from a switch (reduced: within safe_share of the tolerance; `full`: the state's
+  // A check far from a switch (reduced: within safe_share of the tolerance, and not the first since
+  // the state was set, which tells nothing of how fast the estimate grows; `full`: the state's
   // distance to the span above safe_share of the tolerance, or touching a collider, so no dwell
   // counts, or, once the dwell is over, the estimate there above safe_share of it) doubles the steps
   // to the next, up to this many times check_steps; any other check, and a switch, resets them to

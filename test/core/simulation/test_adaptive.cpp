@@ -657,7 +657,9 @@ TEST(Adaptive, AReducedStepTakesSeveralTimeStepsOnFullsClock)
       const bool was_reduced = adaptive.reduced();
       ASSERT_FALSE(adaptive.step().diverged);
       if (was_reduced && adaptive.reduced())
+      {
         ASSERT_EQ(sim.stepCount() % span, 0);
+      }
     }
     EXPECT_DOUBLE_EQ(sim.time(), 198 * 5e-3);
     if (falls_back)
