@@ -646,6 +646,82 @@ void BM_AdaptiveCoarseTurnOwnStep(benchmark::State& state)
 }
 BENCHMARK(BM_AdaptiveCoarseTurnOwnStep)->ArgsProduct({{50, 100}, {0, 1}})->Unit(benchmark::kMicrosecond);
 
+// config/compare/large_motion_grips.yaml's corners_together, the scene where the coarse grid's span
+// is right only at the start: the 20 x 20 cloth hanging from two 2 x 2 grips at its top corners,
+// brought 0.35 m towards each other over 1 s (s = 10 tau^3 - 15 tau^4 + 6 tau^5) and held 2 s,
+// explicit at 5 ms. range(0) = 0: `full`; 1: `adaptive` on `coarse` (its defaults, at coarse's own
+// step). Each iteration is the whole scene from the hanging start (restored untimed): compare the
+// two by their time per iteration.
+void BM_AdaptiveCornersTogether(benchmark::State& state)
+{
+  const bool adaptive = state.range(0) == 1;
+  GridParams g;
+  g.rows = g.cols = 20;
+  g.spacing = 0.05;
+  g.dimension = 3;
+  g.mass = 0.005;
+  g.structural_stiffness = 50.0;
+  g.shear_stiffness = 20.0;
+  g.bending = true;
+  g.bending_stiffness = 5.0;
+  g.fixed = {};
+  g.handles = {{0, 1, 20, 21}, {18, 19, 38, 39}};
+  SimulationParams s;
+  s.method = adaptive ? Method::Coarse : Method::Full;
+  s.num_modes = 30;
+  s.linearization = Linearization::Equilibrium;
+  s.initial_state = InitialState::Equilibrium;
+  s.handle_formulation = HandleFormulation::ConstraintModes;
+  s.integrator = IntegratorKind::Explicit;
+  s.alpha = 0.5;
+  s.time_step = 0.005;
+  s.adaptive_method = Method::Coarse;
+  Simulation sim(g, s);
+  const SimulationState start = sim.saveState();
+  const Eigen::VectorXd rest = sim.handlePositions();
+  const long steps = 600;
+  const Drive drive = [&](Simulation& sim) {
+    const double t = static_cast<double>(sim.stepCount() + sim.stepSpan()) * s.time_step;
+    const double tau = std::min(t, 1.0);
+    const double ramp = tau * tau * tau * (10.0 - 15.0 * tau + 6.0 * tau * tau);
+    const double rate = t < 1.0 ? 30.0 * tau * tau * (1.0 - tau) * (1.0 - tau) : 0.0;
+    const double spin = t < 1.0 ? 60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau) : 0.0;
+    Eigen::VectorXd x = rest, v = Eigen::VectorXd::Zero(rest.size()), a = v;
+    for (Eigen::Index d = 0; d < x.size(); d += 3)
+    {
+      const double towards = d < x.size() / 2 ? 0.35 : -0.35;  // the first grip's four particles, then the second's
+      x[d] += towards * ramp;
+      v[d] = towards * rate;
+      a[d] = towards * spin;
+    }
+    sim.setHandleMotion(x, v, a);
+  };
+  AdaptiveSettings settings = adaptiveSettings(s);
+  settings.reduced_step_span = coarseStepMultiple(g, s, steps);
+  double reduced_share = 0.0;
+  for (auto _ : state)
+  {
+    state.PauseTiming();
+    sim.restoreState(start);
+    std::unique_ptr<AdaptiveStepper> stepper =
+        adaptive ? std::make_unique<AdaptiveStepper>(sim, settings, drive) : nullptr;
+    state.ResumeTiming();
+    while (sim.stepCount() < steps)
+    {
+      if (!stepper)
+        drive(sim);
+      if ((stepper ? stepper->step() : sim.step()).diverged)
+      {
+        state.SkipWithError("diverged");
+        return;
+      }
+    }
+    reduced_share = stepper ? stepper->reducedShare() : 0.0;
+  }
+  state.counters["reduced_share"] = reduced_share;
+}
+BENCHMARK(BM_AdaptiveCornersTogether)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
+
 // The error indicator of `coarse` (what the adaptive method's check costs while reduced), on the held
 // cloth of BM_CoarseTurn hanging at rest, against one step of `coarse` at its own step.
 void BM_CoarseErrorIndicator(benchmark::State& state)
