@@ -54,7 +54,8 @@ checked before anything runs; bad input ends with exit code 2 and a message nami
                 `full` too, measured against it, with its wall time per step; DT must divide time_step,
                 at most 100000 times)
               --no-snapshots (no particle positions file)
-              --coarse-step-multiple K (0, the default: `coarse` steps time_step times the square root of
+              --coarse-step-multiple K (0, the default: `coarse`, and `adaptive`'s reduced steps on it,
+                step time_step times the square root of
                 the fine particles per coarse one, rounded down (explicit: at most 2 / (alpha time_step)),
                 or the largest smaller number that divides --sample; K >= 1: K time steps, K dividing
                 --sample)
