@@ -161,6 +161,7 @@ struct SimulationState
 {
   Method method = Method::Full;
   double time_step = 0.0;  // s
+  int step_span = 1;       // time steps a step takes (Simulation::setStepSpan)
   long step_count = 0;     // the time is step_count x time_step
   State coordinates;       // the method's q, v, a
   Eigen::VectorXd offset;  // a modal method's or `coarse`'s frozen offset (free dofs); empty for `full`
@@ -262,7 +263,8 @@ public:
   void setTimeStep(double dt);
   // How many time steps each step() takes at once (1 unless set): the adaptive method steps
   // `coarse` at its own larger step while keeping `full`'s clock. Rebuilds the integrator when it
-  // changes and keeps the state; stepCount() and time() go on counting time steps. Throws
+  // changes (an implicit one starts afresh) and keeps the state; stepCount() and time() go on
+  // counting time steps. Part of the saved state; reset() sets it back to 1. Throws
   // std::invalid_argument below 1. The caller keeps it within the method's stability.
   void setStepSpan(int time_steps);
   int stepSpan() const { return step_span_; }
@@ -371,7 +373,7 @@ public:
 
   // The whole state (SimulationState), and that state put back: the steps that follow are those
   // that followed it (bit for bit with the same handle and collider motions). restoreState switches
-  // method and time step to the state's (building the basis when needed) and throws
+  // method, time step and step span to the state's (building the basis when needed) and throws
   // std::invalid_argument naming the field, changing nothing, for one whose size does not fit this
   // grid and method, a non-finite value or a time step validateParameters refuses.
   SimulationState saveState() const;

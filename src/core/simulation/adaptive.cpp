@@ -253,16 +253,19 @@ StepResult AdaptiveStepper::fallBack(std::ostringstream& why)
   sim_.setMethod(Method::Full);
   StepResult result;
   const long again = drive_ ? std::max(0L, now - sim_.stepCount()) : static_cast<long>(recorded_);
-  for (long k = 0; k < again && !result.diverged; ++k)
+  long taken = 0;
+  for (; taken < again && !result.diverged; ++taken)
   {
     if (drive_)
       drive_(sim_);
     else
-      apply(since_check_[static_cast<size_t>(k)]);
+      apply(since_check_[static_cast<size_t>(taken)]);
     result = sim_.step();
     --reduced_steps_;
   }
   why << "; its last " << again << " steps taken again under full";
+  if (result.diverged)
+    why << " (`full` diverged at step " << taken << " of them)";
   since_check_.clear();  // none recorded under `full`
   recorded_ = 0;
   checks_since_ = 0;

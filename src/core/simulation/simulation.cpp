@@ -468,6 +468,7 @@ void Simulation::setStepSpan(int time_steps)
 
 void Simulation::reset()
 {
+  step_span_ = 1;  // installed with the start below
   // The handles go back to rest at the linearization point with the grid.
   handle_current_ = handle_target_ = HandleMotion{};
   handle_pending_ = false;

@@ -27,6 +27,7 @@ SimulationState Simulation::saveState() const
   SimulationState s;
   s.method = method();
   s.time_step = params_.time_step;
+  s.step_span = step_span_;
   s.step_count = step_count_;
   s.coordinates = model_->state();
   s.offset = model_->offset();
@@ -93,9 +94,15 @@ void Simulation::restoreState(const SimulationState& s)
       rejectParameter("state.collider_poses[" + std::to_string(i) + "]", "a non-finite value", "must be finite");
   if (s.step_count < 0)
     rejectParameter("state.step_count", s.step_count, "must be >= 0");
+  if (s.step_span < 1)
+    rejectParameter("state.step_span", s.step_span, "must be an integer >= 1");
 
-  if (s.time_step != params_.time_step)
-    setTimeStep(s.time_step);
+  if (s.time_step != params_.time_step || s.step_span != step_span_)
+  {
+    params_.time_step = s.time_step;  // validated above
+    step_span_ = s.step_span;
+    model_->configure(integratorSettings());
+  }
   handle_current_ = handle_target_ = s.handles;
   handle_pending_ = false;
   frame_current_ = frame_target_ = s.frame;

@@ -678,6 +678,47 @@ TEST(Adaptive, AReducedStepTakesSeveralTimeStepsOnFullsClock)
       EXPECT_GT(largestParticleDistance(sim, full.positions()), 1e-3);
     }
   }
+  // Back and forth (the coarse grid held still after the turn, as in the dwell's test): every
+  // reduced step ends on a multiple of the span, and a fallback from a return retakes, a time step
+  // at a time, the steps since the return at most.
+  {
+    Simulation sim(topRowHeld(), params(Method::Coarse, 5e-3));
+    AdaptiveSettings settings = stepsOf5ms();
+    settings.reduced = Method::Coarse;
+    settings.tolerance = 0.01;
+    settings.dwell = 0.1;
+    settings.reduced_step_span = span;
+    AdaptiveStepper adaptive(sim, settings, driveTurn(sim.handlePositions()));
+    int switches = 0, returns = 0, fallbacks_after_a_return = 0;
+    long returned_at = -1;
+    while (sim.stepCount() < 1400)
+    {
+      const bool was_reduced = adaptive.reduced();
+      ASSERT_FALSE(adaptive.step().diverged);
+      if (was_reduced && adaptive.reduced())
+      {
+        ASSERT_EQ(sim.stepCount() % span, 0);
+      }
+      if (adaptive.switches() == switches)
+        continue;
+      switches = adaptive.switches();
+      if (adaptive.reduced())
+      {
+        ++returns;
+        returned_at = sim.stepCount();
+      }
+      else if (returned_at >= 0)
+      {
+        ++fallbacks_after_a_return;
+        EXPECT_LE(stepsTakenAgain(adaptive.lastSwitch()), sim.stepCount() - returned_at) << adaptive.lastSwitch();
+        EXPECT_GT(stepsTakenAgain(adaptive.lastSwitch()), 0) << adaptive.lastSwitch();
+      }
+    }
+    EXPECT_GE(returns, 1);
+    EXPECT_GE(fallbacks_after_a_return, 1);
+    EXPECT_GT(adaptive.reducedShare(), 0.0);
+    EXPECT_LT(adaptive.reducedShare(), 1.0);
+  }
   // Reduced from a time step between multiples of the span, as a return may be: a shorter step to
   // the next multiple first.
   Simulation late(topRowHeld(), params(Method::Coarse, 5e-3));

@@ -271,13 +271,27 @@ TEST(Simulation, AStepSpanningSeveralTimeStepsIsOneStepOfTheirSum)
   EXPECT_DOUBLE_EQ(spanned.time(), 0.15);
   EXPECT_DOUBLE_EQ(spanned.timeSinceStateSet(), 0.15);
   EXPECT_EQ(spanned.params().time_step, 1e-3);
-  // Back to one: the next step is a millisecond's.
+  // The span is part of the state: restored elsewhere, the next steps are the same.
+  Simulation other(GridParams{}, withMethod(Method::Full, 4, 1e-3));
+  other.restoreState(spanned.saveState());
+  EXPECT_EQ(other.stepSpan(), 3);
+  other.step(5);
+  spanned.step(5);
+  EXPECT_EQ(other.positions(), spanned.positions());
+  // Back to one: the next step is a millisecond's, as at 1 ms from the same state.
+  Simulation one(GridParams{}, withMethod(Method::Full, 4, 1e-3));
   spanned.setStepSpan(1);
+  one.restoreState(spanned.saveState());
   spanned.step();
-  EXPECT_EQ(spanned.stepCount(), 151);
-  EXPECT_DOUBLE_EQ(spanned.time(), 0.151);
+  EXPECT_EQ(spanned.stepCount(), 166);
+  EXPECT_DOUBLE_EQ(spanned.time(), 0.166);
+  one.step();
+  EXPECT_EQ(spanned.positions(), one.positions());
   EXPECT_TRUE(contains(refusal([&] { spanned.setStepSpan(0); }), "'step_span' = 0"));
   EXPECT_EQ(spanned.stepSpan(), 1);
+  // A reset starts again a time step a step.
+  other.reset();
+  EXPECT_EQ(other.stepSpan(), 1);
 }
 
 // A cubature on the linear modes of a sheet held by two single-particle grips, linearized at rest,
