@@ -575,7 +575,7 @@ void turnCoarse(benchmark::State& state, int size, bool frame, bool own_step, bo
   // Turned to 60 degrees and back, smoothly, every 2 s: angle (1 - cos(pi t / duration)) / 2, where
   // the next step ends.
   const Drive drive = [&](Simulation& sim) {
-    const double t = static_cast<double>(sim.stepCount() + sim.stepSpan()) * s.time_step, w = EIGEN_PI / duration;
+    const double t = sim.nextStepTime(), w = EIGEN_PI / duration;
     const double turn = 0.5 * angle * (1.0 - std::cos(w * t)), rate = 0.5 * angle * w * std::sin(w * t);
     const double spin = 0.5 * angle * w * w * std::cos(w * t);
     const FrameMotion m = turnAbout(pivot, axis, turn, rate, spin);
@@ -681,7 +681,7 @@ void BM_AdaptiveCornersTogether(benchmark::State& state)
   const Eigen::VectorXd rest = sim.handlePositions();
   const long steps = 600;
   const Drive drive = [&](Simulation& sim) {
-    const double t = static_cast<double>(sim.stepCount() + sim.stepSpan()) * s.time_step;
+    const double t = sim.nextStepTime();
     const double tau = std::min(t, 1.0);
     const double ramp = tau * tau * tau * (10.0 - 15.0 * tau + 6.0 * tau * tau);
     const double rate = t < 1.0 ? 30.0 * tau * tau * (1.0 - tau) * (1.0 - tau) : 0.0;

@@ -61,7 +61,7 @@ struct AdaptiveSettings
 };
 
 // Hands `sim` the motion of its handles (and of whatever else the caller moves) at the end of its
-// next step, Simulation::time() plus stepSpan() time steps. An AdaptiveStepper given one calls it
+// next step, Simulation::nextStepTime(). An AdaptiveStepper given one calls it
 // before every step it takes, those a fallback takes again included, instead of recording what the
 // caller set.
 using Drive = std::function<void(Simulation& sim)>;

@@ -428,6 +428,8 @@ public:
   bool diverged() const { return diverged_; }
   long stepCount() const { return step_count_; }
   double time() const { return step_count_ * params_.time_step; }
+  // Where the next step ends (s): stepSpan() time steps on, the time a motion handed over for it is at.
+  double nextStepTime() const { return static_cast<double>(step_count_ + step_span_) * params_.time_step; }
 
   // The generalized state of the current method (u for full, X for the modal methods).
   const State& state() const;

@@ -350,7 +350,7 @@ void HandleDriver::particleMotion(double t, Eigen::VectorXd& positions, Eigen::V
 
 void HandleDriver::drive(Simulation& sim) const
 {
-  const double t = static_cast<double>(sim.stepCount() + sim.stepSpan()) * sim.params().time_step;
+  const double t = sim.nextStepTime();
   if (sim.handleFormulation() == HandleFormulation::MovingFrame)
   {
     sim.setHandleFrameMotion(bodyFrameMotion(t));

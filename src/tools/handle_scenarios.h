@@ -106,7 +106,7 @@ public:
   // The motion of the frame B of a scenario with one handle (x = p + R y, B at the world's at the
   // start), as Simulation::setHandleFrameMotion takes it.
   FrameMotion bodyFrameMotion(double t) const;
-  // Hands the motion at the end of the simulation's next step (its stepSpan() time steps on) to it,
+  // Hands the motion at the end of the simulation's next step (Simulation::nextStepTime) to it,
   // as its handle formulation takes it: the frame's motion in the moving frame, every handle
   // particle's motion with constraint modes.
   void drive(Simulation& sim) const;

@@ -189,10 +189,11 @@ StepResult AdaptiveStepper::step()
   StepResult result = sim_.step();
   if (result.diverged)
     return result;
-  steps_ += sim_.stepCount() - before;
+  const long taken = sim_.stepCount() - before;
+  steps_ += taken;
   if (was_reduced)
   {
-    reduced_steps_ += sim_.stepCount() - before;
+    reduced_steps_ += taken;
     if (!drive_)
       record();
   }

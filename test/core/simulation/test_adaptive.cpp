@@ -625,8 +625,7 @@ TEST(Adaptive, AReducedStepTakesSeveralTimeStepsOnFullsClock)
   // The turn where a simulation's next step ends, counted in the tests' 5 ms steps.
   auto driveTurn = [](const Eigen::VectorXd& start) {
     return [start](Simulation& sim) {
-      const double end = static_cast<double>(sim.stepCount() + sim.stepSpan()) * sim.params().time_step;
-      sim.setHandleMotion(turn(start, static_cast<int>(std::lround(end / 5e-3))));
+      sim.setHandleMotion(turn(start, static_cast<int>(std::lround(sim.nextStepTime() / 5e-3))));
     };
   };
   Simulation alone(topRowHeld(), params(Method::Coarse, span * 5e-3));

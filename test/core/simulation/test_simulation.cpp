@@ -270,6 +270,7 @@ TEST(Simulation, AStepSpanningSeveralTimeStepsIsOneStepOfTheirSum)
   EXPECT_EQ(spanned.stepCount(), 150);
   EXPECT_DOUBLE_EQ(spanned.time(), 0.15);
   EXPECT_DOUBLE_EQ(spanned.timeSinceStateSet(), 0.15);
+  EXPECT_DOUBLE_EQ(spanned.nextStepTime(), 0.153);
   EXPECT_EQ(spanned.params().time_step, 1e-3);
   // The span is part of the state: restored elsewhere, the next steps are the same.
   Simulation other(GridParams{}, withMethod(Method::Full, 4, 1e-3));
