@@ -121,6 +121,8 @@ public:
   AdaptiveStepper(Simulation& sim, const AdaptiveSettings& settings, Drive drive = {});
   // One step of the active method (with a drive: driven first; reduced: up to the next multiple of
   // reduced_step_span time steps), then the check when one is due (and the switch it calls for).
+  // With a drive, a reduced step that diverges switches to `full` as a failed check does, and its
+  // time steps are taken again with the others since the checkpoint; without one, it is returned.
   StepResult step();
   bool reduced() const { return sim_.method() != Method::Full; }
   // The share of the steps taken so far in the reduced method, the switches, the checks, the last check's
@@ -150,8 +152,11 @@ private:
   // The state now is the checkpoint a fallback goes back to.
   void setCheckpoint();
   void apply(const Motion& m);
-  // Back to the checkpoint, then the steps since again under `full`.
-  StepResult fallBack(std::ostringstream& why);
+  // Back to the checkpoint, then the steps since again under `full` (with a drive, up to step count
+  // `until`; without one, those recorded).
+  StepResult fallBack(std::ostringstream& why, long until);
+  // A fallback, counted as a switch for `why`, and the next check scheduled from it.
+  StepResult toFull(std::ostringstream& why, long until);
   StepResult check();
   // The time within the safe share of the tolerance before a return: `dwell`, doubled (from a check
   // period at least) for each return in a row that kept no reduced step (its fallback took them all

@@ -186,9 +186,22 @@ StepResult AdaptiveStepper::step()
   if (drive_)
     drive_(sim_);
   const long before = sim_.stepCount();
+  const long time_steps = sim_.stepSpan();
   StepResult result = sim_.step();
   if (result.diverged)
-    return result;
+  {
+    // With a drive its time steps can be taken again: a reduced step that diverges goes to `full`
+    // as a failed check does. Without one the step's motion was the caller's and is not recorded
+    // (a step is recorded once taken), so the divergence is returned, the last good state kept.
+    if (!was_reduced || !drive_)
+      return result;
+    std::ostringstream why;
+    why << "to full at t = " << sim_.time() << " s: its " << toString(settings_.reduced) << " step of "
+        << time_steps * sim_.params().time_step << " s from there diverged";
+    steps_ += time_steps;
+    reduced_steps_ += time_steps;  // taken again under `full` below
+    return toFull(why, before + time_steps);
+  }
   const long taken = sim_.stepCount() - before;
   steps_ += taken;
   if (was_reduced)
@@ -246,14 +259,26 @@ bool AdaptiveStepper::touching() const
   return std::any_of(touching.begin(), touching.end(), [](int n) { return n > 0; });
 }
 
-StepResult AdaptiveStepper::fallBack(std::ostringstream& why)
+StepResult AdaptiveStepper::toFull(std::ostringstream& why, long until)
 {
-  const long now = sim_.stepCount();
+  if (at_return_)
+    ++futile_returns_;
+  at_return_ = false;
+  const StepResult result = fallBack(why, until);
+  within_since_ = -1.0;
+  scheduleNextCheck(false);
+  ++switches_;
+  last_switch_ = why.str();
+  return result;
+}
+
+StepResult AdaptiveStepper::fallBack(std::ostringstream& why, long until)
+{
   sim_.restoreState(checkpoint_);
   sim_.setStepSpan(1);  // before `full` is installed: it takes the time step
   sim_.setMethod(Method::Full);
   StepResult result;
-  const long again = drive_ ? std::max(0L, now - sim_.stepCount()) : static_cast<long>(recorded_);
+  const long again = drive_ ? std::max(0L, until - sim_.stepCount()) : static_cast<long>(recorded_);
   long taken = 0;
   for (; taken < again && !result.diverged; ++taken)
   {
@@ -306,12 +331,7 @@ StepResult AdaptiveStepper::check()
     else
       why << "a particle " << inside << " m inside a collider, deeper than the contact thickness " << thickness
           << " m";
-    if (at_return_)
-      ++futile_returns_;
-    at_return_ = false;
-    result = fallBack(why);
-    within_since_ = -1.0;
-    scheduleNextCheck(false);
+    return toFull(why, sim_.stepCount());
   }
   else
   {

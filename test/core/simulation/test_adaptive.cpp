@@ -610,6 +610,83 @@ TEST(Adaptive, AFallBackOntoATableRetakesTheStepsAsFullTakesThem)
   }
 }
 
+// A step too long for the coarse grid's explicit integrator: with a drive the stepper takes it again
+// under `full` from its checkpoint, as it takes a failed check's steps; `full` then follows the turn
+// as if it had run alone.
+TEST(Adaptive, AReducedStepThatDivergesIsTakenAgainUnderFull)
+{
+  const int span = 40;  // 0.2 s: the coarse grid's explicit step diverges within a few, `full`'s 5 ms does not
+  auto params = [](Method method) {
+    SimulationParams s = heldParams(method, BasisKind::LinearModes);
+    s.integrator = IntegratorKind::Explicit;
+    s.coarse_cols = 4;
+    s.time_step = 5e-3;
+    return s;
+  };
+  auto driveTurn = [](const Eigen::VectorXd& start) {
+    return [start](Simulation& sim) {
+      sim.setHandleMotion(turn(start, static_cast<int>(std::lround(sim.nextStepTime() / 5e-3))));
+    };
+  };
+  int diverges_at = 0;  // the coarse grid's steps up to the one that diverges
+  {
+    Simulation alone(topRowHeld(), params(Method::Coarse));
+    alone.setStepSpan(span);
+    const Drive drive = driveTurn(alone.handlePositions());
+    for (bool diverged = false; !diverged && diverges_at < 10; ++diverges_at)
+    {
+      drive(alone);
+      diverged = alone.step().diverged;
+    }
+  }
+  const int steps = 200;
+  ASSERT_LE(diverges_at * span, steps) << "the coarse grid must diverge within the run for the test to mean anything";
+  Simulation full(topRowHeld(), params(Method::Full));
+  const Drive full_drive = driveTurn(full.handlePositions());
+  for (int k = 0; k < steps; ++k)
+  {
+    full_drive(full);
+    ASSERT_FALSE(full.step().diverged);
+  }
+  Simulation sim(topRowHeld(), params(Method::Coarse));
+  AdaptiveSettings settings = stepsOf5ms();
+  settings.reduced = Method::Coarse;
+  settings.tolerance = 1e9;      // no estimate sends it to `full`
+  settings.check_steps = 10000;  // nor a check: the checkpoint stays the start
+  settings.reduced_step_span = span;
+  AdaptiveStepper adaptive(sim, settings, driveTurn(sim.handlePositions()));
+  while (sim.stepCount() < steps)
+  {
+    const StepResult result = adaptive.step();
+    ASSERT_FALSE(result.diverged) << result.message;
+  }
+  EXPECT_EQ(adaptive.switches(), 1);
+  EXPECT_FALSE(adaptive.reduced());
+  EXPECT_EQ(adaptive.reducedShare(), 0.0);
+  EXPECT_TRUE(contains(adaptive.lastSwitch(), "its coarse step of 0.2 s from there diverged")) << adaptive.lastSwitch();
+  EXPECT_TRUE(contains(adaptive.lastSwitch(), "its last " + std::to_string(diverges_at * span) + " steps taken again"))
+      << adaptive.lastSwitch();
+  EXPECT_DOUBLE_EQ(sim.time(), steps * 5e-3);
+  EXPECT_LT(largestParticleDistance(sim, full.positions()), 1e-9);
+  // Without a drive (and so one time step a step, here of 0.2 s) the step the caller set is
+  // returned as it diverged.
+  SimulationParams long_steps = params(Method::Coarse);
+  long_steps.time_step = span * 5e-3;
+  Simulation undriven(topRowHeld(), long_steps);
+  settings.reduced_step_span = 1;
+  AdaptiveStepper recording(undriven, settings);
+  const Eigen::VectorXd start = undriven.handlePositions();
+  bool diverged = false;
+  for (int k = 1; k <= 10 && !diverged; ++k)
+  {
+    undriven.setHandleMotion(turn(start, span * k));
+    diverged = recording.step().diverged;
+  }
+  EXPECT_TRUE(diverged);
+  EXPECT_EQ(recording.switches(), 0);
+  EXPECT_TRUE(recording.reduced());
+}
+
 // `coarse` at its own step: each reduced step takes reduced_step_span time steps, driven at its end
 // and ending on a multiple of the span. Where it stays reduced the run is the coarse grid's alone at
 // that larger step; a fallback takes each time step again under `full`, as `full` takes them.
