@@ -72,6 +72,15 @@ Eigen::VectorXd turn(const Eigen::VectorXd& start, int k)
   return x;
 }
 
+// The turn where a simulation's next step ends (Simulation::nextStepTime), counted in the tests' 5 ms
+// steps: a Drive for steps that span several of them.
+Drive driveTurn(const Eigen::VectorXd& start)
+{
+  return [start](Simulation& sim) {
+    sim.setHandleMotion(turn(start, static_cast<int>(std::lround(sim.nextStepTime() / 5e-3))));
+  };
+}
+
 // Moves the row 5 cm along x over 100 steps, then holds it.
 Eigen::VectorXd translate(const Eigen::VectorXd& start, int k)
 {
@@ -623,11 +632,6 @@ TEST(Adaptive, AReducedStepThatDivergesIsTakenAgainUnderFull)
     s.time_step = 5e-3;
     return s;
   };
-  auto driveTurn = [](const Eigen::VectorXd& start) {
-    return [start](Simulation& sim) {
-      sim.setHandleMotion(turn(start, static_cast<int>(std::lround(sim.nextStepTime() / 5e-3))));
-    };
-  };
   int diverges_at = 0;  // the coarse grid's steps up to the one that diverges
   {
     Simulation alone(topRowHeld(), params(Method::Coarse));
@@ -698,12 +702,6 @@ TEST(Adaptive, AReducedStepTakesSeveralTimeStepsOnFullsClock)
     s.coarse_cols = 4;
     s.time_step = time_step;
     return s;
-  };
-  // The turn where a simulation's next step ends, counted in the tests' 5 ms steps.
-  auto driveTurn = [](const Eigen::VectorXd& start) {
-    return [start](Simulation& sim) {
-      sim.setHandleMotion(turn(start, static_cast<int>(std::lround(sim.nextStepTime() / 5e-3))));
-    };
   };
   Simulation alone(topRowHeld(), params(Method::Coarse, span * 5e-3));
   const Drive alone_drive = driveTurn(alone.handlePositions());
