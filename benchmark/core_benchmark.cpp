@@ -646,9 +646,90 @@ void BM_AdaptiveCoarseTurnOwnStep(benchmark::State& state)
 }
 BENCHMARK(BM_AdaptiveCoarseTurnOwnStep)->ArgsProduct({{50, 100}, {0, 1}})->Unit(benchmark::kMicrosecond);
 
+// modal_compare's ramp for a handle scenario's move over 1 s (s = 10 tau^3 - 15 tau^4 + 6 tau^5, its
+// velocity and acceleration zero at both ends): where it is at time t, and its two rates.
+struct Ramp
+{
+  double s, ds, dds;
+};
+Ramp moveRamp(double t)
+{
+  const double tau = std::clamp(t, 0.0, 1.0), rest = 1.0 - tau;
+  return {tau * tau * tau * (10.0 - 15.0 * tau + 6.0 * tau * tau), 30.0 * tau * tau * rest * rest,
+          60.0 * tau * rest * (1.0 - 2.0 * tau)};
+}
+
+// config/compare/large_motion_100.yaml's turn_60 as `benchmark/size_sweep.py --scene turn` runs it: the
+// held cloth of BM_CoarseTurn on N x N turned 60 degrees about the vertical over 1 s and held 0.5 s,
+// explicit at `full`'s step (0.8 ms x 100 / N). range(1) = 0: `coarse` alone at its own step; 1:
+// `adaptive` on `coarse` with its defaults (the tolerance 1.5 cm), each reduced step at coarse's own
+// step; 2: the same with no check after the first (what the stepper costs besides them). Each iteration is the whole scene from the hanging start (restored untimed), so the checks
+// come where they come in the scene; counter: CPU seconds per simulated second of the stepping.
+void BM_AdaptiveCoarseTurnScene(benchmark::State& state)
+{
+  const int size = static_cast<int>(state.range(0));
+  const bool adaptive = state.range(1) >= 1;
+  const GridParams g = clampedCloth(size);
+  SimulationParams s = coarseAtRest();
+  s.handle_formulation = HandleFormulation::ConstraintModes;
+  s.time_step = 0.0008 * 100.0 / size;
+  s.adaptive_method = Method::Coarse;
+  const long fine_steps = std::lround(1.5 / s.time_step);
+  const int multiple = coarseStepMultiple(g, s);
+  if (!adaptive)
+    s.time_step *= multiple;
+  Simulation sim(g, s);
+  const SimulationState start = sim.saveState();
+  const std::vector<int>& dofs = sim.grid().handleDofs();
+  Eigen::Matrix3Xd points(3, static_cast<Eigen::Index>(dofs.size()) / 3);
+  for (Eigen::Index p = 0; p < points.cols(); ++p)
+    points.col(p) = sim.linearizationPositions().segment<3>(dofs[3 * p]);
+  const Eigen::Vector3d pivot = points.rowwise().mean(), axis = Eigen::Vector3d::UnitZ();
+  const Drive drive = [&](Simulation& sim) {
+    const Ramp r = moveRamp(sim.nextStepTime());
+    const double angle = EIGEN_PI / 3.0;
+    const RigidPointMotion motion = pointMotion(turnAbout(pivot, axis, angle * r.s, angle * r.ds, angle * r.dds), points);
+    sim.setHandleMotion(motion.position.reshaped(), motion.velocity.reshaped(), motion.acceleration.reshaped());
+  };
+  AdaptiveSettings settings = adaptiveSettings(s);
+  settings.reduced_step_span = multiple;
+  if (state.range(1) == 2)
+    settings.check_steps = static_cast<int>(fine_steps);
+  const double end = fine_steps * (adaptive ? s.time_step : s.time_step / multiple) - 1e-9;
+  double cpu = 0.0, simulated = 0.0, reduced_share = 0.0;
+  int checks = 0;
+  for (auto _ : state)
+  {
+    state.PauseTiming();
+    sim.restoreState(start);
+    std::unique_ptr<AdaptiveStepper> stepper =
+        adaptive ? std::make_unique<AdaptiveStepper>(sim, settings, drive) : nullptr;
+    state.ResumeTiming();
+    const double start_cpu = threadCpuSeconds();
+    while (sim.time() < end)
+    {
+      if (!stepper)
+        drive(sim);
+      if ((stepper ? stepper->step() : sim.step()).diverged)
+      {
+        state.SkipWithError("diverged");
+        return;
+      }
+    }
+    cpu += threadCpuSeconds() - start_cpu;
+    simulated += sim.time();
+    reduced_share = stepper ? stepper->reducedShare() : 1.0;
+    checks = stepper ? stepper->checks() : 0;
+  }
+  state.counters["cpu_per_simulated_s"] = simulated > 0.0 ? cpu / simulated : 0.0;
+  state.counters["reduced_share"] = reduced_share;
+  state.counters["checks"] = checks;
+}
+BENCHMARK(BM_AdaptiveCoarseTurnScene)->ArgsProduct({{50, 100}, {0, 1, 2}})->Unit(benchmark::kMillisecond);
+
 // config/compare/large_motion_grips.yaml's corners_together, the scene where the coarse grid's span
 // is right only at the start: the 20 x 20 cloth hanging from two 2 x 2 grips at its top corners,
-// brought 0.35 m towards each other over 1 s (s = 10 tau^3 - 15 tau^4 + 6 tau^5) and held 2 s,
+// brought 0.35 m towards each other over 1 s (moveRamp) and held 2 s,
 // explicit at 5 ms. range(0) = 0: `full`; 1: `adaptive` on `coarse` (its defaults, at coarse's own
 // step). Each iteration is the whole scene from the hanging start (restored untimed): compare the
 // two by their time per iteration.
@@ -681,18 +762,14 @@ void BM_AdaptiveCornersTogether(benchmark::State& state)
   const Eigen::VectorXd rest = sim.handlePositions();
   const long steps = 600;
   const Drive drive = [&](Simulation& sim) {
-    const double t = sim.nextStepTime();
-    const double tau = std::min(t, 1.0);
-    const double ramp = tau * tau * tau * (10.0 - 15.0 * tau + 6.0 * tau * tau);
-    const double rate = t < 1.0 ? 30.0 * tau * tau * (1.0 - tau) * (1.0 - tau) : 0.0;
-    const double spin = t < 1.0 ? 60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau) : 0.0;
+    const Ramp r = moveRamp(sim.nextStepTime());
     Eigen::VectorXd x = rest, v = Eigen::VectorXd::Zero(rest.size()), a = v;
     for (Eigen::Index d = 0; d < x.size(); d += 3)
     {
       const double towards = d < x.size() / 2 ? 0.35 : -0.35;  // the first grip's four particles, then the second's
-      x[d] += towards * ramp;
-      v[d] = towards * rate;
-      a[d] = towards * spin;
+      x[d] += towards * r.s;
+      v[d] = towards * r.ds;
+      a[d] = towards * r.dds;
     }
     sim.setHandleMotion(x, v, a);
   };

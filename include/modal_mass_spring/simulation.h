@@ -24,6 +24,7 @@ namespace modal_mass_spring
 
 // The method objects and what builds them are internal (src/core/dynamics/method_model.h).
 class ErrorIndicator;
+class CoarseErrorIndicator;
 class MethodModel;
 struct CoarseGrid;
 struct IntegratorSettings;
@@ -531,6 +532,7 @@ private:
   double start_energy_ = 0.0;  // the method's energy at the start of the run, carried over switches
   double projection_error_ = 0.0;
   std::unique_ptr<ErrorIndicator> error_indicator_;  // built at the first errorIndicator()
+  std::unique_ptr<CoarseErrorIndicator> coarse_indicator_;  // built at the first errorIndicator(Method::Coarse)
   long state_sets_ = 0;  // stateSets()
   double time_since_set_ = 0.0;  // timeSinceStateSet()
   std::unique_ptr<CoarseGrid> coarse_;               // built at the first use of `coarse`

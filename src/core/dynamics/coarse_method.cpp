@@ -133,6 +133,29 @@ double CoarseMethod::velocityAt(const State& s, int k) const
   return interpolateAt(s.v, coarse_motion_.velocity, Eigen::VectorXd(), k);
 }
 
+void CoarseMethod::statesAt(const State& s, const std::vector<int>& k, Eigen::VectorXd& u, Eigen::VectorXd& v) const
+{
+  // The coarse grid's every dof once, then each fine dof from its stencil's four.
+  const Eigen::VectorXd x_c = coarsePositions(s.q), v_c = coarseVelocities(s.v);
+  const int dim = fine_.grid.dimension();
+  u.resize(static_cast<Eigen::Index>(k.size()));
+  v.resize(u.size());
+  for (size_t i = 0; i < k.size(); ++i)
+  {
+    const int dof = fine_.grid.freeDofs()[k[i]];
+    const Stencil& stencil = coarse_.interpolation_stencils[dof / dim];
+    double x = 0.0, speed = 0.0;
+    for (int j = 0; j < 4; ++j)
+    {
+      const int c = stencil.particle[j] * dim + dof % dim;
+      x += stencil.weight[j] * x_c[c];
+      speed += stencil.weight[j] * v_c[c];
+    }
+    u[static_cast<Eigen::Index>(i)] = x - fine_reference_[k[i]] + (offset_.size() > 0 ? offset_[k[i]] : 0.0);
+    v[static_cast<Eigen::Index>(i)] = speed;
+  }
+}
+
 void CoarseMethod::setAnchor(const Eigen::VectorXd& u_anchor, const Eigen::VectorXd& handles_anchor)
 {
   FullMethod::setAnchor(sampleDisplacement(u_anchor, handles_anchor), gather(handles_anchor, coarse_.handle_source));

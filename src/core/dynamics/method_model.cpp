@@ -478,6 +478,17 @@ double ModalMethod::displacementAt(const State& s, int k) const
   return offset_[k] + handles + lin_.basis.phi.row(k).dot(s.q);
 }
 
+void MethodModel::statesAt(const State& s, const std::vector<int>& k, Eigen::VectorXd& u, Eigen::VectorXd& v) const
+{
+  u.resize(static_cast<Eigen::Index>(k.size()));
+  v.resize(u.size());
+  for (size_t i = 0; i < k.size(); ++i)
+  {
+    u[static_cast<Eigen::Index>(i)] = displacementAt(s, k[i]);
+    v[static_cast<Eigen::Index>(i)] = velocityAt(s, k[i]);
+  }
+}
+
 double ModalMethod::velocityAt(const State& s, int k) const
 {
   const double handles = lin_.constraint_modes ? lin_.constraint_modes->row(k).dot(handle_motion_.velocity) : 0.0;

@@ -126,6 +126,9 @@ public:
   // for following one particle every step (a drag).
   virtual double displacementAt(const State& s, int k) const = 0;
   virtual double velocityAt(const State& s, int k) const = 0;
+  // The same of many free dofs, u[i] and v[i] of k[i]: where the entries share work (`coarse`'s
+  // coarse positions), read faster than one at a time.
+  virtual void statesAt(const State& s, const std::vector<int>& k, Eigen::VectorXd& u, Eigen::VectorXd& v) const;
   virtual double kineticEnergy(const State& s) const = 0;
   // Sets the displacement that distances are measured from (the start of the run), with the handle
   // dofs' displacement then (empty: at rest), and measures a state's mass-weighted squared distance
@@ -346,6 +349,7 @@ public:
   Eigen::VectorXd velocity(const State& s) const override;
   double displacementAt(const State& s, int k) const override;
   double velocityAt(const State& s, int k) const override;
+  void statesAt(const State& s, const std::vector<int>& k, Eigen::VectorXd& u, Eigen::VectorXd& v) const override;
   void setAnchor(const Eigen::VectorXd& u_anchor, const Eigen::VectorXd& handles_anchor) override;
   void setHandleMotion(const HandleMotion& motion) override;
   Eigen::VectorXd offset() const override { return offset_; }

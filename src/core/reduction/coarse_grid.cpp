@@ -205,14 +205,18 @@ CoarseGrid::CoarseGrid(const Grid& fine, int coarse_cols) : grid(coarseGridParam
     throw std::runtime_error("coarse grid: its interpolation's Gram matrix could not be factorised");
 }
 
-bool CoarseGrid::fitRestLengths(const Eigen::VectorXd& x_fine)
+bool CoarseGrid::fitRestLengths(const Eigen::VectorXd& x_fine, Held held)
 {
   const int dim = grid.dimension();
-  // The coarse positions: the free particles sampled, the held ones where the coarse method holds them.
-  Eigen::VectorXd x = grid.initialPositions();
-  const Eigen::VectorXd sampled = sampling * x_fine;
-  for (int dof : grid.freeDofs())
-    x[dof] = sampled[dof];
+  // The coarse positions: the free particles sampled, the held ones as `held` says.
+  Eigen::VectorXd x = sampling * x_fine;
+  if (held == Held::AtRest)
+  {
+    const Eigen::VectorXd sampled = x;
+    x = grid.initialPositions();
+    for (int dof : grid.freeDofs())
+      x[dof] = sampled[dof];
+  }
   Eigen::VectorXd f_fine, f_coarse;
   springAndGravityForces(fine_, x_fine, f_fine);
   springAndGravityForces(grid, x, f_coarse);

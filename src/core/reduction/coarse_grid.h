@@ -55,7 +55,10 @@ struct CoarseGrid
   // it as it turns (a rest length turns with its spring). K and K_ib stay those of the unfitted grid
   // (Rayleigh damping, the handles' damping load, the step limit: as before the fit). False, and
   // nothing changed, where the fit would take a rest length to zero or below, or not finite.
-  bool fitRestLengths(const Eigen::VectorXd& x_fine);
+  // `held`: where its fixed and handle particles are in that balance, at its own rest as the coarse
+  // method holds them, or sampled from x_fine as every other (a grid that only views the fine one).
+  enum class Held { AtRest, Sampled };
+  bool fitRestLengths(const Eigen::VectorXd& x_fine, Held held = Held::AtRest);
 
   // What the interpolation misses of fine positions x (every fine dof), on the fine free dofs:
   // x less its interpolation from the coarse particles sampled from it, P R x. A switch to the coarse

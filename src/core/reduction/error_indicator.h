@@ -9,13 +9,18 @@
 // resist, bounded), as an RMS over the free particles (m): the same measure as the distance to
 // `full` it stands for. What the coarse grid leaves out has wavelengths below its spacing, where L
 // acts within a factor of about two as its diagonal does: `coarse` balances r through the diagonal
-// alone, O(n) instead of a solve that costs tens of coarse steps (docs/results.md).
+// alone, O(n) instead of a solve that costs tens of coarse steps (docs/results.md). On a grid more
+// than three times finer than its coarse grid, `coarse` reads the same residual on a view of the
+// cloth at a third of the coarse spacing (CoarseErrorIndicator).
 #pragma once
 
 #include "modal_mass_spring/grid.h"
+#include "reduction/coarse_grid.h"
 
 #include <Eigen/Core>
 #include <Eigen/SparseCholesky>
+
+#include <memory>
 
 namespace modal_mass_spring
 {
@@ -45,4 +50,51 @@ private:
   bool factored_ = false;
 };
 
+// `coarse`'s indicator. The default coarse grid has a third of the grid's columns, and the
+// indicator's calibration was taken there (indicatorScale); on a grid finer than that (the default's
+// columns are capped), it is read on a view of the cloth with three times the coarse grid's columns:
+// its positions sampled from the grid's, its rest lengths fitted so that at the grid's hanging
+// equilibrium it is in the balance the grid is in. Its cost then grows with the coarse grid, not the
+// fine one, and it ranks the distance to `full` as well as the fine grid's residual (better on the
+// 100 x 100 turn; docs/results.md, "`coarse` at its own step under `adaptive`").
+class CoarseErrorIndicator
+{
+public:
+  // `mass`: the diagonal of M on the grid's free dofs; `x_ref`: the positions (every dof) the
+  // grid's displacements are from, where its fixed particles stay; `equilibrium`: its hanging
+  // equilibrium (empty: none).
+  CoarseErrorIndicator(const Grid& grid, const CoarseGrid& coarse, const Eigen::VectorXd& mass,
+                       const Eigen::VectorXd& x_ref, const Eigen::VectorXd& equilibrium);
+  // Whether it reads a view (else the grid itself).
+  bool viewed() const { return view_ != nullptr; }
+  // The estimate at the grid's positions x (every dof), with the external force on every dof (zero
+  // or empty: none).
+  double operator()(const Eigen::VectorXd& x, const Eigen::VectorXd& external) const;
+  // The same where `coarse` steps, from its own state (a view only, viewed()): the coarse grid's
+  // positions (every dof) and the grid's handle dofs' displacement (empty: none), what it reads
+  // of the grid's free particles. What its interpolation misses, frozen at a state set, is taken
+  // by setMissed; missedSets says at which set it was last.
+  double operator()(const Eigen::VectorXd& coarse_positions, const Eigen::VectorXd& handle_displacement,
+                    const Eigen::VectorXd& external) const;
+  void setMissed(const Eigen::VectorXd& missed, long state_sets);
+  long missedSets() const { return missed_sets_; }
+
+  static constexpr int kViewRefinement = 3;
+
+private:
+  double fromView(const Eigen::VectorXd& x_view, const Eigen::VectorXd& external) const;
+
+  const Grid& grid_;
+  const CoarseGrid& coarse_;
+  std::unique_ptr<CoarseGrid> view_;  // null: the grid itself
+  std::unique_ptr<CoarseGrid> span_;  // the coarse grid over the view
+  std::unique_ptr<ErrorIndicator> indicator_;
+  // The view's positions from the coarse state: S (sampling) times the grid's positions, which are
+  // P x_c + missed on the free dofs, x_ref + displacement on the handle dofs, x_ref on the fixed.
+  SparseMatrix from_coarse_;    // S P
+  SparseMatrix from_handles_;   // S on the handle dofs
+  Eigen::VectorXd at_rest_;     // S x_ref on the held dofs
+  Eigen::VectorXd missed_;      // S missed
+  long missed_sets_ = -1;
+};
 }  // namespace modal_mass_spring

@@ -117,6 +117,7 @@ AdaptiveStepper::AdaptiveStepper(Simulation& sim, const AdaptiveSettings& settin
                     "must be 1 without a drive: a fallback takes each time step again with its own motion");
   if (sim_.method() != settings_.reduced)
     sim_.setMethod(settings_.reduced);
+  sim_.errorIndicator();  // built with the rest of the setup, not in the first check's step
   handle_reference_ = sim_.handlePositions();
   if (sim_.handleMotion().displacement.size() > 0)
     handle_reference_ -= sim_.handleMotion().displacement;

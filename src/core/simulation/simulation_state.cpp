@@ -243,12 +243,23 @@ double Simulation::errorIndicator(Method span)
     return 0.0;
   if (span == Method::Coarse ? !coarse_ : !basis_built_)
     throw std::logic_error("errorIndicator: the span of method '" + toString(span) + "' is not built");
+  // In the body frame where one moves: the springs do not see the frame, and the span lives there.
+  if (span == Method::Coarse)
+  {
+    if (!coarse_indicator_)
+      coarse_indicator_ = std::make_unique<CoarseErrorIndicator>(grid_, *coarse_, mass_, x_ref_, equilibrium_);
+    if (params_.method != Method::Coarse || !coarse_indicator_->viewed())
+      return (*coarse_indicator_)(bodyPositions(), external_force_);
+    // Read on the view from the coarse state: the grid's every particle is not reconstructed.
+    const auto& method = static_cast<const CoarseMethod&>(*model_);
+    if (coarse_indicator_->missedSets() != state_sets_)
+      coarse_indicator_->setMissed(method.offset(), state_sets_);
+    return (*coarse_indicator_)(method.coarsePositions(model_->state().q), handle_current_.displacement,
+                                external_force_);
+  }
   if (!error_indicator_)
     error_indicator_ = std::make_unique<ErrorIndicator>(grid_, mass_);
-  // In the body frame where one moves: the springs do not see the frame, and the span lives there.
   const Eigen::VectorXd f = error_indicator_->force(bodyPositions(), external_force_);
-  if (span == Method::Coarse)
-    return error_indicator_->balanceLocally(coarse_->outsideSpan(f));
   const ModalBasis& basis = span == Method::Linear ? basis_ : physical_basis_;
   return error_indicator_->balance(f - mass_.cwiseProduct(basis.phi * (basis.phi.transpose() * f)));
 }
@@ -336,21 +347,35 @@ double Simulation::deformationSpeed() const
       return indices;
     };
     const std::vector<int> rows = lattice(g.rows), cols = lattice(g.cols);
-    x = v = Eigen::Matrix3Xd::Zero(3, static_cast<Eigen::Index>(rows.size() * cols.size()));
-    Eigen::Index n = 0;
-    Eigen::VectorXd at_position, at_velocity;
+    std::vector<int> particles, dofs;  // the lattice's free particles, and their free dofs
     for (int i : rows)
       for (int j : cols)
+        if (const int particle = i * g.cols + j; !grid_.isFixed(particle) && !grid_.isHandle(particle))
+        {
+          particles.push_back(particle);
+          for (int c = 0; c < dim; ++c)
+            dofs.push_back(grid_.freeIndex(particle * dim + c));
+        }
+    Eigen::VectorXd u, at_velocity;
+    model_->statesAt(model_->state(), dofs, u, at_velocity);
+    const Eigen::Index n = static_cast<Eigen::Index>(particles.size());
+    x = v = Eigen::Matrix3Xd::Zero(3, n);
+    for (Eigen::Index p = 0; p < n; ++p)
+    {
+      x.col(p).head(dim) = x_ref_.segment(particles[static_cast<size_t>(p)] * dim, dim) + u.segment(p * dim, dim);
+      v.col(p).head(dim) = at_velocity.segment(p * dim, dim);
+    }
+    if (frameMoved())
+    {
+      // As particleState: in the world, x = p + R y, x' = p' + omega x R y + R y'.
+      const PlanarFrame f = restrict(frame_current_, dim);
+      for (Eigen::Index p = 0; p < n; ++p)
       {
-        const int particle = i * g.cols + j;
-        if (grid_.isFixed(particle) || grid_.isHandle(particle))
-          continue;
-        particleState(particle, at_position, at_velocity);
-        x.col(n).head(dim) = at_position;
-        v.col(n++).head(dim) = at_velocity;
+        const Eigen::VectorXd y = x.col(p).head(dim);
+        v.col(p).head(dim) = f.worldVelocity(y, v.col(p).head(dim));
+        x.col(p).head(dim) = f.worldPosition(y);
       }
-    x.conservativeResize(3, n);
-    v.conservativeResize(3, n);
+    }
   }
   if (x.cols() == 0)
     return 0.0;

@@ -1,6 +1,7 @@
 // Method `coarse`: the same cloth on a coarser grid, interpolated onto the grid.
 #include "modal_mass_spring/simulation.h"
 #include "reduction/coarse_grid.h"
+#include "reduction/error_indicator.h"
 
 #include "test_support.h"
 
@@ -223,6 +224,50 @@ TEST(Coarse, ErrorIndicatorAndSpanDistanceSeeWhatTheCoarseGridCannotHold)
   sim.setMethod(Method::Coarse);
   const Eigen::VectorXd frozen = sim.saveState().offset;
   EXPECT_NEAR(std::sqrt(frozen.squaredNorm() / (frozen.size() / 3)), distance, 1e-12);
+}
+
+// On a grid more than three times finer than its coarse grid, `coarse`'s indicator reads a view with
+// three times the coarse columns; on one at most that fine, the grid itself. The view is fitted to
+// the hanging equilibrium, where nothing is left outside the span. Read from the coarse state while
+// `coarse` steps (its handles slid, the detail frozen at its start), it is what the grid's positions
+// sampled onto the view give after a switch to `full`, which moves no particle; and the swing's
+// speed, over a lattice of the particles on a grid this large, is what `full` reads of them one at a
+// time.
+TEST(Coarse, OnAFinerGridItsIndicatorReadsAViewAtAThirdOfTheCoarseSpacing)
+{
+  const Grid fine(swingingSheet(13));
+  const CoarseGrid on_5(fine, 5);  // 3 x 4 + 1 = 13 columns: the grid itself
+  EXPECT_FALSE(CoarseErrorIndicator(fine, on_5, Eigen::VectorXd::Ones(fine.numFreeDofs()), fine.initialPositions(),
+                                    Eigen::VectorXd())
+                   .viewed());
+
+  const GridParams g = heldCloth({{0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, 21, 22,
+                                   23, 24, 25, 26, 27, 28, 29, 30, 31, 32, 33}},
+                                 34);
+  SimulationParams s = coarseParams(6, 5e-4);  // a view of 16 columns
+  s.linearization = Linearization::Equilibrium;
+  s.initial_state = InitialState::Equilibrium;
+  s.alpha = 0.5;
+  Simulation sim(g, s);
+  const CoarseErrorIndicator unfitted(sim.grid(), CoarseGrid(sim.grid(), 6), Eigen::VectorXd::Ones(sim.grid().numFreeDofs()),
+                                      sim.linearizationPositions(), Eigen::VectorXd());
+  ASSERT_TRUE(unfitted.viewed());
+  const double at_rest = sim.errorIndicator();
+  EXPECT_LT(at_rest, 1e-12);
+  EXPECT_GT(unfitted(sim.positions(), Eigen::VectorXd()), 1e3 * at_rest + 1e-9) << "the fit must matter";
+
+  const Eigen::VectorXd start = sim.handlePositions();
+  for (long k = 0; k < 200; ++k)
+  {
+    slideHandles(sim, start, k, 2.0);
+    ASSERT_FALSE(sim.step().diverged);
+  }
+  const double stepping = sim.errorIndicator(), speed = sim.deformationSpeed();
+  EXPECT_GT(stepping, 1e-7);
+  sim.setMethod(Method::Full);
+  EXPECT_NEAR(sim.errorIndicator(Method::Coarse), stepping, 1e-9 * stepping);
+  EXPECT_GT(speed, 1e-3);
+  EXPECT_NEAR(sim.deformationSpeed(), speed, 1e-9 * speed);
 }
 
 // With as many columns as the grid, the coarse grid is the grid: `coarse` steps as `full` does, held
