@@ -16,6 +16,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <map>
 #include <memory>
 #include <numeric>
@@ -646,6 +647,31 @@ void BM_AdaptiveCoarseTurnOwnStep(benchmark::State& state)
 }
 BENCHMARK(BM_AdaptiveCoarseTurnOwnStep)->ArgsProduct({{50, 100}, {0, 1}})->Unit(benchmark::kMicrosecond);
 
+// One whole scene from `start` (restored untimed): through a new adaptive stepper with `drive` (kept
+// in `stepper` for its counters) where `settings` is given, else `sim` alone driven every step; until
+// `done`. Returns the CPU seconds of its steps; -1, and the benchmark skipped, where a step diverged.
+double runScene(benchmark::State& state, Simulation& sim, const SimulationState& start,
+                const AdaptiveSettings* settings, const Drive& drive, const std::function<bool()>& done,
+                std::unique_ptr<AdaptiveStepper>& stepper)
+{
+  state.PauseTiming();
+  sim.restoreState(start);
+  stepper = settings ? std::make_unique<AdaptiveStepper>(sim, *settings, drive) : nullptr;
+  state.ResumeTiming();
+  const double start_cpu = threadCpuSeconds();
+  while (!done())
+  {
+    if (!stepper)
+      drive(sim);
+    if ((stepper ? stepper->step() : sim.step()).diverged)
+    {
+      state.SkipWithError("diverged");
+      return -1.0;
+    }
+  }
+  return threadCpuSeconds() - start_cpu;
+}
+
 // modal_compare's ramp for a handle scenario's move over 1 s (s = 10 tau^3 - 15 tau^4 + 6 tau^5, its
 // velocity and acceleration zero at both ends): where it is at time t, and its two rates.
 struct Ramp
@@ -663,8 +689,9 @@ Ramp moveRamp(double t)
 // held cloth of BM_CoarseTurn on N x N turned 60 degrees about the vertical over 1 s and held 0.5 s,
 // explicit at `full`'s step (0.8 ms x 100 / N). range(1) = 0: `coarse` alone at its own step; 1:
 // `adaptive` on `coarse` with its defaults (the tolerance 1.5 cm), each reduced step at coarse's own
-// step; 2: the same with no check after the first (what the stepper costs besides them). Each iteration is the whole scene from the hanging start (restored untimed), so the checks
-// come where they come in the scene; counter: CPU seconds per simulated second of the stepping.
+// step; 2: the same with one check only, at the end (what the stepper costs besides them). Each
+// iteration is the whole scene from the hanging start (restored untimed), so the checks come where
+// they come in the scene; counter: CPU seconds per simulated second of the stepping.
 void BM_AdaptiveCoarseTurnScene(benchmark::State& state)
 {
   const int size = static_cast<int>(state.range(0));
@@ -688,7 +715,8 @@ void BM_AdaptiveCoarseTurnScene(benchmark::State& state)
   const Drive drive = [&](Simulation& sim) {
     const Ramp r = moveRamp(sim.nextStepTime());
     const double angle = EIGEN_PI / 3.0;
-    const RigidPointMotion motion = pointMotion(turnAbout(pivot, axis, angle * r.s, angle * r.ds, angle * r.dds), points);
+    const RigidPointMotion motion =
+        pointMotion(turnAbout(pivot, axis, angle * r.s, angle * r.ds, angle * r.dds), points);
     sim.setHandleMotion(motion.position.reshaped(), motion.velocity.reshaped(), motion.acceleration.reshaped());
   };
   AdaptiveSettings settings = adaptiveSettings(s);
@@ -698,25 +726,14 @@ void BM_AdaptiveCoarseTurnScene(benchmark::State& state)
   const double end = fine_steps * (adaptive ? s.time_step : s.time_step / multiple) - 1e-9;
   double cpu = 0.0, simulated = 0.0, reduced_share = 0.0;
   int checks = 0;
+  std::unique_ptr<AdaptiveStepper> stepper;
   for (auto _ : state)
   {
-    state.PauseTiming();
-    sim.restoreState(start);
-    std::unique_ptr<AdaptiveStepper> stepper =
-        adaptive ? std::make_unique<AdaptiveStepper>(sim, settings, drive) : nullptr;
-    state.ResumeTiming();
-    const double start_cpu = threadCpuSeconds();
-    while (sim.time() < end)
-    {
-      if (!stepper)
-        drive(sim);
-      if ((stepper ? stepper->step() : sim.step()).diverged)
-      {
-        state.SkipWithError("diverged");
-        return;
-      }
-    }
-    cpu += threadCpuSeconds() - start_cpu;
+    const double scene = runScene(state, sim, start, adaptive ? &settings : nullptr, drive,
+                                  [&] { return sim.time() >= end; }, stepper);
+    if (scene < 0.0)
+      return;
+    cpu += scene;
     simulated += sim.time();
     reduced_share = stepper ? stepper->reducedShare() : 1.0;
     checks = stepper ? stepper->checks() : 0;
@@ -776,23 +793,12 @@ void BM_AdaptiveCornersTogether(benchmark::State& state)
   AdaptiveSettings settings = adaptiveSettings(s);
   settings.reduced_step_span = coarseStepMultiple(g, s, steps);
   double reduced_share = 0.0;
+  std::unique_ptr<AdaptiveStepper> stepper;
   for (auto _ : state)
   {
-    state.PauseTiming();
-    sim.restoreState(start);
-    std::unique_ptr<AdaptiveStepper> stepper =
-        adaptive ? std::make_unique<AdaptiveStepper>(sim, settings, drive) : nullptr;
-    state.ResumeTiming();
-    while (sim.stepCount() < steps)
-    {
-      if (!stepper)
-        drive(sim);
-      if ((stepper ? stepper->step() : sim.step()).diverged)
-      {
-        state.SkipWithError("diverged");
-        return;
-      }
-    }
+    if (runScene(state, sim, start, adaptive ? &settings : nullptr, drive, [&] { return sim.stepCount() >= steps; },
+                 stepper) < 0.0)
+      return;
     reduced_share = stepper ? stepper->reducedShare() : 0.0;
   }
   state.counters["reduced_share"] = reduced_share;

@@ -472,12 +472,6 @@ Eigen::VectorXd ModalMethod::velocity(const State& s) const
 
 // Row k of Psi dx_b and Psi v_b from Psi's row: O(handle dofs), where psiDx() and psiV() redo the whole
 // product after every handle motion.
-double ModalMethod::displacementAt(const State& s, int k) const
-{
-  const double handles = lin_.constraint_modes ? lin_.constraint_modes->row(k).dot(handle_motion_.displacement) : 0.0;
-  return offset_[k] + handles + lin_.basis.phi.row(k).dot(s.q);
-}
-
 void MethodModel::statesAt(const State& s, const std::vector<int>& k, Eigen::VectorXd& u, Eigen::VectorXd& v) const
 {
   u.resize(static_cast<Eigen::Index>(k.size()));
@@ -487,6 +481,12 @@ void MethodModel::statesAt(const State& s, const std::vector<int>& k, Eigen::Vec
     u[static_cast<Eigen::Index>(i)] = displacementAt(s, k[i]);
     v[static_cast<Eigen::Index>(i)] = velocityAt(s, k[i]);
   }
+}
+
+double ModalMethod::displacementAt(const State& s, int k) const
+{
+  const double handles = lin_.constraint_modes ? lin_.constraint_modes->row(k).dot(handle_motion_.displacement) : 0.0;
+  return offset_[k] + handles + lin_.basis.phi.row(k).dot(s.q);
 }
 
 double ModalMethod::velocityAt(const State& s, int k) const

@@ -55,20 +55,19 @@ CoarseErrorIndicator::CoarseErrorIndicator(const Grid& grid, const CoarseGrid& c
   const int view_cols = kViewRefinement * (coarse_cols - 1) + 1;
   if (view_cols < grid.params().cols)
   {
-    // Three times the coarse columns always spans the same cloth as the grid and holds the coarse
-    // grid's; the two moves of a held particle to the nearest (grid to view, view to coarse) can
-    // still put two handles on one coarse particle: the grid itself is then read.
+    // The view only makes the reading cheaper: where it cannot be built or fitted, the grid itself is read.
     try
     {
       auto view = std::make_unique<CoarseGrid>(grid, view_cols);
-      if (equilibrium.size() > 0)
-        view->fitRestLengths(equilibrium, CoarseGrid::Held::Sampled);
-      span_ = std::make_unique<CoarseGrid>(view->grid, coarse_cols);
-      view_ = std::move(view);
+      if (equilibrium.size() == 0 || view->fitRestLengths(equilibrium, CoarseGrid::Held::Sampled))
+      {
+        span_ = std::make_unique<CoarseGrid>(view->grid, coarse_cols);
+        view_ = std::move(view);
+      }
     }
-    catch (const std::invalid_argument&)
+    catch (const std::exception&)
     {
-      span_.reset();
+      view_.reset();
     }
   }
   if (!view_)

@@ -50,13 +50,14 @@ private:
   bool factored_ = false;
 };
 
-// `coarse`'s indicator. The default coarse grid has a third of the grid's columns, and the
-// indicator's calibration was taken there (indicatorScale); on a grid finer than that (the default's
-// columns are capped), it is read on a view of the cloth with three times the coarse grid's columns:
-// its positions sampled from the grid's, its rest lengths fitted so that at the grid's hanging
-// equilibrium it is in the balance the grid is in. Its cost then grows with the coarse grid, not the
-// fine one, and it ranks the distance to `full` as well as the fine grid's residual (better on the
-// 100 x 100 turn; docs/results.md, "`coarse` at its own step under `adaptive`").
+// `coarse`'s indicator. Its calibration (indicatorScale) was taken where the grid has three times the
+// coarse grid's columns, as the default coarse grid gives up to 58 columns; on a grid with more than
+// that (a larger grid, whose default coarse grid stays at 20 columns, or fewer coarse_cols) it is
+// read on a view of the cloth with three times the coarse columns: its positions sampled from the
+// grid's, its rest lengths fitted, where the grid has a hanging equilibrium, so that there it is in
+// the balance the grid is in. But for one pass over the external force, its cost then grows with the
+// coarse grid, not the fine one, and it ranks the distance to `full` as well as the grid's residual
+// (docs/results.md, "The indicator on a view of the cloth").
 class CoarseErrorIndicator
 {
 public:

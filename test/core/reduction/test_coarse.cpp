@@ -249,9 +249,12 @@ TEST(Coarse, OnAFinerGridItsIndicatorReadsAViewAtAThirdOfTheCoarseSpacing)
   s.initial_state = InitialState::Equilibrium;
   s.alpha = 0.5;
   Simulation sim(g, s);
-  const CoarseErrorIndicator unfitted(sim.grid(), CoarseGrid(sim.grid(), 6), Eigen::VectorXd::Ones(sim.grid().numFreeDofs()),
-                                      sim.linearizationPositions(), Eigen::VectorXd());
+  const CoarseGrid coarse(sim.grid(), 6);
+  const Eigen::VectorXd mass = Eigen::VectorXd::Constant(sim.grid().numFreeDofs(), sim.grid().particleMass());
+  const CoarseErrorIndicator unfitted(sim.grid(), coarse, mass, sim.linearizationPositions(), Eigen::VectorXd());
+  const CoarseErrorIndicator fitted(sim.grid(), coarse, mass, sim.linearizationPositions(), sim.linearizationPositions());
   ASSERT_TRUE(unfitted.viewed());
+  ASSERT_TRUE(fitted.viewed());
   const double at_rest = sim.errorIndicator();
   EXPECT_LT(at_rest, 1e-12);
   EXPECT_GT(unfitted(sim.positions(), Eigen::VectorXd()), 1e3 * at_rest + 1e-9) << "the fit must matter";
@@ -264,6 +267,7 @@ TEST(Coarse, OnAFinerGridItsIndicatorReadsAViewAtAThirdOfTheCoarseSpacing)
   }
   const double stepping = sim.errorIndicator(), speed = sim.deformationSpeed();
   EXPECT_GT(stepping, 1e-7);
+  EXPECT_NEAR(fitted(sim.positions(), Eigen::VectorXd()), stepping, 1e-9 * stepping) << "the simulation reads the view";
   sim.setMethod(Method::Full);
   EXPECT_NEAR(sim.errorIndicator(Method::Coarse), stepping, 1e-9 * stepping);
   EXPECT_GT(speed, 1e-3);
