@@ -470,8 +470,6 @@ Eigen::VectorXd ModalMethod::velocity(const State& s) const
   return lin_.basis.phi * s.v;
 }
 
-// Row k of Psi dx_b and Psi v_b from Psi's row: O(handle dofs), where psiDx() and psiV() redo the whole
-// product after every handle motion.
 void MethodModel::statesAt(const State& s, const std::vector<int>& k, Eigen::VectorXd& u, Eigen::VectorXd& v) const
 {
   u.resize(static_cast<Eigen::Index>(k.size()));
@@ -483,6 +481,8 @@ void MethodModel::statesAt(const State& s, const std::vector<int>& k, Eigen::Vec
   }
 }
 
+// Row k of Psi dx_b and Psi v_b from Psi's row: O(handle dofs), where psiDx() and psiV() redo the whole
+// product after every handle motion.
 double ModalMethod::displacementAt(const State& s, int k) const
 {
   const double handles = lin_.constraint_modes ? lin_.constraint_modes->row(k).dot(handle_motion_.displacement) : 0.0;

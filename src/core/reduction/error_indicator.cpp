@@ -67,7 +67,7 @@ CoarseErrorIndicator::CoarseErrorIndicator(const Grid& grid, const CoarseGrid& c
     }
     catch (const std::exception&)
     {
-      view_.reset();
+      // view_ is still null: the grid itself.
     }
   }
   if (!view_)
