@@ -30,12 +30,15 @@ double swingDrift(Method reduced)
   return reduced == Method::Coarse ? 0.02 : 0.0;
 }
 
+namespace
+{
+// Time t (s) since the state was set as the mass damping alpha remembers it (swingDistance).
+double rememberedTime(double alpha, double t) { return alpha > 0.0 ? -std::expm1(-0.5 * alpha * t) * 2.0 / alpha : t; }
+}  // namespace
+
 double swingDistance(const Simulation& sim)
 {
-  const double alpha = sim.params().alpha;
-  const double t = sim.timeSinceStateSet();
-  const double remembered = alpha > 0.0 ? -std::expm1(-0.5 * alpha * t) * 2.0 / alpha : t;
-  return sim.deformationSpeed() * remembered;
+  return sim.deformationSpeed() * rememberedTime(sim.params().alpha, sim.timeSinceStateSet());
 }
 
 double errorEstimate(const Simulation& sim, double largest_indicator, double scale, double drift)
@@ -216,10 +219,14 @@ StepResult AdaptiveStepper::step()
   return result;
 }
 
+long AdaptiveStepper::longestCheckInterval() const
+{
+  return static_cast<long>(settings_.max_check_stretch) * settings_.check_steps;
+}
+
 void AdaptiveStepper::scheduleNextCheck(bool far)
 {
-  const long longest = static_cast<long>(settings_.max_check_stretch) * settings_.check_steps;
-  check_interval_ = far ? std::min(2 * check_interval_, longest) : settings_.check_steps;
+  check_interval_ = far ? std::min(2 * check_interval_, longestCheckInterval()) : settings_.check_steps;
   next_check_ = steps_ + check_interval_;
 }
 
@@ -306,13 +313,22 @@ StepResult AdaptiveStepper::check()
   StepResult result;
   if (reduced())
   {
-    last_estimate_ = errorEstimate(sim_, indicator_max_(sim_, sim_.errorIndicator()), settings_.indicator_scale,
-                                   settings_.swing_drift);
+    const double largest = indicator_max_(sim_, sim_.errorIndicator());
+    last_estimate_ = errorEstimate(sim_, largest, settings_.indicator_scale, settings_.swing_drift);
     const double inside = insideColliders();
     const double thickness = sim_.contact() ? sim_.contact()->thickness() : 0.0;
     // The first reading since the state was set tells nothing of how fast the estimate grows.
     const bool first = sim_.stateSets() != sets_checked_;
     sets_checked_ = sim_.stateSets();
+    // The swing's drift is its rate (drift times the speed) times the remembered time: the fastest
+    // rate read at a check since the set is what the next check's drift is foreseen from.
+    const double alpha = sim_.params().alpha;
+    const double indicator_part = settings_.indicator_scale * largest;
+    const double remembered = rememberedTime(alpha, sim_.timeSinceStateSet());
+    if (first)
+      drift_rate_ = 0.0;
+    if (remembered > 0.0)
+      drift_rate_ = std::max(drift_rate_, (last_estimate_ - indicator_part) / remembered);
     if (last_estimate_ <= settings_.tolerance && inside <= thickness)
     {
       const bool safe = last_estimate_ <= settings_.safe_share * settings_.tolerance;
@@ -323,7 +339,15 @@ StepResult AdaptiveStepper::check()
         at_return_ = false;
         setCheckpoint();
       }
-      scheduleNextCheck(safe && !first);
+      // Within the tolerance but not safely, a check is far from a switch too where the indicator's
+      // part is safely within what the swing's drift, foreseen at the next check, leaves of the
+      // tolerance: the drift is a phase that grows with the time swung, the indicator what comes
+      // and goes (without a drift, only the safe checks stretch).
+      const long next = std::min(2 * check_interval_, longestCheckInterval());
+      const double drift_next =
+          drift_rate_ * rememberedTime(alpha, sim_.timeSinceStateSet() + next * sim_.params().time_step);
+      const bool room = indicator_part <= settings_.safe_share * (settings_.tolerance - drift_next);
+      scheduleNextCheck((safe || room) && !first);
       return result;
     }
     why << "to full at t = " << sim_.time() << " s: ";

@@ -285,6 +285,70 @@ TEST(Adaptive, ChecksFarFromASwitchComeLessOften)
   EXPECT_EQ(checks(reduced, BasisKind::LinearModes, turn), std::make_pair(40, true));
 }
 
+TEST(Adaptive, ChecksWithinTheToleranceStretchWhereTheSwingsDriftLeavesTheIndicatorRoom)
+{
+  // Six linear modes on the turn, checked every 5 steps at the least, with a 10 m tolerance whose
+  // safe share (1e-9 of it) the swing's drift (a tenth of the tolerance at the largest swing) leaves
+  // at once: every check but the first within the tolerance and not safely.
+  Simulation physical(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
+  double largest_swing = 0.0;
+  const Eigen::VectorXd start = physical.handlePositions();
+  for (int k = 1; k <= 200; ++k)
+  {
+    physical.setHandleMotion(turn(start, k));
+    ASSERT_FALSE(physical.step().diverged);
+    largest_swing = std::max(largest_swing, swingDistance(physical));
+  }
+  ASSERT_GT(largest_swing, 1e-3);
+  AdaptiveSettings settings = stepsOf5ms();
+  settings.reduced = Method::Physical;
+  settings.check_steps = 5;
+  settings.tolerance = 10.0;
+  settings.safe_share = 1e-9;
+  settings.swing_drift = 0.1 * settings.tolerance / largest_swing;
+  struct Checked
+  {
+    int checks = 0, switches = 0;
+    double largest_estimate = 0.0;  // read at a check
+    std::string why;
+  };
+  auto checked = [&start](const AdaptiveSettings& with) {
+    Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
+    AdaptiveStepper adaptive(sim, with);
+    Checked c;
+    for (int k = 1; k <= 200 && adaptive.reduced(); ++k)
+    {
+      sim.setHandleMotion(turn(start, k));
+      EXPECT_FALSE(adaptive.step().diverged);
+      if (adaptive.checks() > c.checks && adaptive.reduced())
+        c.largest_estimate = std::max(c.largest_estimate, adaptive.lastEstimate());
+      c.checks = adaptive.checks();
+    }
+    c.switches = adaptive.switches();
+    c.why = adaptive.lastSwitch();
+    return c;
+  };
+  // The indicator's part (scaled to nothing) within the safe share of what the drift leaves: they
+  // stretch as safe checks do (5, 10, 20, 40, 60, ...: 12).
+  settings.indicator_scale = 1e-30;
+  const Checked stretched = checked(settings);
+  EXPECT_EQ(stretched.checks, 12);
+  EXPECT_EQ(stretched.switches, 0) << stretched.why;
+  // The indicator's part as calibrated is above that share: none stretches.
+  settings.indicator_scale = indicatorScale(Method::Physical);
+  EXPECT_EQ(checked(settings).checks, 40);
+  // A tolerance a quarter above every drift those stretched checks read, below the largest swing's
+  // between them: the drift foreseen at the next check (the fastest swing read since the set, for
+  // the time until then) reaches it first, the checks come every 5 steps again, and one finds the
+  // swing above it. Foreseen at the check's own time it would not.
+  settings.indicator_scale = 1e-30;
+  settings.tolerance = 1.25 * stretched.largest_estimate;
+  ASSERT_GT(settings.swing_drift * largest_swing, settings.tolerance);
+  const Checked near = checked(settings);
+  EXPECT_EQ(near.switches, 1);
+  EXPECT_TRUE(contains(near.why, "estimated distance")) << near.why;
+}
+
 TEST(Adaptive, StaysReducedWhereTheSpanFollows)
 {
   // The skinning span moves the cloth along with its row: every step reduced, the same run as
