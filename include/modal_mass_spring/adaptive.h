@@ -1,15 +1,14 @@
 // A reduced method that falls back to `full` where its span cannot follow the motion (after Kim and
 // James 2009): every check_steps time steps (up to max_check_stretch times as many far from a
-// switch, or where the swing's drift leaves the indicator room; the reduced method may take several
-// at once, reduced_step_span), a
-// reduced step's error estimate (errorEstimate: its indicator calibrated, plus the swing's drift)
-// decides whether the motion is still within `tolerance` of `full`, and whether a particle is further
-// inside a collider than the contact thickness (a span too coarse to bend round a table's edge); if
-// not, the steps since the last check that was safely within it (a third of `tolerance`, at most
-// max_rollback_checks checks back) are taken again under `full`, a time step at a time, from the state
-// saved there (with the handle and collider motions they had, or as the Drive sets them again), so
-// that the error that grew before the check found it is not
-// carried into `full`. Under `full`, it switches back once the state has stayed safely within
+// switch, AdaptiveSettings::max_check_stretch; the reduced method may take several at once,
+// reduced_step_span), a reduced step's error estimate (errorEstimate: its indicator calibrated, plus
+// the swing's drift) decides whether the motion is still within `tolerance` of `full`, and whether a
+// particle is further inside a collider than the contact thickness (a span too coarse to bend round a
+// table's edge); if not, the steps since the last check that was safely within it (a third of
+// `tolerance`, at most max_rollback_checks checks back) are taken again under `full`, a time step at
+// a time, from the state saved there (with the handle and collider motions they had, or as the Drive
+// sets them again), so that the error that grew before the check found it is not carried into
+// `full`. Under `full`, it switches back once the state has stayed safely within
 // `tolerance` of the reduced span (Simulation::spanDistance) for `dwell` seconds (twice as long after
 // each return in a row whose fallback took every reduced step since it again, up to 64 times),
 // touching no collider, and an estimate for that span, read then, is safely within it too (else the
@@ -47,11 +46,13 @@ struct AdaptiveSettings
   // the distance grows before the indicator shows it (docs/results.md, "The adaptive method"). A
   // return asks the same of the state's distance to the span and of the estimate at the state.
   double safe_share = 1.0 / 3.0;
-  int max_rollback_checks = 10;  // and never more checks back than this: the motions kept are bounded
+  // And never more checks back than this: the motions kept are bounded (by this many stretched
+  // intervals, since checks within the tolerance but not safely can be stretched too).
+  int max_rollback_checks = 10;
   // A check far from a switch (reduced: not the first since the state was set, which tells nothing
-  // of how fast the estimate grows, and within safe_share of the tolerance, or within the tolerance
-  // with the indicator's part within safe_share of what the swing's drift, foreseen at the next
-  // check from the fastest swing read since the set, leaves of it; `full`: the state's
+  // of how fast the estimate grows, and either within safe_share of the tolerance or within the
+  // tolerance with the indicator's part within safe_share of what the swing's drift, foreseen at the
+  // next check from the fastest swing read since the set, leaves of it; `full`: the state's
   // distance to the span above safe_share of the tolerance, or touching a collider, so no dwell
   // counts, or, once the dwell is over, the estimate there above safe_share of it) doubles the steps
   // to the next, up to this many times check_steps; any other check, and a switch, resets them to
@@ -169,7 +170,7 @@ private:
   // The next check after this one: `far` from a switch, twice as many steps as the last time (up to
   // the stretch), else check_steps.
   void scheduleNextCheck(bool far);
-  long longestCheckInterval() const;  // max_check_stretch times check_steps
+  long stretchedCheckInterval() const;  // twice the last interval, up to max_check_stretch times check_steps
   // How deep the particle deepest inside a collider is (m; 0: none, or no colliders).
   double insideColliders() const;
   // Whether a particle touched a collider in the last step.
@@ -195,7 +196,7 @@ private:
   bool at_return_ = false;           // the checkpoint is still the state a return to the reduced method set
   int futile_returns_ = 0;           // returns in a row whose fallback took every reduced step again
   long sets_checked_ = -1;           // Simulation::stateSets() at the last check while reduced
-  double drift_rate_ = 0.0;          // the swing's drift per remembered second, the fastest at a check since then (m/s)
+  double drift_rate_ = 0.0;          // the swing's drift per remembered second: the fastest at a check since the state was set (m/s)
   static constexpr int kMaxBackOff = 6;
   Eigen::VectorXd handle_reference_;  // the handle dofs' positions at zero displacement
   // The external force the simulation holds (the last motion kept, or the last applied), and

@@ -219,14 +219,14 @@ StepResult AdaptiveStepper::step()
   return result;
 }
 
-long AdaptiveStepper::longestCheckInterval() const
+long AdaptiveStepper::stretchedCheckInterval() const
 {
-  return static_cast<long>(settings_.max_check_stretch) * settings_.check_steps;
+  return std::min(2 * check_interval_, static_cast<long>(settings_.max_check_stretch) * settings_.check_steps);
 }
 
 void AdaptiveStepper::scheduleNextCheck(bool far)
 {
-  check_interval_ = far ? std::min(2 * check_interval_, longestCheckInterval()) : settings_.check_steps;
+  check_interval_ = far ? stretchedCheckInterval() : settings_.check_steps;
   next_check_ = steps_ + check_interval_;
 }
 
@@ -320,11 +320,12 @@ StepResult AdaptiveStepper::check()
     // The first reading since the state was set tells nothing of how fast the estimate grows.
     const bool first = sim_.stateSets() != sets_checked_;
     sets_checked_ = sim_.stateSets();
-    // The swing's drift is its rate (drift times the speed) times the remembered time: the fastest
-    // rate read at a check since the set is what the next check's drift is foreseen from.
+    // The swing's drift is its rate (drift times the swing's speed) times the remembered time; the
+    // fastest rate read at a check since the set is what the drift at the next check is foreseen from.
     const double alpha = sim_.params().alpha;
+    const double since_set = sim_.timeSinceStateSet();
     const double indicator_part = settings_.indicator_scale * largest;
-    const double remembered = rememberedTime(alpha, sim_.timeSinceStateSet());
+    const double remembered = rememberedTime(alpha, since_set);
     if (first)
       drift_rate_ = 0.0;
     if (remembered > 0.0)
@@ -340,12 +341,13 @@ StepResult AdaptiveStepper::check()
         setCheckpoint();
       }
       // Within the tolerance but not safely, a check is far from a switch too where the indicator's
-      // part is safely within what the swing's drift, foreseen at the next check, leaves of the
-      // tolerance: the drift is a phase that grows with the time swung, the indicator what comes
-      // and goes (without a drift, only the safe checks stretch).
-      const long next = std::min(2 * check_interval_, longestCheckInterval());
-      const double drift_next =
-          drift_rate_ * rememberedTime(alpha, sim_.timeSinceStateSet() + next * sim_.params().time_step);
+      // part is safely within what the swing's drift, foreseen at the next check (which a reduced
+      // step spanning several time steps may end up to span - 1 of them later), leaves of the
+      // tolerance: the indicator is what comes and goes; the drift grows with the time swung, and
+      // the foresight holds while the swing is no faster than the fastest read (without a drift,
+      // only the safe checks stretch).
+      const long next = stretchedCheckInterval() + settings_.reduced_step_span - 1;
+      const double drift_next = drift_rate_ * rememberedTime(alpha, since_set + next * sim_.params().time_step);
       const bool room = indicator_part <= settings_.safe_share * (settings_.tolerance - drift_next);
       scheduleNextCheck((safe || room) && !first);
       return result;

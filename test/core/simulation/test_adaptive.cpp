@@ -288,8 +288,8 @@ TEST(Adaptive, ChecksFarFromASwitchComeLessOften)
 TEST(Adaptive, ChecksWithinTheToleranceStretchWhereTheSwingsDriftLeavesTheIndicatorRoom)
 {
   // Six linear modes on the turn, checked every 5 steps at the least, with a 10 m tolerance whose
-  // safe share (1e-9 of it) the swing's drift (a tenth of the tolerance at the largest swing) leaves
-  // at once: every check but the first within the tolerance and not safely.
+  // safe share (1e-9 of it) the swing's drift (a tenth of the tolerance at the largest swing)
+  // exceeds from the second check on (the first never stretches).
   Simulation physical(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
   double largest_swing = 0.0;
   const Eigen::VectorXd start = physical.handlePositions();
@@ -306,10 +306,11 @@ TEST(Adaptive, ChecksWithinTheToleranceStretchWhereTheSwingsDriftLeavesTheIndica
   settings.tolerance = 10.0;
   settings.safe_share = 1e-9;
   settings.swing_drift = 0.1 * settings.tolerance / largest_swing;
+  settings.indicator_scale = 1e-30;  // the indicator's part scaled to nothing
   struct Checked
   {
     int checks = 0, switches = 0;
-    double largest_estimate = 0.0;  // read at a check
+    double largest_estimate = 0.0, smallest_estimate = INFINITY;  // read at the checks after the first
     std::string why;
   };
   auto checked = [&start](const AdaptiveSettings& with) {
@@ -320,33 +321,37 @@ TEST(Adaptive, ChecksWithinTheToleranceStretchWhereTheSwingsDriftLeavesTheIndica
     {
       sim.setHandleMotion(turn(start, k));
       EXPECT_FALSE(adaptive.step().diverged);
-      if (adaptive.checks() > c.checks && adaptive.reduced())
+      if (adaptive.checks() > c.checks && adaptive.checks() > 1 && adaptive.reduced())
+      {
         c.largest_estimate = std::max(c.largest_estimate, adaptive.lastEstimate());
+        c.smallest_estimate = std::min(c.smallest_estimate, adaptive.lastEstimate());
+      }
       c.checks = adaptive.checks();
     }
     c.switches = adaptive.switches();
     c.why = adaptive.lastSwitch();
     return c;
   };
-  // The indicator's part (scaled to nothing) within the safe share of what the drift leaves: they
-  // stretch as safe checks do (5, 10, 20, 40, 60, ...: 12).
-  settings.indicator_scale = 1e-30;
+  // Within the tolerance but not safely, the indicator's part within the safe share of what the
+  // drift leaves: they stretch as safe checks do (5, 10, 20, 40, 60, ...: 12), where before only the
+  // safe ones did (40).
   const Checked stretched = checked(settings);
+  EXPECT_GT(stretched.smallest_estimate, settings.safe_share * settings.tolerance);
+  EXPECT_LE(stretched.largest_estimate, settings.tolerance);
   EXPECT_EQ(stretched.checks, 12);
   EXPECT_EQ(stretched.switches, 0) << stretched.why;
-  // The indicator's part as calibrated is above that share: none stretches.
-  settings.indicator_scale = indicatorScale(Method::Physical);
-  EXPECT_EQ(checked(settings).checks, 40);
   // A tolerance a quarter above every drift those stretched checks read, below the largest swing's
   // between them: the drift foreseen at the next check (the fastest swing read since the set, for
   // the time until then) reaches it first, the checks come every 5 steps again, and one finds the
-  // swing above it. Foreseen at the check's own time it would not.
-  settings.indicator_scale = 1e-30;
+  // swing above it, before the unstretched checks would have (40 in all). With the drift read at
+  // the check's own time instead, the run takes the stretched checks' course and never switches.
   settings.tolerance = 1.25 * stretched.largest_estimate;
   ASSERT_GT(settings.swing_drift * largest_swing, settings.tolerance);
   const Checked near = checked(settings);
   EXPECT_EQ(near.switches, 1);
   EXPECT_TRUE(contains(near.why, "estimated distance")) << near.why;
+  EXPECT_GT(near.checks, 5);  // stretched before (5, 10, 20, 40, 60 at the least)
+  EXPECT_LT(near.checks, 40);
 }
 
 TEST(Adaptive, StaysReducedWhereTheSpanFollows)
