@@ -196,7 +196,8 @@ private:
   bool at_return_ = false;           // the checkpoint is still the state a return to the reduced method set
   int futile_returns_ = 0;           // returns in a row whose fallback took every reduced step again
   long sets_checked_ = -1;           // Simulation::stateSets() at the last check while reduced
-  double drift_rate_ = 0.0;          // the swing's drift per remembered second: the fastest at a check since the state was set (m/s)
+  // The swing's drift per remembered second (m/s): the fastest read at a check since the state was set.
+  double drift_rate_ = 0.0;
   static constexpr int kMaxBackOff = 6;
   Eigen::VectorXd handle_reference_;  // the handle dofs' positions at zero displacement
   // The external force the simulation holds (the last motion kept, or the last applied), and
