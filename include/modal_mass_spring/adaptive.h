@@ -1,6 +1,6 @@
 // A reduced method that falls back to `full` where its span cannot follow the motion (after Kim and
 // James 2009): every check_steps time steps (up to max_check_stretch times as many far from a
-// switch, AdaptiveSettings::max_check_stretch; the reduced method may take several at once,
+// switch, as AdaptiveSettings::max_check_stretch says; the reduced method may take several at once,
 // reduced_step_span), a reduced step's error estimate (errorEstimate: its indicator calibrated, plus
 // the swing's drift) decides whether the motion is still within `tolerance` of `full`, and whether a
 // particle is further inside a collider than the contact thickness (a span too coarse to bend round a

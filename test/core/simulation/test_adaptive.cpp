@@ -103,6 +103,27 @@ void run(Simulation& sim, const Motion& motion, int steps, AdaptiveStepper* adap
   }
 }
 
+// The largest swing (swingDistance) of `physical` alone on `basis` over `steps` steps of `motion`,
+// read every `every` steps; NaN if a step diverges.
+double largestSwing(BasisKind basis, const Motion& motion, int steps, int every)
+{
+  Simulation physical(topRowHeld(), heldParams(Method::Physical, basis));
+  const Eigen::VectorXd start = physical.handlePositions();
+  double largest = 0.0;
+  for (int k = 1; k <= steps; ++k)
+  {
+    physical.setHandleMotion(motion(start, k));
+    if (const StepResult r = physical.step(); r.diverged)
+    {
+      ADD_FAILURE() << "step " << k << ": " << r.message;
+      return std::nan("");
+    }
+    if (k % every == 0)
+      largest = std::max(largest, swingDistance(physical));
+  }
+  return largest;
+}
+
 }  // namespace
 
 TEST(Adaptive, BadSettingsAreRefusedByName)
@@ -290,15 +311,7 @@ TEST(Adaptive, ChecksWithinTheToleranceStretchWhereTheSwingsDriftLeavesTheIndica
   // Six linear modes on the turn, checked every 5 steps at the least, with a 10 m tolerance whose
   // safe share (1e-9 of it) the swing's drift (a tenth of the tolerance at the largest swing)
   // exceeds from the second check on (the first never stretches).
-  Simulation physical(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
-  double largest_swing = 0.0;
-  const Eigen::VectorXd start = physical.handlePositions();
-  for (int k = 1; k <= 200; ++k)
-  {
-    physical.setHandleMotion(turn(start, k));
-    ASSERT_FALSE(physical.step().diverged);
-    largest_swing = std::max(largest_swing, swingDistance(physical));
-  }
+  const double largest_swing = largestSwing(BasisKind::LinearModes, turn, 200, 1);
   ASSERT_GT(largest_swing, 1e-3);
   AdaptiveSettings settings = stepsOf5ms();
   settings.reduced = Method::Physical;
@@ -313,8 +326,9 @@ TEST(Adaptive, ChecksWithinTheToleranceStretchWhereTheSwingsDriftLeavesTheIndica
     double largest_estimate = 0.0, smallest_estimate = INFINITY;  // read at the checks after the first
     std::string why;
   };
-  auto checked = [&start](const AdaptiveSettings& with) {
+  auto checked = [](const AdaptiveSettings& with) {
     Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::LinearModes));
+    const Eigen::VectorXd start = sim.handlePositions();
     AdaptiveStepper adaptive(sim, with);
     Checked c;
     for (int k = 1; k <= 200 && adaptive.reduced(); ++k)
@@ -376,19 +390,10 @@ TEST(Adaptive, TheSwingsDriftSendsToFullASwingTheIndicatorAloneWouldKeep)
   // The same translation as above, whose indicator never nears the tolerance, checked every
   // check_steps: a drift that puts the largest swing at a check at twice the tolerance sends it to
   // `full`, one that puts it at half does not.
-  Simulation physical(topRowHeld(), heldParams(Method::Physical, BasisKind::Skinning));
   AdaptiveSettings settings = stepsOf5ms();
   settings.reduced = Method::Physical;
   settings.max_check_stretch = 1;
-  double largest_swing = 0.0;
-  const Eigen::VectorXd start = physical.handlePositions();
-  for (int k = 1; k <= 200; ++k)
-  {
-    physical.setHandleMotion(translate(start, k));
-    ASSERT_FALSE(physical.step().diverged);
-    if (k % settings.check_steps == 0)
-      largest_swing = std::max(largest_swing, swingDistance(physical));
-  }
+  const double largest_swing = largestSwing(BasisKind::Skinning, translate, 200, settings.check_steps);
   ASSERT_GT(largest_swing, 0.0);
   auto switchesWithDrift = [&](double drift) {
     Simulation sim(topRowHeld(), heldParams(Method::Physical, BasisKind::Skinning));
